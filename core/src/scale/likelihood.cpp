@@ -1,0 +1,94 @@
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <scaled/core/scale/likelihood.h>
+
+namespace scaled::core {
+
+bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prior,
+                           const ScaleGrid& grid, const LikelihoodConfig& config,
+                           std::span<Scalar> log_l) {
+    const Scalar D = extent.D;
+    if (prior.size() == 0 || !(D > 0) || !std::isfinite(D) || log_l.size() != grid.size()) {
+        return false;
+    }
+    const auto heights = prior.heights();
+    const auto log_probs = prior.logProbabilities();
+    const std::size_t M = heights.size();
+
+    const Scalar var_prior_bin = prior.binWidth() * prior.binWidth() / 12;
+    const Scalar res = D * grid.delta();
+    const Scalar var_grid_per_d2 = res * res / 12;  // times d^2
+    const Scalar min_var = config.min_sigma_m * config.min_sigma_m;
+
+    // Model variance: constant (paper) or proportional to d^2 (propagated).
+    Scalar var_const = 0;
+    Scalar var_per_d2 = var_grid_per_d2;
+    if (config.variance_model == VarianceModel::kPaper) {
+        const Scalar s = extent.sigma_D_paper * D;
+        var_const = s * s;
+    } else {
+        var_per_d2 += extent.sigma_D_feature * extent.sigma_D_feature +
+                      extent.sigma_D_box * extent.sigma_D_box;
+    }
+    var_const += var_prior_bin;
+
+    const Scalar log_sqrt_2pi = Scalar(0.5) * std::log(2 * std::numbers::pi_v<Scalar>);
+    const bool robust = config.robust && config.outlier_weight > 0;
+    const Scalar log_inlier = robust ? std::log1p(-config.outlier_weight) : 0;
+    const Scalar log_outlier =
+        robust ? std::log(config.outlier_weight / config.outlier_height_range_m) : 0;
+
+    for (std::size_t j = 0; j < grid.size(); ++j) {
+        const Scalar d = grid.d(j);
+        const Scalar x = d * D;
+        const Scalar var = std::max(var_const + var_per_d2 * d * d, min_var);
+        const Scalar inv_2var = 1 / (2 * var);
+        const Scalar log_norm = -log_sqrt_2pi - Scalar(0.5) * std::log(var);
+        // log-sum-exp over the histogram: first the largest term, then the sum.
+        Scalar best = -std::numeric_limits<Scalar>::infinity();
+        for (std::size_t m = 0; m < M; ++m) {
+            const Scalar r = x - heights[m];
+            best = std::max(best, log_probs[m] - r * r * inv_2var);
+        }
+        Scalar sum = 0;
+        for (std::size_t m = 0; m < M; ++m) {
+            const Scalar r = x - heights[m];
+            sum += std::exp(log_probs[m] - r * r * inv_2var - best);
+        }
+        Scalar value = log_norm + best + std::log(sum);
+        if (config.variance_model == VarianceModel::kPropagated) {
+            // Density of the measurement D itself: p(D | d) = d f(d D - H; d sigma_D).
+            value += std::log(d);
+        }
+        if (robust) {
+            // log((1-w) L + w/R), computed without leaving the log domain.
+            const Scalar a = log_inlier + value;
+            const Scalar hi = std::max(a, log_outlier);
+            value = hi + std::log(std::exp(a - hi) + std::exp(log_outlier - hi));
+        }
+        log_l[j] = value;
+    }
+    return true;
+}
+
+Scalar gridMode(const ScaleGrid& grid, std::span<const Scalar> v) {
+    std::size_t j = 0;
+    for (std::size_t i = 1; i < v.size(); ++i) {
+        if (v[i] > v[j]) {
+            j = i;
+        }
+    }
+    Scalar offset = 0;
+    if (j > 0 && j + 1 < v.size()) {
+        const Scalar denom = v[j - 1] - 2 * v[j] + v[j + 1];
+        if (denom < 0) {
+            offset = std::clamp(Scalar(0.5) * (v[j - 1] - v[j + 1]) / denom, Scalar(-0.5),
+                                Scalar(0.5));
+        }
+    }
+    return std::exp(grid.logD(j) + offset * grid.delta());
+}
+
+}  // namespace scaled::core

@@ -1,0 +1,108 @@
+#include <string>
+
+#include <scaled/core/scale/scale_estimator.h>
+
+namespace scaled::core {
+
+Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, PriorTable priors,
+                                              const PinholeRadialCamera& camera) {
+    if (priors.empty()) {
+        return makeError(ErrorCode::kInvalidArgument, "scale estimator: no height priors given");
+    }
+    if (config.max_features_per_box < 1 || config.max_features_per_box > 4096) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "scale estimator: max_features_per_box must be in [1, 4096] (got " +
+                             std::to_string(config.max_features_per_box) + ")");
+    }
+    const auto& lc = config.likelihood;
+    if (lc.robust && !(lc.outlier_weight > 0 && lc.outlier_weight < 1 &&
+                       lc.outlier_height_range_m > 0)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "scale estimator: robust likelihood needs 0 < outlier_weight < 1 and "
+                         "outlier_height_range_m > 0");
+    }
+    if (!(lc.min_sigma_m > 0)) {
+        return makeError(ErrorCode::kInvalidArgument, "scale estimator: min_sigma_m must be > 0");
+    }
+    auto posterior = ScalePosterior::create(config.posterior);
+    if (!posterior) {
+        return posterior.error();
+    }
+    return ScaleEstimator(config, std::move(priors), camera, std::move(posterior.value()));
+}
+
+ScaleEstimator::ScaleEstimator(const EstimatorConfig& config, PriorTable priors,
+                               const PinholeRadialCamera& camera, ScalePosterior posterior)
+    : config_(config),
+      priors_(std::move(priors)),
+      camera_(camera),
+      posterior_(std::move(posterior)),
+      log_l_(posterior_.grid().size(), 0),
+      extents_(static_cast<std::size_t>(config.max_features_per_box)),
+      extent_features_(static_cast<std::size_t>(config.max_features_per_box), -1) {}
+
+UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
+                                   std::span<const Detection> detections,
+                                   std::span<ObservationRecord> records) {
+    UpdateStats stats;
+    for (std::size_t di = 0; di < detections.size(); ++di) {
+        const Detection& det = detections[di];
+        const HeightPrior* prior = priors_.find(det.class_name);
+        if (prior == nullptr || (!prior->upright() && !config_.use_non_upright) ||
+            det.score < config_.min_detection_score) {
+            ++stats.detections_skipped;
+            continue;
+        }
+        // Geometry first, so that per-box weighting knows how many features count.
+        std::size_t n = 0;
+        for (std::size_t fi = 0; fi < frame.features.size() && n < extents_.size(); ++fi) {
+            const ExtentResult r = measureVerticalExtent(camera_, frame.pose, frame.up_W,
+                                                         frame.features[fi], det.box,
+                                                         config_.extent);
+            if (r.status != ExtentStatus::kOk) {
+                // Features outside the box are the common case, not a rejection.
+                if (r.status != ExtentStatus::kOutsideBox) {
+                    ++stats.rejected[static_cast<std::size_t>(r.status)];
+                }
+                continue;
+            }
+            extents_[n] = r.extent;
+            extent_features_[n] = static_cast<int>(fi);
+            ++n;
+        }
+        const Scalar weight = config_.weighting == ObservationWeighting::kPerBox && n > 0
+                                  ? Scalar(1) / static_cast<Scalar>(n)
+                                  : Scalar(1);
+        int used = 0;
+        for (std::size_t k = 0; k < n; ++k) {
+            if (!evaluateLogLikelihood(extents_[k], *prior, posterior_.grid(),
+                                       config_.likelihood, log_l_) ||
+                !posterior_.addLogLikelihood(log_l_, weight)) {
+                ++stats.rejected[static_cast<std::size_t>(ExtentStatus::kUnstable)];
+                continue;
+            }
+            ++used;
+            ++stats.observations;
+            if (static_cast<std::size_t>(stats.records_written) < records.size()) {
+                ObservationRecord& rec = records[static_cast<std::size_t>(stats.records_written)];
+                rec.detection_index = static_cast<int>(di);
+                rec.feature_index = extent_features_[k];
+                rec.D = extents_[k].D;
+                rec.sigma_D_paper = extents_[k].sigma_D_paper;
+                rec.sigma_D_feature = extents_[k].sigma_D_feature;
+                rec.sigma_D_box = extents_[k].sigma_D_box;
+                rec.local_estimate = gridMode(posterior_.grid(), log_l_);
+                rec.weight = weight;
+                ++stats.records_written;
+            }
+        }
+        if (used > 0) {
+            ++stats.detections_used;
+        } else {
+            ++stats.detections_skipped;
+        }
+    }
+    return stats;
+}
+
+}  // namespace scaled::core

@@ -1,0 +1,275 @@
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <toml++/toml.h>
+
+#include <scaled/drivers/priors_toml.h>
+
+namespace scaled::drivers {
+
+using core::Error;
+using core::ErrorCode;
+using core::HeightPrior;
+using core::makeError;
+using core::PriorTable;
+using core::Result;
+using core::Scalar;
+
+namespace {
+
+constexpr int kFormatVersion = 1;
+constexpr int kDefaultBins = 24;
+
+class Reporter {
+public:
+    explicit Reporter(std::string_view source) : source_(source) {}
+
+    [[nodiscard]] Error at(const toml::node* node, const std::string& key,
+                           const std::string& what) const {
+        std::string where = source_;
+        if (node != nullptr && node->source().begin.line > 0) {
+            where += ":" + std::to_string(node->source().begin.line);
+        }
+        return makeError(ErrorCode::kParse, where + ": " + key + ": " + what);
+    }
+
+private:
+    std::string source_;
+};
+
+std::string show(const toml::node& n) {
+    std::ostringstream os;
+    if (n.is_string()) {
+        os << '"' << n.as_string()->get() << '"';
+    } else if (n.is_array()) {
+        os << "an array";
+    } else if (n.is_table()) {
+        os << "a table";
+    } else {
+        n.visit([&](const auto& v) { os << v; });
+    }
+    return os.str();
+}
+
+std::optional<Scalar> number(const toml::node& n) {
+    if (const auto* f = n.as_floating_point()) {
+        return static_cast<Scalar>(f->get());
+    }
+    if (const auto* i = n.as_integer()) {
+        return static_cast<Scalar>(i->get());
+    }
+    return std::nullopt;
+}
+
+struct ClassSpec {
+    std::optional<bool> upright;
+    std::optional<std::string> source;
+    std::optional<Scalar> mean_m, std_m, min_m, max_m, bin_width_m;
+    std::optional<int> bins;
+    std::optional<std::vector<Scalar>> heights_m, probabilities;
+};
+
+Result<std::vector<Scalar>> numberArray(const Reporter& rep, const toml::node& n,
+                                        const std::string& key) {
+    const auto* arr = n.as_array();
+    if (arr == nullptr) {
+        return rep.at(&n, key, "must be an array of numbers (got " + show(n) + ")");
+    }
+    std::vector<Scalar> out;
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+        const auto v = number(*arr->get(i));
+        if (!v) {
+            return rep.at(arr->get(i), key + "[" + std::to_string(i) + "]",
+                          "must be a number (got " + show(*arr->get(i)) + ")");
+        }
+        out.push_back(*v);
+    }
+    return out;
+}
+
+Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name,
+                               const toml::table& t, int default_bins) {
+    const std::string base = "classes." + name;
+    ClassSpec spec;
+    for (const auto& [k, node] : t) {
+        const std::string key(k.str());
+        const std::string full = base + "." + key;
+        if (key == "upright") {
+            if (!node.is_boolean()) {
+                return rep.at(&node, full, "must be true or false (got " + show(node) + ")");
+            }
+            spec.upright = node.as_boolean()->get();
+        } else if (key == "source") {
+            if (!node.is_string() || node.as_string()->get().empty()) {
+                return rep.at(&node, full, "must be a non-empty string (got " + show(node) + ")");
+            }
+            spec.source = node.as_string()->get();
+        } else if (key == "bins") {
+            const auto* i = node.as_integer();
+            if (i == nullptr || i->get() < 1 || i->get() > HeightPrior::kMaxBins) {
+                return rep.at(&node, full,
+                              "must be an integer in [1, " + std::to_string(HeightPrior::kMaxBins) +
+                                  "] (got " + show(node) + ")");
+            }
+            spec.bins = static_cast<int>(i->get());
+        } else if (key == "heights_m" || key == "probabilities") {
+            auto arr = numberArray(rep, node, full);
+            if (!arr) {
+                return arr.error();
+            }
+            (key == "heights_m" ? spec.heights_m : spec.probabilities) = std::move(arr.value());
+        } else if (key == "mean_m" || key == "std_m" || key == "min_m" || key == "max_m" ||
+                   key == "bin_width_m") {
+            const auto v = number(node);
+            if (!v) {
+                return rep.at(&node, full, "must be a number (got " + show(node) + ")");
+            }
+            if (key == "mean_m") {
+                spec.mean_m = v;
+            } else if (key == "std_m") {
+                spec.std_m = v;
+            } else if (key == "min_m") {
+                spec.min_m = v;
+            } else if (key == "max_m") {
+                spec.max_m = v;
+            } else {
+                spec.bin_width_m = v;
+            }
+        } else {
+            return rep.at(&node, full,
+                          "unknown key (allowed: upright, source, mean_m, std_m, min_m, max_m, "
+                          "bins, heights_m, probabilities, bin_width_m)");
+        }
+    }
+    if (!spec.upright) {
+        return rep.at(&t, base + ".upright", "missing (true or false is required)");
+    }
+    if (!spec.source) {
+        return rep.at(&t, base + ".source", "missing (say where the numbers come from)");
+    }
+    const bool normal_form = spec.mean_m || spec.std_m || spec.min_m || spec.max_m || spec.bins;
+    const bool explicit_form = spec.heights_m || spec.probabilities || spec.bin_width_m;
+    if (normal_form == explicit_form) {
+        return rep.at(&t, base,
+                      "give exactly one form: mean_m/std_m/min_m/max_m[/bins] or "
+                      "heights_m/probabilities[/bin_width_m]");
+    }
+    Result<HeightPrior> prior = makeError(ErrorCode::kParse, "");
+    if (normal_form) {
+        for (const auto& [key, v] : {std::pair{"mean_m", spec.mean_m}, {"std_m", spec.std_m},
+                                     {"min_m", spec.min_m}, {"max_m", spec.max_m}}) {
+            if (!v) {
+                return rep.at(&t, base + "." + key, "missing (the mean/std form needs mean_m, "
+                                                    "std_m, min_m and max_m)");
+            }
+        }
+        prior = HeightPrior::fromNormal(name, *spec.mean_m, *spec.std_m, *spec.min_m,
+                                        *spec.max_m, spec.bins.value_or(default_bins),
+                                        *spec.upright);
+    } else {
+        if (!spec.heights_m || !spec.probabilities) {
+            return rep.at(&t, base, "the explicit form needs both heights_m and probabilities");
+        }
+        prior = HeightPrior::fromHistogram(name, *spec.heights_m, *spec.probabilities,
+                                           spec.bin_width_m.value_or(0), *spec.upright);
+    }
+    if (!prior) {
+        return rep.at(&t, base, prior.error().message);
+    }
+    return prior;
+}
+
+}  // namespace
+
+Result<PriorTable> parsePriors(std::string_view text, std::string_view source_name) {
+    const Reporter rep(source_name);
+    toml::table root;
+    try {
+        root = toml::parse(text, source_name);
+    } catch (const toml::parse_error& e) {
+        return makeError(ErrorCode::kParse,
+                         std::string(source_name) + ":" +
+                             std::to_string(e.source().begin.line) + ":" +
+                             std::to_string(e.source().begin.column) + ": " +
+                             std::string(e.description()));
+    }
+
+    int default_bins = kDefaultBins;
+    const toml::table* classes = nullptr;
+    bool have_version = false;
+    for (const auto& [k, node] : root) {
+        const std::string key(k.str());
+        if (key == "version") {
+            const auto* v = node.as_integer();
+            if (v == nullptr || v->get() != kFormatVersion) {
+                return rep.at(&node, key,
+                              "unsupported format version " + show(node) + " (this build reads " +
+                                  std::to_string(kFormatVersion) + ")");
+            }
+            have_version = true;
+        } else if (key == "histogram") {
+            const auto* t = node.as_table();
+            if (t == nullptr) {
+                return rep.at(&node, key, "must be a table");
+            }
+            for (const auto& [hk, hn] : *t) {
+                const std::string hkey = "histogram." + std::string(hk.str());
+                if (hk.str() != "bins") {
+                    return rep.at(&hn, hkey, "unknown key (allowed: bins)");
+                }
+                const auto* i = hn.as_integer();
+                if (i == nullptr || i->get() < 1 || i->get() > HeightPrior::kMaxBins) {
+                    return rep.at(&hn, hkey,
+                                  "must be an integer in [1, " +
+                                      std::to_string(HeightPrior::kMaxBins) + "] (got " + show(hn) +
+                                      ")");
+                }
+                default_bins = static_cast<int>(i->get());
+            }
+        } else if (key == "classes") {
+            classes = node.as_table();
+            if (classes == nullptr) {
+                return rep.at(&node, key, "must be a table of classes");
+            }
+        } else {
+            return rep.at(&node, key, "unknown key (allowed: version, histogram, classes)");
+        }
+    }
+    if (!have_version) {
+        return rep.at(nullptr, "version", "missing (expected version = 1)");
+    }
+    if (classes == nullptr || classes->empty()) {
+        return rep.at(nullptr, "classes", "no classes defined");
+    }
+    PriorTable table;
+    for (const auto& [k, node] : *classes) {
+        const std::string name(k.str());
+        const auto* t = node.as_table();
+        if (t == nullptr) {
+            return rep.at(&node, "classes." + name, "must be a table");
+        }
+        auto prior = parseClass(rep, name, *t, default_bins);
+        if (!prior) {
+            return prior.error();
+        }
+        table.add(std::move(prior.value()));
+    }
+    return table;
+}
+
+Result<PriorTable> loadPriorsFile(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        return makeError(ErrorCode::kIo, path.string() + ": cannot open priors file");
+    }
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    if (in.bad()) {
+        return makeError(ErrorCode::kIo, path.string() + ": read error");
+    }
+    return parsePriors(ss.str(), path.string());
+}
+
+}  // namespace scaled::drivers
