@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <scaled/core/scale/likelihood.h>
@@ -40,20 +41,44 @@ bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prio
     const Scalar log_outlier =
         robust ? std::log(config.outlier_weight / config.outlier_height_range_m) : 0;
 
+    // Heights are sorted and x = d D grows with j, so the terms within
+    // kWindowSigmas standard deviations of x form a window [lo, hi) that only
+    // moves forward: O(grid + histogram) per observation. Each term outside it
+    // is below exp(-kWindowSigmas^2 / 2) = e^-32 of the peak density, so the
+    // sum is exact wherever L matters (within ~e^-20 of its peak); when the
+    // window is empty (far tail) the heights bracketing x stand for the sum,
+    // which keeps log L finite there.
+    constexpr Scalar kWindowSigmas = 8;
+    std::size_t lo = 0;
+    std::size_t hi = 0;
     for (std::size_t j = 0; j < grid.size(); ++j) {
         const Scalar d = grid.d(j);
         const Scalar x = d * D;
         const Scalar var = std::max(var_const + var_per_d2 * d * d, min_var);
         const Scalar inv_2var = 1 / (2 * var);
         const Scalar log_norm = -log_sqrt_2pi - Scalar(0.5) * std::log(var);
-        // log-sum-exp over the histogram: first the largest term, then the sum.
+        const Scalar reach = kWindowSigmas * std::sqrt(var);
+        while (lo < M && heights[lo] < x - reach) {
+            ++lo;
+        }
+        hi = std::max(hi, lo);
+        while (hi < M && heights[hi] <= x + reach) {
+            ++hi;
+        }
+        std::size_t first = lo;
+        std::size_t last = hi;  // exclusive
+        if (first == last) {
+            first = lo > 0 ? lo - 1 : lo;
+            last = std::min(M, lo + 1);
+        }
+        // log-sum-exp over the window: first the largest term, then the sum.
         Scalar best = -std::numeric_limits<Scalar>::infinity();
-        for (std::size_t m = 0; m < M; ++m) {
+        for (std::size_t m = first; m < last; ++m) {
             const Scalar r = x - heights[m];
             best = std::max(best, log_probs[m] - r * r * inv_2var);
         }
         Scalar sum = 0;
-        for (std::size_t m = 0; m < M; ++m) {
+        for (std::size_t m = first; m < last; ++m) {
             const Scalar r = x - heights[m];
             sum += std::exp(log_probs[m] - r * r * inv_2var - best);
         }
@@ -65,8 +90,8 @@ bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prio
         if (robust) {
             // log((1-w) L + w/R), computed without leaving the log domain.
             const Scalar a = log_inlier + value;
-            const Scalar hi = std::max(a, log_outlier);
-            value = hi + std::log(std::exp(a - hi) + std::exp(log_outlier - hi));
+            const Scalar top = std::max(a, log_outlier);
+            value = top + std::log(std::exp(a - top) + std::exp(log_outlier - top));
         }
         log_l[j] = value;
     }

@@ -1,0 +1,93 @@
+#include <numeric>
+
+#include <gtest/gtest.h>
+
+#include <scaled/core/scale/height_prior.h>
+
+namespace scaled::core {
+namespace {
+
+Scalar sum(std::span<const Scalar> v) { return std::accumulate(v.begin(), v.end(), Scalar(0)); }
+
+TEST(HeightPrior, HistogramIsNormalisedSortedAndDropsZeroBins) {
+    const std::vector<Scalar> h{0.3, 0.1, 0.2, 0.4};
+    const std::vector<Scalar> p{2, 1, 0, 1};
+    const auto prior = HeightPrior::fromHistogram("cup", h, p, 0.05, true);
+    ASSERT_TRUE(prior.ok()) << prior.error().message;
+    ASSERT_EQ(prior->size(), 3U);
+    EXPECT_DOUBLE_EQ(prior->heights()[0], 0.1);
+    EXPECT_DOUBLE_EQ(prior->heights()[1], 0.3);
+    EXPECT_DOUBLE_EQ(prior->heights()[2], 0.4);
+    EXPECT_DOUBLE_EQ(prior->probabilities()[1], 0.5);
+    EXPECT_DOUBLE_EQ(prior->logProbabilities()[0], std::log(0.25));
+    EXPECT_NEAR(sum(prior->probabilities()), 1, 1e-15);
+    EXPECT_NEAR(prior->mean(), 0.1 * 0.25 + 0.3 * 0.5 + 0.4 * 0.25, 1e-15);
+    EXPECT_TRUE(prior->upright());
+    EXPECT_EQ(prior->className(), "cup");
+    EXPECT_DOUBLE_EQ(prior->binWidth(), 0.05);
+}
+
+TEST(HeightPrior, NormalFormIntegratesTheTruncatedNormal) {
+    const auto prior = HeightPrior::fromNormal("chair", 0.9, 0.1, 0.6, 1.2, 6, true);
+    ASSERT_TRUE(prior.ok()) << prior.error().message;
+    ASSERT_EQ(prior->size(), 6U);
+    EXPECT_NEAR(prior->binWidth(), 0.1, 1e-15);
+    EXPECT_NEAR(prior->heights()[0], 0.65, 1e-15);
+    EXPECT_NEAR(prior->heights()[5], 1.15, 1e-15);
+    // Symmetric about the mean; the centre bins hold Phi(1)-Phi(0) of N, renormalised
+    // by the mass in [-3, 3] sigma.
+    EXPECT_NEAR(prior->probabilities()[0], prior->probabilities()[5], 1e-15);
+    EXPECT_NEAR(prior->probabilities()[2], prior->probabilities()[3], 1e-15);
+    const Scalar inside = std::erf(3 / std::sqrt(2.0));
+    EXPECT_NEAR(prior->probabilities()[2], 0.5 * std::erf(1 / std::sqrt(2.0)) / inside, 1e-12);
+    EXPECT_NEAR(prior->mean(), 0.9, 1e-12);
+}
+
+TEST(HeightPrior, RejectsBadInputWithClearMessages) {
+    const std::vector<Scalar> h{0.1, 0.2};
+    const std::vector<Scalar> p{1, 1};
+    const std::vector<Scalar> one{1};
+    const std::vector<Scalar> zeros{0, 0};
+    const std::vector<Scalar> neg{0.1, -0.2};
+    const std::vector<Scalar> nan{0.1, std::nan("")};
+    struct Case {
+        Result<HeightPrior> r;
+        const char* expect;
+    };
+    const std::vector<Case> cases{
+        {HeightPrior::fromHistogram("a", {}, {}, 0, true), "no heights"},
+        {HeightPrior::fromHistogram("a", h, one, 0, true), "2 entries but probabilities has 1"},
+        {HeightPrior::fromHistogram("a", h, zeros, 0, true), "sum to zero"},
+        {HeightPrior::fromHistogram("a", neg, p, 0, true), "heights_m[1] must be > 0"},
+        {HeightPrior::fromHistogram("a", h, nan, 0, true), "probabilities[1]"},
+        {HeightPrior::fromHistogram("a", h, p, -1, true), "bin_width_m"},
+        {HeightPrior::fromNormal("a", 0.5, 0, 0.1, 1, 10, true), "std_m must be > 0"},
+        {HeightPrior::fromNormal("a", 0.5, 0.1, 1, 0.1, 10, true), "min_m < max_m"},
+        {HeightPrior::fromNormal("a", 2, 0.1, 0.1, 1, 10, true), "outside [min_m, max_m]"},
+        {HeightPrior::fromNormal("a", 0.5, 0.1, 0.1, 1, 0, true), "bins must be in"},
+        {HeightPrior::fromNormal("a", 0.5, 0.1, 0.1, 1, 100000, true), "bins must be in"},
+    };
+    for (const auto& c : cases) {
+        ASSERT_FALSE(c.r.ok()) << c.expect;
+        EXPECT_NE(c.r.error().message.find(c.expect), std::string::npos) << c.r.error().message;
+        EXPECT_NE(c.r.error().message.find("prior 'a'"), std::string::npos);
+    }
+}
+
+TEST(PriorTable, FindsAndReplacesByName) {
+    PriorTable t;
+    const std::vector<Scalar> h{0.1};
+    const std::vector<Scalar> p{1};
+    const std::vector<Scalar> h2{0.2};
+    t.add(HeightPrior::fromHistogram("cup", h, p, 0, true).value());
+    t.add(HeightPrior::fromHistogram("tv", h, p, 0, true).value());
+    t.add(HeightPrior::fromHistogram("cup", h2, p, 0, false).value());
+    EXPECT_EQ(t.priors().size(), 2U);
+    ASSERT_NE(t.find("cup"), nullptr);
+    EXPECT_DOUBLE_EQ(t.find("cup")->heights()[0], 0.2);
+    EXPECT_FALSE(t.find("cup")->upright());
+    EXPECT_EQ(t.find("chair"), nullptr);
+}
+
+}  // namespace
+}  // namespace scaled::core
