@@ -2,6 +2,8 @@
 
 namespace scaled::daemon {
 
-const char* version() { return SCALED_VERSION; }
+const char* version() {
+    return SCALED_VERSION;
+}
 
 }  // namespace scaled::daemon

@@ -1,4 +1,6 @@
+#include <cmath>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -69,7 +71,83 @@ struct ClassSpec {
     std::optional<Scalar> mean_m, std_m, min_m, max_m, bin_width_m;
     std::optional<int> bins;
     std::optional<std::vector<Scalar>> heights_m, probabilities;
+    // Where each value stands, so range errors name its own line.
+    const toml::node* mean_node = nullptr;
+    const toml::node* std_node = nullptr;
+    const toml::node* min_node = nullptr;
+    const toml::node* max_node = nullptr;
+    const toml::node* width_node = nullptr;
+    const toml::node* heights_node = nullptr;
+    const toml::node* probs_node = nullptr;
 };
+
+std::string num(Scalar v) {
+    std::ostringstream os;
+    os << v;
+    return os.str();
+}
+
+// Range checks of one class, each reported at the offending key's line. The
+// core constructors check the same again; these exist for the message.
+std::optional<Error> checkRanges(const Reporter& rep, const std::string& base, const ClassSpec& s) {
+    if (s.std_m && !(*s.std_m > 0 && std::isfinite(*s.std_m))) {
+        return rep.at(s.std_node, base + ".std_m", "must be > 0 (got " + num(*s.std_m) + ")");
+    }
+    if (s.min_m && !(*s.min_m > 0 && std::isfinite(*s.min_m))) {
+        return rep.at(s.min_node, base + ".min_m", "must be > 0 (got " + num(*s.min_m) + ")");
+    }
+    if (s.min_m && s.max_m && !(*s.max_m > *s.min_m && std::isfinite(*s.max_m))) {
+        return rep.at(
+            s.max_node, base + ".max_m",
+            "must be greater than min_m = " + num(*s.min_m) + " (got " + num(*s.max_m) + ")");
+    }
+    if (s.mean_m && s.min_m && s.max_m && !(*s.mean_m >= *s.min_m && *s.mean_m <= *s.max_m)) {
+        return rep.at(s.mean_node, base + ".mean_m",
+                      "must lie in [min_m, max_m] = [" + num(*s.min_m) + ", " + num(*s.max_m) +
+                          "] (got " + num(*s.mean_m) + ")");
+    }
+    if (s.bin_width_m && !(*s.bin_width_m >= 0 && std::isfinite(*s.bin_width_m))) {
+        return rep.at(s.width_node, base + ".bin_width_m",
+                      "must be >= 0 (got " + num(*s.bin_width_m) + ")");
+    }
+    if (s.heights_m) {
+        const auto& h = *s.heights_m;
+        if (h.empty()) {
+            return rep.at(s.heights_node, base + ".heights_m", "must not be empty");
+        }
+        if (h.size() > static_cast<std::size_t>(HeightPrior::kMaxBins)) {
+            return rep.at(s.heights_node, base + ".heights_m",
+                          "at most " + std::to_string(HeightPrior::kMaxBins) + " entries (got " +
+                              std::to_string(h.size()) + ")");
+        }
+        for (std::size_t i = 0; i < h.size(); ++i) {
+            if (!(h[i] > 0 && std::isfinite(h[i]))) {
+                return rep.at(s.heights_node, base + ".heights_m[" + std::to_string(i) + "]",
+                              "must be > 0 (got " + num(h[i]) + ")");
+            }
+        }
+    }
+    if (s.probabilities) {
+        const auto& p = *s.probabilities;
+        Scalar total = 0;
+        for (std::size_t i = 0; i < p.size(); ++i) {
+            if (!(p[i] >= 0 && std::isfinite(p[i]))) {
+                return rep.at(s.probs_node, base + ".probabilities[" + std::to_string(i) + "]",
+                              "must be >= 0 (got " + num(p[i]) + ")");
+            }
+            total += p[i];
+        }
+        if (s.heights_m && p.size() != s.heights_m->size()) {
+            return rep.at(s.probs_node, base + ".probabilities",
+                          "has " + std::to_string(p.size()) + " entries but heights_m has " +
+                              std::to_string(s.heights_m->size()));
+        }
+        if (!(total > 0)) {
+            return rep.at(s.probs_node, base + ".probabilities", "all zero: they must sum to > 0");
+        }
+    }
+    return std::nullopt;
+}
 
 Result<std::vector<Scalar>> numberArray(const Reporter& rep, const toml::node& n,
                                         const std::string& key) {
@@ -89,8 +167,8 @@ Result<std::vector<Scalar>> numberArray(const Reporter& rep, const toml::node& n
     return out;
 }
 
-Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name,
-                               const toml::table& t, int default_bins) {
+Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, const toml::table& t,
+                               int default_bins) {
     const std::string base = "classes." + name;
     ClassSpec spec;
     for (const auto& [k, node] : t) {
@@ -119,7 +197,13 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name,
             if (!arr) {
                 return arr.error();
             }
-            (key == "heights_m" ? spec.heights_m : spec.probabilities) = std::move(arr.value());
+            if (key == "heights_m") {
+                spec.heights_m = std::move(arr.value());
+                spec.heights_node = &node;
+            } else {
+                spec.probabilities = std::move(arr.value());
+                spec.probs_node = &node;
+            }
         } else if (key == "mean_m" || key == "std_m" || key == "min_m" || key == "max_m" ||
                    key == "bin_width_m") {
             const auto v = number(node);
@@ -128,14 +212,19 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name,
             }
             if (key == "mean_m") {
                 spec.mean_m = v;
+                spec.mean_node = &node;
             } else if (key == "std_m") {
                 spec.std_m = v;
+                spec.std_node = &node;
             } else if (key == "min_m") {
                 spec.min_m = v;
+                spec.min_node = &node;
             } else if (key == "max_m") {
                 spec.max_m = v;
+                spec.max_node = &node;
             } else {
                 spec.bin_width_m = v;
+                spec.width_node = &node;
             }
         } else {
             return rep.at(&node, full,
@@ -156,18 +245,23 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name,
                       "give exactly one form: mean_m/std_m/min_m/max_m[/bins] or "
                       "heights_m/probabilities[/bin_width_m]");
     }
+    if (auto err = checkRanges(rep, base, spec)) {
+        return *err;
+    }
     Result<HeightPrior> prior = makeError(ErrorCode::kParse, "");
     if (normal_form) {
-        for (const auto& [key, v] : {std::pair{"mean_m", spec.mean_m}, {"std_m", spec.std_m},
-                                     {"min_m", spec.min_m}, {"max_m", spec.max_m}}) {
+        for (const auto& [key, v] : {std::pair{"mean_m", spec.mean_m},
+                                     {"std_m", spec.std_m},
+                                     {"min_m", spec.min_m},
+                                     {"max_m", spec.max_m}}) {
             if (!v) {
-                return rep.at(&t, base + "." + key, "missing (the mean/std form needs mean_m, "
-                                                    "std_m, min_m and max_m)");
+                return rep.at(&t, base + "." + key,
+                              "missing (the mean/std form needs mean_m, "
+                              "std_m, min_m and max_m)");
             }
         }
-        prior = HeightPrior::fromNormal(name, *spec.mean_m, *spec.std_m, *spec.min_m,
-                                        *spec.max_m, spec.bins.value_or(default_bins),
-                                        *spec.upright);
+        prior = HeightPrior::fromNormal(name, *spec.mean_m, *spec.std_m, *spec.min_m, *spec.max_m,
+                                        spec.bins.value_or(default_bins), *spec.upright);
     } else {
         if (!spec.heights_m || !spec.probabilities) {
             return rep.at(&t, base, "the explicit form needs both heights_m and probabilities");
@@ -189,11 +283,10 @@ Result<PriorTable> parsePriors(std::string_view text, std::string_view source_na
     try {
         root = toml::parse(text, source_name);
     } catch (const toml::parse_error& e) {
-        return makeError(ErrorCode::kParse,
-                         std::string(source_name) + ":" +
-                             std::to_string(e.source().begin.line) + ":" +
-                             std::to_string(e.source().begin.column) + ": " +
-                             std::string(e.description()));
+        return makeError(ErrorCode::kParse, std::string(source_name) + ":" +
+                                                std::to_string(e.source().begin.line) + ":" +
+                                                std::to_string(e.source().begin.column) + ": " +
+                                                std::string(e.description()));
     }
 
     int default_bins = kDefaultBins;
@@ -241,7 +334,7 @@ Result<PriorTable> parsePriors(std::string_view text, std::string_view source_na
         return rep.at(nullptr, "version", "missing (expected version = 1)");
     }
     if (classes == nullptr || classes->empty()) {
-        return rep.at(nullptr, "classes", "no classes defined");
+        return rep.at(classes, "classes", "no classes defined");
     }
     PriorTable table;
     for (const auto& [k, node] : *classes) {
@@ -260,16 +353,28 @@ Result<PriorTable> parsePriors(std::string_view text, std::string_view source_na
 }
 
 Result<PriorTable> loadPriorsFile(const std::filesystem::path& path) {
+    std::error_code ec;
+    const auto status = std::filesystem::status(path, ec);
+    if (ec || !std::filesystem::exists(status)) {
+        return makeError(ErrorCode::kIo, path.string() + ": cannot open priors file: " +
+                                             (ec ? ec.message() : "no such file"));
+    }
+    if (!std::filesystem::is_regular_file(status)) {
+        return makeError(ErrorCode::kIo, path.string() + ": not a regular file");
+    }
     std::ifstream in(path, std::ios::binary);
     if (!in) {
         return makeError(ErrorCode::kIo, path.string() + ": cannot open priors file");
     }
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    if (in.bad()) {
+    std::string text;
+    char buf[4096];
+    while (in.read(buf, sizeof buf) || in.gcount() > 0) {
+        text.append(buf, static_cast<std::size_t>(in.gcount()));
+    }
+    if (in.bad() || !in.eof()) {
         return makeError(ErrorCode::kIo, path.string() + ": read error");
     }
-    return parsePriors(ss.str(), path.string());
+    return parsePriors(text, path.string());
 }
 
 }  // namespace scaled::drivers

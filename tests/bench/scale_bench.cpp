@@ -15,9 +15,8 @@ namespace {
 using namespace scaled::core;
 
 struct Fixture {
-    PinholeRadialCamera cam = PinholeRadialCamera::create({500, 500, 320, 240, -0.05, 0.01, 640,
-                                                           480})
-                                  .value();
+    PinholeRadialCamera cam =
+        PinholeRadialCamera::create({500, 500, 320, 240, -0.05, 0.01, 640, 480}).value();
     CameraPose pose;
     MapFeature feature;
     BoundingBox box{300, 115, 340, 315};
@@ -41,8 +40,8 @@ void runUpdate(benchmark::State& state, VarianceModel model, bool roll) {
     cfg.posterior.grid.bins = static_cast<int>(state.range(0));
     cfg.likelihood.variance_model = model;
     cfg.extent.compensate_roll = roll;
-    auto est = ScaleEstimator::create(cfg, bottlePrior(static_cast<int>(state.range(1))), fx.cam)
-                   .value();
+    auto est =
+        ScaleEstimator::create(cfg, bottlePrior(static_cast<int>(state.range(1))), fx.cam).value();
     FrameSnapshot snap;
     snap.pose = fx.pose;
     snap.features = std::span<const MapFeature>(&fx.feature, 1);
@@ -61,7 +60,9 @@ void runUpdate(benchmark::State& state, VarianceModel model, bool roll) {
     state.SetItemsProcessed(state.iterations());
 }
 
-void BM_ObservationUpdatePaper(benchmark::State& s) { runUpdate(s, VarianceModel::kPaper, false); }
+void BM_ObservationUpdatePaper(benchmark::State& s) {
+    runUpdate(s, VarianceModel::kPaper, false);
+}
 void BM_ObservationUpdatePropagatedRoll(benchmark::State& s) {
     runUpdate(s, VarianceModel::kPropagated, true);
 }

@@ -29,10 +29,9 @@ void expectJacobianNear(const char* what, const Eigen::Matrix<S, Out, In>& analy
                         const Eigen::Matrix<S, In, 1>& x, S tol = S(1e-6), S h = S(1e-6)) {
     const Eigen::Matrix<S, Out, In> numeric = numericJacobian<Out, In>(f, x, h);
     const S scale = std::max(S(1), numeric.cwiseAbs().maxCoeff());
-    EXPECT_LE((numeric - analytic).cwiseAbs().maxCoeff(), tol * scale)
-        << what << "\nanalytic:\n"
-        << analytic << "\nnumeric:\n"
-        << numeric;
+    EXPECT_LE((numeric - analytic).cwiseAbs().maxCoeff(), tol * scale) << what << "\nanalytic:\n"
+                                                                       << analytic << "\nnumeric:\n"
+                                                                       << numeric;
 }
 
 }  // namespace scaled::test

@@ -65,8 +65,7 @@ core::EstimatorConfig defaultSimEstimatorConfig() {
     return c;
 }
 
-std::vector<ExperimentSpec> paperExperiments(std::uint32_t seed,
-                                             const core::EstimatorConfig& est) {
+std::vector<ExperimentSpec> paperExperiments(std::uint32_t seed, const core::EstimatorConfig& est) {
     std::vector<ExperimentSpec> out;
     {
         ExperimentSpec s = base(seed, est);
@@ -105,8 +104,7 @@ std::vector<ExperimentSpec> paperExperiments(std::uint32_t seed,
         s.name = "four_bottles_four_heights";
         s.description =
             "bottles of 0.20, 0.25, 0.30, 0.35 m; prior: uniform over those four heights";
-        const std::array<Scalar, 4> heights{Scalar(0.20), Scalar(0.25), Scalar(0.30),
-                                            Scalar(0.35)};
+        const std::array<Scalar, 4> heights{Scalar(0.20), Scalar(0.25), Scalar(0.30), Scalar(0.35)};
         const std::array<Scalar, 4> xs{Scalar(-0.3), Scalar(-0.1), Scalar(0.1), Scalar(0.3)};
         for (std::size_t i = 0; i < heights.size(); ++i) {
             s.objects.push_back(bottle(xs[i], heights[i]));

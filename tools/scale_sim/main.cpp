@@ -91,8 +91,7 @@ int main(int argc, char** argv) {
             } else if (v == "box") {
                 config.weighting = ObservationWeighting::kPerBox;
             } else {
-                std::cerr << "scale-sim: --weighting: expected feature or box, got '" << v
-                          << "'\n";
+                std::cerr << "scale-sim: --weighting: expected feature or box, got '" << v << "'\n";
                 return kExUsage;
             }
         } else if (a == "--roll-compensation") {
@@ -111,8 +110,7 @@ int main(int argc, char** argv) {
             char* end = nullptr;
             const double s = std::strtod(v.c_str(), &end);
             if (end == v.c_str() || *end != '\0' || !(s >= 0) || s > 1) {
-                std::cerr << "scale-sim: --drift: expected a number in [0, 1], got '" << v
-                          << "'\n";
+                std::cerr << "scale-sim: --drift: expected a number in [0, 1], got '" << v << "'\n";
                 return kExUsage;
             }
             config.posterior.drift_sigma_log = static_cast<scaled::core::Scalar>(s);
@@ -149,13 +147,13 @@ int main(int argc, char** argv) {
             const auto& r = results[i];
             std::printf(
                 "%s{\"name\":\"%s\",\"updates\":%d,\"converged_at_update\":%s,"
-                "\"median_rel_error\":%.6g,\"std_rel_error\":%.6g,\"final_scale\":%.6g,"
+                "\"median_rel_error\":%.6g,\"std_rel_error\":%.6g,\"ci95_coverage\":%.4g,"
+                "\"final_scale\":%.6g,"
                 "\"final_ci95\":[%.6g,%.6g]}",
                 i == 0 ? "" : ",", r.name.c_str(), r.updates,
-                r.converged_at_update < 0 ? "null"
-                                          : std::to_string(r.converged_at_update).c_str(),
+                r.converged_at_update < 0 ? "null" : std::to_string(r.converged_at_update).c_str(),
                 static_cast<double>(r.median_rel_error), static_cast<double>(r.std_rel_error),
-                static_cast<double>(r.final_summary.map),
+                static_cast<double>(r.ci95_coverage), static_cast<double>(r.final_summary.map),
                 static_cast<double>(r.final_summary.ci95.lo),
                 static_cast<double>(r.final_summary.ci95.hi));
         }
@@ -165,15 +163,15 @@ int main(int argc, char** argv) {
     std::printf("seed %u, variance %s, weighting %s, roll compensation %s, robust %s, drift %g\n",
                 seed, variance, weighting, roll, config.likelihood.robust ? "on" : "off",
                 static_cast<double>(config.posterior.drift_sigma_log));
-    std::printf("%-28s %7s %10s %12s %12s %10s\n", "experiment", "updates", "converged",
-                "median_err", "std_err", "final_d");
+    std::printf("%-28s %7s %10s %12s %12s %9s %10s\n", "experiment", "updates", "converged",
+                "median_err", "std_err", "ci95_cov", "final_d");
     for (const auto& r : results) {
-        std::printf("%-28s %7d %10s %11.3f%% %11.3f%% %10.4f\n", r.name.c_str(), r.updates,
-                    r.converged_at_update < 0 ? "never"
-                                              : std::to_string(r.converged_at_update).c_str(),
-                    100 * static_cast<double>(r.median_rel_error),
-                    100 * static_cast<double>(r.std_rel_error),
-                    static_cast<double>(r.final_summary.map));
+        std::printf(
+            "%-28s %7d %10s %11.3f%% %11.3f%% %8.0f%% %10.4f\n", r.name.c_str(), r.updates,
+            r.converged_at_update < 0 ? "never" : std::to_string(r.converged_at_update).c_str(),
+            100 * static_cast<double>(r.median_rel_error),
+            100 * static_cast<double>(r.std_rel_error), 100 * static_cast<double>(r.ci95_coverage),
+            static_cast<double>(r.final_summary.map));
     }
     std::printf("(true scale 0.37 m per SLAM unit; errors over the updates after convergence)\n");
     return status;

@@ -11,8 +11,8 @@ namespace scaled::sim {
 
 using core::BoundingBox;
 using core::CameraPose;
-using core::Mat3;
 using core::MapFeature;
+using core::Mat3;
 using core::PinholeRadialCamera;
 using core::ScaleEstimator;
 using core::Vec2;
@@ -21,13 +21,17 @@ namespace {
 
 constexpr Scalar kDeg = std::numbers::pi_v<Scalar> / 180;
 
-Mat3 rotX(Scalar a) { return Eigen::AngleAxis<Scalar>(a, Vec3::UnitX()).toRotationMatrix(); }
-Mat3 rotZ(Scalar a) { return Eigen::AngleAxis<Scalar>(a, Vec3::UnitZ()).toRotationMatrix(); }
+Mat3 rotX(Scalar a) {
+    return Eigen::AngleAxis<Scalar>(a, Vec3::UnitX()).toRotationMatrix();
+}
+Mat3 rotZ(Scalar a) {
+    return Eigen::AngleAxis<Scalar>(a, Vec3::UnitZ()).toRotationMatrix();
+}
 
 // Camera pose in the metric world at frame k.
 CameraPose worldPose(const TrajectorySpec& t, int k, int frames) {
-    const Scalar th = 2 * std::numbers::pi_v<Scalar> * static_cast<Scalar>(k) /
-                      static_cast<Scalar>(frames);
+    const Scalar th =
+        2 * std::numbers::pi_v<Scalar> * static_cast<Scalar>(k) / static_cast<Scalar>(frames);
     CameraPose pose;
     pose.p_CinW = t.look_centre_W + Vec3(t.sweep_x_m * std::sin(th),
                                          -t.distance_m + t.sweep_y_m * std::sin(2 * th),
@@ -97,8 +101,7 @@ std::vector<Vec3> silhouette(const SimObject& o) {
         for (const Scalar sx : {-0.5, 0.5}) {
             for (const Scalar sy : {-0.5, 0.5}) {
                 for (const Scalar sz : {0.0, 1.0}) {
-                    pts.push_back(o.base_W +
-                                  Vec3(sx * o.width_m, sy * o.depth_m, sz * o.height_m));
+                    pts.push_back(o.base_W + Vec3(sx * o.width_m, sy * o.depth_m, sz * o.height_m));
                 }
             }
         }
@@ -275,6 +278,13 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
             var += (e - mean) * (e - mean);
         }
         result.std_rel_error = std::sqrt(var / static_cast<Scalar>(errors.size()));
+        int covered = 0;
+        for (auto u = static_cast<std::size_t>(result.converged_at_update);
+             u < result.series.size(); ++u) {
+            const auto& ci = result.series[u].summary.ci95;
+            covered += (ci.lo <= d && d <= ci.hi) ? 1 : 0;
+        }
+        result.ci95_coverage = static_cast<Scalar>(covered) / static_cast<Scalar>(errors.size());
     }
     if (!result.series.empty()) {
         result.final_summary = result.series.back().summary;

@@ -46,19 +46,19 @@ struct SimObject {
 
 struct TrajectorySpec {
     Vec3 look_centre_W = Vec3(0, 0, 1);  // the camera faces +y towards this point
-    Scalar distance_m = Scalar(1.2);      // from the camera to look_centre along y
-    Scalar sweep_x_m = Scalar(0.3);       // lateral amplitude
-    Scalar sweep_y_m = Scalar(0.1);       // forward/back amplitude
-    Scalar sweep_z_m = Scalar(0.03);      // vertical amplitude
-    Scalar roll_deg = 1;                  // amplitude of roll
-    Scalar pitch_deg = 2;                 // amplitude of pitch around its mean
-    Scalar yaw_deg = 2;                   // amplitude of yaw
+    Scalar distance_m = Scalar(1.2);     // from the camera to look_centre along y
+    Scalar sweep_x_m = Scalar(0.3);      // lateral amplitude
+    Scalar sweep_y_m = Scalar(0.1);      // forward/back amplitude
+    Scalar sweep_z_m = Scalar(0.03);     // vertical amplitude
+    Scalar roll_deg = 1;                 // amplitude of roll
+    Scalar pitch_deg = 2;                // amplitude of pitch around its mean
+    Scalar yaw_deg = 2;                  // amplitude of yaw
 };
 
 struct NoiseSpec {
-    Scalar pixel_sigma = 1;          // feature angular noise, in pixels
+    Scalar pixel_sigma = 1;                 // feature angular noise, in pixels
     Scalar depth_rel_sigma0 = Scalar(0.5);  // initial depth std / depth
-    Scalar box_sigma_px = 2;         // detection box edge noise
+    Scalar box_sigma_px = 2;                // detection box edge noise
     int features_per_object = 12;
 };
 
@@ -86,11 +86,14 @@ struct UpdatePoint {
 
 struct ExperimentResult {
     std::string name;
-    int updates = 0;                // detection frames that added >= 1 observation
-    int converged_at_update = -1;   // first update after which the state stays converged
-    Scalar median_rel_error = 0;    // over updates from converged_at_update on
+    int updates = 0;               // detection frames that added >= 1 observation
+    int converged_at_update = -1;  // first update after which the state stays converged
+    Scalar median_rel_error = 0;   // over updates from converged_at_update on
     Scalar std_rel_error = 0;
     Scalar final_rel_error = 0;
+    // Fraction of the updates after convergence whose 95% interval holds d_true
+    // (calibration: about 0.95 for an honest posterior).
+    Scalar ci95_coverage = 0;
     core::ScaleSummary final_summary;
     std::vector<UpdatePoint> series;
     std::array<int, static_cast<std::size_t>(core::ExtentStatus::kCount)> rejected{};

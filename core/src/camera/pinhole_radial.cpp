@@ -10,7 +10,9 @@ namespace scaled::core {
 
 namespace {
 
-bool finite(Scalar v) { return std::isfinite(v); }
+bool finite(Scalar v) {
+    return std::isfinite(v);
+}
 
 // Smallest positive r where d/dr [r (1 + k1 r^2 + k2 r^4)] = 1 + 3 k1 r^2 + 5 k2 r^4 = 0.
 Scalar monotonicRadius(Scalar k1, Scalar k2) {
@@ -49,9 +51,9 @@ Result<PinholeRadialCamera> PinholeRadialCamera::create(const CameraIntrinsics& 
                              std::to_string(k.fx) + ", fy=" + std::to_string(k.fy) + ")");
     }
     if (k.width_px <= 0 || k.height_px <= 0) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         "camera: image size must be positive (got " + std::to_string(k.width_px) +
-                             "x" + std::to_string(k.height_px) + ")");
+        return makeError(ErrorCode::kInvalidArgument, "camera: image size must be positive (got " +
+                                                          std::to_string(k.width_px) + "x" +
+                                                          std::to_string(k.height_px) + ")");
     }
     return PinholeRadialCamera(k);
 }

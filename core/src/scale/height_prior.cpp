@@ -22,7 +22,9 @@ std::string num(Scalar v) {
     return s;
 }
 
-Scalar normalCdf(Scalar x) { return Scalar(0.5) * std::erfc(-x / std::sqrt(Scalar(2))); }
+Scalar normalCdf(Scalar x) {
+    return Scalar(0.5) * std::erfc(-x / std::sqrt(Scalar(2)));
+}
 
 }  // namespace
 
@@ -110,6 +112,18 @@ Result<HeightPrior> HeightPrior::fromNormal(std::string class_name, Scalar mean_
         const auto i = static_cast<std::size_t>(b);
         heights[i] = Scalar(0.5) * (lo + hi);
         probs[i] = normalCdf((hi - mean_m) / std_m) - normalCdf((lo - mean_m) / std_m);
+    }
+    Scalar total = 0;
+    for (const Scalar p : probs) {
+        total += p;
+    }
+    if (!(total > 0)) {
+        // The CDF differences underflow when std_m dwarfs the bins (a nearly
+        // uniform prior): the density at the bin centres is exact enough there.
+        for (std::size_t i = 0; i < probs.size(); ++i) {
+            const Scalar z = (heights[i] - mean_m) / std_m;
+            probs[i] = std::exp(Scalar(-0.5) * z * z);
+        }
     }
     return fromHistogram(std::move(class_name), heights, probs, width, upright);
 }

@@ -109,8 +109,8 @@ Scalar gridMode(const ScaleGrid& grid, std::span<const Scalar> v) {
     if (j > 0 && j + 1 < v.size()) {
         const Scalar denom = v[j - 1] - 2 * v[j] + v[j + 1];
         if (denom < 0) {
-            offset = std::clamp(Scalar(0.5) * (v[j - 1] - v[j + 1]) / denom, Scalar(-0.5),
-                                Scalar(0.5));
+            offset =
+                std::clamp(Scalar(0.5) * (v[j - 1] - v[j + 1]) / denom, Scalar(-0.5), Scalar(0.5));
         }
     }
     return std::exp(grid.logD(j) + offset * grid.delta());

@@ -15,8 +15,8 @@ Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, Pri
                              std::to_string(config.max_features_per_box) + ")");
     }
     const auto& lc = config.likelihood;
-    if (lc.robust && !(lc.outlier_weight > 0 && lc.outlier_weight < 1 &&
-                       lc.outlier_height_range_m > 0)) {
+    if (lc.robust &&
+        !(lc.outlier_weight > 0 && lc.outlier_weight < 1 && lc.outlier_height_range_m > 0)) {
         return makeError(ErrorCode::kInvalidArgument,
                          "scale estimator: robust likelihood needs 0 < outlier_weight < 1 and "
                          "outlier_height_range_m > 0");
@@ -56,9 +56,8 @@ UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
         // Geometry first, so that per-box weighting knows how many features count.
         std::size_t n = 0;
         for (std::size_t fi = 0; fi < frame.features.size() && n < extents_.size(); ++fi) {
-            const ExtentResult r = measureVerticalExtent(camera_, frame.pose, frame.up_W,
-                                                         frame.features[fi], det.box,
-                                                         config_.extent);
+            const ExtentResult r = measureVerticalExtent(
+                camera_, frame.pose, frame.up_W, frame.features[fi], det.box, config_.extent);
             if (r.status != ExtentStatus::kOk) {
                 // Features outside the box are the common case, not a rejection.
                 if (r.status != ExtentStatus::kOutsideBox) {
@@ -75,8 +74,8 @@ UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
                                   : Scalar(1);
         int used = 0;
         for (std::size_t k = 0; k < n; ++k) {
-            if (!evaluateLogLikelihood(extents_[k], *prior, posterior_.grid(),
-                                       config_.likelihood, log_l_) ||
+            if (!evaluateLogLikelihood(extents_[k], *prior, posterior_.grid(), config_.likelihood,
+                                       log_l_) ||
                 !posterior_.addLogLikelihood(log_l_, weight)) {
                 ++stats.rejected[static_cast<std::size_t>(ExtentStatus::kUnstable)];
                 continue;

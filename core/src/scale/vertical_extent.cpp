@@ -101,8 +101,8 @@ BoxEdge violatedEdge(const Region& r, const Vec2& px) {
 // region (distorted pixels). Closed form (slabs in the region's frame) without
 // distortion; otherwise a bounded march followed by bisection on the distorted
 // image of the line.
-std::optional<Exit> exitFromRegion(const PinholeRadialCamera& cam, const Vec2& x0,
-                                   const Vec2& dir, const Region& region) {
+std::optional<Exit> exitFromRegion(const PinholeRadialCamera& cam, const Vec2& x0, const Vec2& dir,
+                                   const Region& region) {
     const auto& k = cam.intrinsics();
     if (!cam.hasDistortion()) {
         const Vec2 p0 = region.toLocal(cam.pixelFromNormalized(x0));
@@ -226,7 +226,9 @@ bool edgeOnImageBorder(const PinholeRadialCamera& cam, const BoundingBox& b, Box
     return true;
 }
 
-bool isSide(BoxEdge e) { return e == BoxEdge::kLeft || e == BoxEdge::kRight; }
+bool isSide(BoxEdge e) {
+    return e == BoxEdge::kLeft || e == BoxEdge::kRight;
+}
 
 }  // namespace
 

@@ -7,7 +7,9 @@
 namespace scaled::core {
 namespace {
 
-Scalar sum(std::span<const Scalar> v) { return std::accumulate(v.begin(), v.end(), Scalar(0)); }
+Scalar sum(std::span<const Scalar> v) {
+    return std::accumulate(v.begin(), v.end(), Scalar(0));
+}
 
 TEST(HeightPrior, HistogramIsNormalisedSortedAndDropsZeroBins) {
     const std::vector<Scalar> h{0.3, 0.1, 0.2, 0.4};
@@ -41,6 +43,14 @@ TEST(HeightPrior, NormalFormIntegratesTheTruncatedNormal) {
     const Scalar inside = std::erf(3 / std::sqrt(2.0));
     EXPECT_NEAR(prior->probabilities()[2], 0.5 * std::erf(1 / std::sqrt(2.0)) / inside, 1e-12);
     EXPECT_NEAR(prior->mean(), 0.9, 1e-12);
+}
+
+TEST(HeightPrior, HugeStdGivesAUniformPrior) {
+    const auto prior = HeightPrior::fromNormal("x", 0.5, 1e300, 0.1, 0.9, 8, true);
+    ASSERT_TRUE(prior.ok()) << prior.error().message;
+    for (const Scalar p : prior->probabilities()) {
+        EXPECT_NEAR(p, 1.0 / 8, 1e-12);
+    }
 }
 
 TEST(HeightPrior, RejectsBadInputWithClearMessages) {

@@ -9,7 +9,9 @@
 namespace scaled::core {
 namespace {
 
-ScaleGrid grid(int bins = 1024) { return ScaleGrid::create({0.01, 100, bins}).value(); }
+ScaleGrid grid(int bins = 1024) {
+    return ScaleGrid::create({0.01, 100, bins}).value();
+}
 
 HeightPrior single(Scalar h, Scalar width = 0) {
     const std::vector<Scalar> hs{h};
@@ -71,8 +73,9 @@ TEST(Likelihood, PropagatedIsTheDensityOfD) {
         const Scalar res = e.D * g.delta();
         // N(D; H/d, s^2) summed over H, written in metres: d * N(dD; H, d^2 s^2).
         const Scalar var = d * d * (0.01 * 0.01 + 0.005 * 0.005 + res * res / 12);
-        const Scalar expected = std::log(d) + std::log(0.25 * std::exp(logNormal(d * 0.5 - 0.9, var)) +
-                                                       0.75 * std::exp(logNormal(d * 0.5 - 1.1, var)));
+        const Scalar expected =
+            std::log(d) + std::log(0.25 * std::exp(logNormal(d * 0.5 - 0.9, var)) +
+                                   0.75 * std::exp(logNormal(d * 0.5 - 1.1, var)));
         EXPECT_NEAR(l[j], expected, 1e-9 * (1 + std::abs(expected))) << j;
     }
 }
@@ -137,9 +140,11 @@ std::vector<Scalar> bruteForce(const VerticalExtent& e, const HeightPrior& prior
         var = std::max(var, cfg.min_sigma_m * cfg.min_sigma_m);
         Scalar sum = 0;
         for (std::size_t m = 0; m < prior.size(); ++m) {
-            sum += prior.probabilities()[m] * std::exp(logNormal(d * e.D - prior.heights()[m], var));
+            sum +=
+                prior.probabilities()[m] * std::exp(logNormal(d * e.D - prior.heights()[m], var));
         }
-        out[j] = std::log(sum) + (cfg.variance_model == VarianceModel::kPropagated ? std::log(d) : 0);
+        out[j] =
+            std::log(sum) + (cfg.variance_model == VarianceModel::kPropagated ? std::log(d) : 0);
     }
     return out;
 }

@@ -19,8 +19,8 @@ PriorTable priors() {
     const std::vector<Scalar> h{0.30};
     const std::vector<Scalar> p{1};
     t.add(HeightPrior::fromHistogram("bottle", h, p, 0, true).value());
-    t.add(HeightPrior::fromHistogram("dining table", std::vector<Scalar>{0.75}, p, 0, false)
-              .value());
+    t.add(
+        HeightPrior::fromHistogram("dining table", std::vector<Scalar>{0.75}, p, 0, false).value());
     return t;
 }
 

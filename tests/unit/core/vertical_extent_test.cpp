@@ -1,7 +1,6 @@
 #include <random>
 
 #include <Eigen/Cholesky>
-
 #include <gtest/gtest.h>
 
 #include <scaled/core/scale/vertical_extent.h>
@@ -61,9 +60,8 @@ TEST(VerticalExtent, ExactForAnyPoseAndDistortion) {
     for (const Scalar k1 : {0.0, -0.15}) {
         const auto cam = makeCamera(k1, k1 == 0 ? 0 : 0.02);
         for (int trial = 0; trial < 200; ++trial) {
-            const CameraPose pose =
-                lookAlongY(Vec3(u(rng) * 0.3, 0, u(rng) * 0.2), u(rng) * 0.3, u(rng) * 0.3,
-                           u(rng) * 0.15);
+            const CameraPose pose = lookAlongY(Vec3(u(rng) * 0.3, 0, u(rng) * 0.2), u(rng) * 0.3,
+                                               u(rng) * 0.3, u(rng) * 0.15);
             const Vec3 base(u(rng) * 0.3, 2 + u(rng) * 0.5, -0.4 + u(rng) * 0.1);
             const Scalar h = 0.5 + 0.3 * u(rng);
             const Vec3 top = base + h * kUp;
@@ -76,8 +74,8 @@ TEST(VerticalExtent, ExactForAnyPoseAndDistortion) {
             if (r.status == ExtentStatus::kTruncatedBox) {
                 continue;  // the random pose put the segment at the image border
             }
-            ASSERT_EQ(r.status, ExtentStatus::kOk) << "trial " << trial << " k1 " << k1 << ": "
-                                                   << toString(r.status);
+            ASSERT_EQ(r.status, ExtentStatus::kOk)
+                << "trial " << trial << " k1 " << k1 << ": " << toString(r.status);
             EXPECT_NEAR(r.extent.D, h, 1e-9) << "trial " << trial << " k1 " << k1;
             EXPECT_LT((r.extent.p_t_W - top).norm(), 1e-9);
             ++checked;

@@ -38,17 +38,17 @@ struct MapFeature {
 
 enum class ExtentStatus : std::uint8_t {
     kOk,
-    kBehindCamera,          // feature not in front of the camera
-    kOutsideBox,            // projection pi_i not inside the box
-    kTruncatedBox,          // the line leaves the box through an edge on the image border
-    kVanishingPointInBox,   // camera looks (nearly) straight up or down through the object
-    kDegenerateDirection,   // the image of the vertical through pi_i is a point
-    kSideExit,              // the line leaves the box through a side edge
-    kNoIntersection,        // no exit from the box was found
-    kInconsistent,          // p_t not above or p_d not below p_i, or behind the camera
-    kTooSmall,              // D or the image extent too small to use
-    kUnstable,              // a perturbation for the variance crossed a degeneracy
-    kRollTooLarge,          // roll compensation cannot explain the box (see ExtentConfig)
+    kBehindCamera,         // feature not in front of the camera
+    kOutsideBox,           // projection pi_i not inside the box
+    kTruncatedBox,         // the line leaves the box through an edge on the image border
+    kVanishingPointInBox,  // camera looks (nearly) straight up or down through the object
+    kDegenerateDirection,  // the image of the vertical through pi_i is a point
+    kSideExit,             // the line leaves the box through a side edge
+    kNoIntersection,       // no exit from the box was found
+    kInconsistent,         // p_t not above or p_d not below p_i, or behind the camera
+    kTooSmall,             // D or the image extent too small to use
+    kUnstable,             // a perturbation for the variance crossed a degeneracy
+    kRollTooLarge,         // roll compensation cannot explain the box (see ExtentConfig)
     kCount
 };
 const char* toString(ExtentStatus status);
