@@ -11,14 +11,16 @@ import statistics
 import subprocess
 import sys
 
+PAPER = ["--variance", "paper", "--roll-compensation", "off", "--weighting", "feature"]
 CONFIGS = [
-    ("paper (literal)", ["--variance", "paper", "--roll-compensation", "off"]),
-    ("paper variance + roll compensation", ["--variance", "paper", "--roll-compensation", "on"]),
-    ("propagated variance, no roll compensation", ["--variance", "propagated", "--roll-compensation", "off"]),
-    ("propagated + roll compensation (scale-sim default)", []),
-    ("default + per-box weighting", ["--weighting", "box"]),
+    ("paper (literal): paper variance, axis-aligned box, per-feature", PAPER),
+    ("paper + roll compensation", PAPER[:2] + ["--roll-compensation", "on", "--weighting", "feature"]),
+    ("paper + per-box weighting", PAPER[:4] + ["--weighting", "box"]),
+    ("propagated variance, roll compensation, per-feature", ["--weighting", "feature"]),
+    ("propagated variance, per-box, no roll compensation", ["--roll-compensation", "off"]),
+    ("**scale-sim default**: propagated, roll compensation, per-box", []),
     ("default + robust likelihood", ["--robust"]),
-    ("default + drift 0.002", ["--drift", "0.002"]),
+    ("default + drift 0.002 per update", ["--drift", "0.002"]),
 ]
 
 

@@ -173,7 +173,9 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
     ClassSpec spec;
     for (const auto& [k, node] : t) {
         const std::string key(k.str());
-        const std::string full = base + "." + key;
+        std::string full = base;
+        full += '.';
+        full += key;
         if (key == "upright") {
             if (!node.is_boolean()) {
                 return rep.at(&node, full, "must be true or false (got " + show(node) + ")");

@@ -46,7 +46,7 @@ void runUpdate(benchmark::State& state, VarianceModel model, bool roll) {
     snap.pose = fx.pose;
     snap.features = std::span<const MapFeature>(&fx.feature, 1);
     const std::array<Detection, 1> dets{Detection{fx.box, "bottle", 1}};
-    for (auto _ : state) {
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
         const UpdateStats st = est.update(snap, dets);
         benchmark::DoNotOptimize(st);
         if (st.observations != 1) {
@@ -76,7 +76,7 @@ void BM_Summary(benchmark::State& state) {
     PosteriorConfig c;
     c.grid.bins = static_cast<int>(state.range(0));
     const auto p = ScalePosterior::create(c).value();
-    for (auto _ : state) {
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
         benchmark::DoNotOptimize(p.summary());
     }
 }
@@ -84,7 +84,7 @@ BENCHMARK(BM_Summary)->Arg(512)->Arg(1024)->Arg(2048);
 
 void BM_SimExperiment(benchmark::State& state) {
     const auto specs = scaled::sim::paperExperiments(1, scaled::sim::defaultSimEstimatorConfig());
-    for (auto _ : state) {
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
         benchmark::DoNotOptimize(scaled::sim::runExperiment(specs[0]));
     }
 }

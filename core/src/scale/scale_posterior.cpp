@@ -89,7 +89,8 @@ void ScalePosterior::diffuse(Scalar sigma_log) {
     }
     for (int k = -half; k <= half; ++k) {
         const Scalar x = static_cast<Scalar>(k) / sigma_bins;
-        kernel_[static_cast<std::size_t>(k + half)] = std::exp(Scalar(-0.5) * x * x);
+        const int slot = k + half;
+        kernel_[static_cast<std::size_t>(slot)] = std::exp(Scalar(-0.5) * x * x);
     }
     const auto n = static_cast<int>(log_p_.size());
     for (int j = 0; j < n; ++j) {
@@ -102,7 +103,8 @@ void ScalePosterior::diffuse(Scalar sigma_log) {
         const int lo = std::max(0, j - half);
         const int hi = std::min(n - 1, j + half);
         for (int i = lo; i <= hi; ++i) {
-            const Scalar w = kernel_[static_cast<std::size_t>(i - j + half)];
+            const int slot = i - j + half;
+            const Scalar w = kernel_[static_cast<std::size_t>(slot)];
             acc += w * work_[static_cast<std::size_t>(i)];
             wsum += w;
         }

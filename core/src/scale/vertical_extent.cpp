@@ -274,7 +274,7 @@ ExtentStatus computeVerticalExtent(const PinholeRadialCamera& camera, const Came
         // from the image's -y axis.
         const auto centre_ray = camera.unproject(region.centre);
         if (centre_ray) {
-            const Vec3 q = *centre_ray;  // point at unit depth
+            const Vec3& q = *centre_ray;  // point at unit depth
             const Vec2 up_n = v_C.head<2>() - q.head<2>() * v_C.z();
             const auto& k = camera.intrinsics();
             const Vec2 up_px(k.fx * up_n.x(), k.fy * up_n.y());

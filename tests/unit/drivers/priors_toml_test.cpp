@@ -23,7 +23,6 @@ namespace {
 using core::ErrorCode;
 using core::HeightPrior;
 using core::PriorTable;
-using core::Result;
 using core::Scalar;
 
 constexpr std::string_view kName = "prio.toml";
@@ -48,8 +47,8 @@ bool writeFile(const std::filesystem::path& path, std::string_view content) {
 
 // A fresh directory under ::testing::TempDir() for one test.
 std::filesystem::path tempDir(std::string_view test_name) {
-    const auto dir = std::filesystem::path(::testing::TempDir()) /
-                     ("scaled_priors_toml_" + std::string(test_name));
+    auto dir = std::filesystem::path(::testing::TempDir()) /
+               ("scaled_priors_toml_" + std::string(test_name));
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     return dir;

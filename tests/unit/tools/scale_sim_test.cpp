@@ -17,6 +17,8 @@ TEST(ScaleSim, PaperExperimentsReachOnePercent) {
         EXPECT_GE(r.updates, 25) << spec.name;
         ASSERT_GE(r.converged_at_update, 0) << spec.name << " never converged";
         EXPECT_LE(r.median_rel_error, 0.01) << spec.name;
+        // Calibrated: most 95% intervals after convergence hold the truth.
+        EXPECT_GE(r.ci95_coverage, 0.8) << spec.name;
         // The final 95% interval contains the true scale.
         EXPECT_LE(r.final_summary.ci95.lo, spec.d_true) << spec.name;
         EXPECT_GE(r.final_summary.ci95.hi, spec.d_true) << spec.name;
