@@ -72,6 +72,20 @@ BENCHMARK(BM_ObservationUpdatePaper)->ArgsProduct({{512, 1024, 2048}, {24}});
 BENCHMARK(BM_ObservationUpdatePropagatedRoll)->ArgsProduct({{512, 1024, 2048}, {24}});
 BENCHMARK(BM_ObservationUpdatePaper)->Args({1024, 1})->Args({1024, 64});
 
+// The observation geometry alone, with and without the propagated variance
+// (range(0) = 1: numeric Jacobians w.r.t. the feature and the four box edges).
+void BM_VerticalExtent(benchmark::State& state) {
+    const Fixture fx;
+    ExtentConfig cfg;
+    cfg.propagate_variance = state.range(0) != 0;
+    const Vec3 up(0, 0, 1);
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
+        benchmark::DoNotOptimize(
+            measureVerticalExtent(fx.cam, fx.pose, up, fx.feature, fx.box, cfg));
+    }
+}
+BENCHMARK(BM_VerticalExtent)->Arg(0)->Arg(1);
+
 void BM_Summary(benchmark::State& state) {
     PosteriorConfig c;
     c.grid.bins = static_cast<int>(state.range(0));
