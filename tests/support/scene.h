@@ -11,7 +11,8 @@ namespace scaled::test {
 
 using core::Scalar;
 
-inline core::PinholeRadialCamera makeCamera(Scalar k1 = 0, Scalar k2 = 0, Scalar f = 500) {
+// 640x480, principal point at the centre.
+inline core::CameraIntrinsics makeIntrinsics(Scalar k1 = 0, Scalar k2 = 0, Scalar f = 500) {
     core::CameraIntrinsics k;
     k.fx = f;
     k.fy = f;
@@ -21,7 +22,11 @@ inline core::PinholeRadialCamera makeCamera(Scalar k1 = 0, Scalar k2 = 0, Scalar
     k.k2 = k2;
     k.width_px = 640;
     k.height_px = 480;
-    return core::PinholeRadialCamera::create(k).value();
+    return k;
+}
+
+inline core::PinholeRadialCamera makeCamera(Scalar k1 = 0, Scalar k2 = 0, Scalar f = 500) {
+    return core::PinholeRadialCamera::create(makeIntrinsics(k1, k2, f)).value();
 }
 
 // A level camera at p looking along world +y (world z up), then rotated by

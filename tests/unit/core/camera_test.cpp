@@ -3,21 +3,14 @@
 #include <scaled/core/camera/pinhole_radial.h>
 
 #include "numeric_jacobian.h"
+#include "scene.h"
 
 namespace scaled::core {
 namespace {
 
+// The 7-Scenes intrinsics (f = 585), with optional distortion.
 CameraIntrinsics kitchenIntrinsics(Scalar k1 = 0, Scalar k2 = 0) {
-    CameraIntrinsics k;
-    k.fx = 585;
-    k.fy = 585;
-    k.cx = 320;
-    k.cy = 240;
-    k.k1 = k1;
-    k.k2 = k2;
-    k.width_px = 640;
-    k.height_px = 480;
-    return k;
+    return test::makeIntrinsics(k1, k2, 585);
 }
 
 PinholeRadialCamera make(Scalar k1 = 0, Scalar k2 = 0) {
