@@ -64,7 +64,7 @@ struct ObservationRecord {
 
 struct UpdateStats {
     int detections_used = 0;     // detections with a prior that produced >= 1 observation
-    int detections_skipped = 0;  // unknown class, non-upright, low score
+    int detections_skipped = 0;  // unknown class, non-upright, low score, or no observation
     int observations = 0;
     std::array<int, static_cast<std::size_t>(ExtentStatus::kCount)> rejected{};
     int records_written = 0;  // into the caller's span (at most its size)

@@ -2,7 +2,8 @@
 
 // The grid posterior over the global scale d, accumulated in the log domain.
 // The prior over d is uniform in log d (scale-invariant). All buffers are
-// allocated at construction: updates do not allocate.
+// allocated at construction: updates do not allocate. Not thread-safe, not even
+// for const calls: summary() uses the object's scratch buffer.
 
 #include <cstdint>
 #include <span>
