@@ -3,6 +3,8 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include <toml++/toml.h>
@@ -65,20 +67,50 @@ std::optional<Scalar> number(const toml::node& n) {
     return std::nullopt;
 }
 
+// A value read from the file with the node it stands at, so that a range error
+// names the value's own line.
+template <typename T>
+struct Located {
+    std::optional<T> value;
+    const toml::node* node = nullptr;
+
+    explicit operator bool() const { return value.has_value(); }
+    const T& operator*() const { return *value; }
+    const T* operator->() const { return &*value; }
+    void set(T v, const toml::node& n) {
+        value = std::move(v);
+        node = &n;
+    }
+};
+
 struct ClassSpec {
     std::optional<bool> upright;
     std::optional<std::string> source;
-    std::optional<Scalar> mean_m, std_m, min_m, max_m, bin_width_m;
     std::optional<int> bins;
-    std::optional<std::vector<Scalar>> heights_m, probabilities;
-    // Where each value stands, so range errors name its own line.
-    const toml::node* mean_node = nullptr;
-    const toml::node* std_node = nullptr;
-    const toml::node* min_node = nullptr;
-    const toml::node* max_node = nullptr;
-    const toml::node* width_node = nullptr;
-    const toml::node* heights_node = nullptr;
-    const toml::node* probs_node = nullptr;
+    Located<Scalar> mean_m, std_m, min_m, max_m, bin_width_m;
+    Located<std::vector<Scalar>> heights_m, probabilities;
+
+    // The number-valued and array-valued keys by name; nullptr for others.
+    Located<Scalar>* numberKey(std::string_view key) {
+        const std::pair<std::string_view, Located<Scalar>*> keys[] = {
+            {"mean_m", &mean_m},
+            {"std_m", &std_m},
+            {"min_m", &min_m},
+            {"max_m", &max_m},
+            {"bin_width_m", &bin_width_m}};
+        for (const auto& [name, field] : keys) {
+            if (name == key) {
+                return field;
+            }
+        }
+        return nullptr;
+    }
+    Located<std::vector<Scalar>>* arrayKey(std::string_view key) {
+        if (key == "heights_m") {
+            return &heights_m;
+        }
+        return key == "probabilities" ? &probabilities : nullptr;
+    }
 };
 
 std::string num(Scalar v) {
@@ -91,38 +123,38 @@ std::string num(Scalar v) {
 // core constructors check the same again; these exist for the message.
 std::optional<Error> checkRanges(const Reporter& rep, const std::string& base, const ClassSpec& s) {
     if (s.std_m && !(*s.std_m > 0 && std::isfinite(*s.std_m))) {
-        return rep.at(s.std_node, base + ".std_m", "must be > 0 (got " + num(*s.std_m) + ")");
+        return rep.at(s.std_m.node, base + ".std_m", "must be > 0 (got " + num(*s.std_m) + ")");
     }
     if (s.min_m && !(*s.min_m > 0 && std::isfinite(*s.min_m))) {
-        return rep.at(s.min_node, base + ".min_m", "must be > 0 (got " + num(*s.min_m) + ")");
+        return rep.at(s.min_m.node, base + ".min_m", "must be > 0 (got " + num(*s.min_m) + ")");
     }
     if (s.min_m && s.max_m && !(*s.max_m > *s.min_m && std::isfinite(*s.max_m))) {
         return rep.at(
-            s.max_node, base + ".max_m",
+            s.max_m.node, base + ".max_m",
             "must be greater than min_m = " + num(*s.min_m) + " (got " + num(*s.max_m) + ")");
     }
     if (s.mean_m && s.min_m && s.max_m && !(*s.mean_m >= *s.min_m && *s.mean_m <= *s.max_m)) {
-        return rep.at(s.mean_node, base + ".mean_m",
+        return rep.at(s.mean_m.node, base + ".mean_m",
                       "must lie in [min_m, max_m] = [" + num(*s.min_m) + ", " + num(*s.max_m) +
                           "] (got " + num(*s.mean_m) + ")");
     }
     if (s.bin_width_m && !(*s.bin_width_m >= 0 && std::isfinite(*s.bin_width_m))) {
-        return rep.at(s.width_node, base + ".bin_width_m",
+        return rep.at(s.bin_width_m.node, base + ".bin_width_m",
                       "must be >= 0 (got " + num(*s.bin_width_m) + ")");
     }
     if (s.heights_m) {
         const auto& h = *s.heights_m;
         if (h.empty()) {
-            return rep.at(s.heights_node, base + ".heights_m", "must not be empty");
+            return rep.at(s.heights_m.node, base + ".heights_m", "must not be empty");
         }
         if (h.size() > static_cast<std::size_t>(HeightPrior::kMaxBins)) {
-            return rep.at(s.heights_node, base + ".heights_m",
+            return rep.at(s.heights_m.node, base + ".heights_m",
                           "at most " + std::to_string(HeightPrior::kMaxBins) + " entries (got " +
                               std::to_string(h.size()) + ")");
         }
         for (std::size_t i = 0; i < h.size(); ++i) {
             if (!(h[i] > 0 && std::isfinite(h[i]))) {
-                return rep.at(s.heights_node, base + ".heights_m[" + std::to_string(i) + "]",
+                return rep.at(s.heights_m.node, base + ".heights_m[" + std::to_string(i) + "]",
                               "must be > 0 (got " + num(h[i]) + ")");
             }
         }
@@ -132,18 +164,20 @@ std::optional<Error> checkRanges(const Reporter& rep, const std::string& base, c
         Scalar total = 0;
         for (std::size_t i = 0; i < p.size(); ++i) {
             if (!(p[i] >= 0 && std::isfinite(p[i]))) {
-                return rep.at(s.probs_node, base + ".probabilities[" + std::to_string(i) + "]",
+                return rep.at(s.probabilities.node,
+                              base + ".probabilities[" + std::to_string(i) + "]",
                               "must be >= 0 (got " + num(p[i]) + ")");
             }
             total += p[i];
         }
         if (s.heights_m && p.size() != s.heights_m->size()) {
-            return rep.at(s.probs_node, base + ".probabilities",
+            return rep.at(s.probabilities.node, base + ".probabilities",
                           "has " + std::to_string(p.size()) + " entries but heights_m has " +
                               std::to_string(s.heights_m->size()));
         }
         if (!(total > 0)) {
-            return rep.at(s.probs_node, base + ".probabilities", "all zero: they must sum to > 0");
+            return rep.at(s.probabilities.node, base + ".probabilities",
+                          "all zero: they must sum to > 0");
         }
     }
     return std::nullopt;
@@ -194,40 +228,18 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
                                   "] (got " + show(node) + ")");
             }
             spec.bins = static_cast<int>(i->get());
-        } else if (key == "heights_m" || key == "probabilities") {
+        } else if (auto* array = spec.arrayKey(key)) {
             auto arr = numberArray(rep, node, full);
             if (!arr) {
                 return arr.error();
             }
-            if (key == "heights_m") {
-                spec.heights_m = std::move(arr.value());
-                spec.heights_node = &node;
-            } else {
-                spec.probabilities = std::move(arr.value());
-                spec.probs_node = &node;
-            }
-        } else if (key == "mean_m" || key == "std_m" || key == "min_m" || key == "max_m" ||
-                   key == "bin_width_m") {
+            array->set(std::move(arr.value()), node);
+        } else if (auto* field = spec.numberKey(key)) {
             const auto v = number(node);
             if (!v) {
                 return rep.at(&node, full, "must be a number (got " + show(node) + ")");
             }
-            if (key == "mean_m") {
-                spec.mean_m = v;
-                spec.mean_node = &node;
-            } else if (key == "std_m") {
-                spec.std_m = v;
-                spec.std_node = &node;
-            } else if (key == "min_m") {
-                spec.min_m = v;
-                spec.min_node = &node;
-            } else if (key == "max_m") {
-                spec.max_m = v;
-                spec.max_node = &node;
-            } else {
-                spec.bin_width_m = v;
-                spec.width_node = &node;
-            }
+            field->set(*v, node);
         } else {
             return rep.at(&node, full,
                           "unknown key (allowed: upright, source, mean_m, std_m, min_m, max_m, "
@@ -269,7 +281,7 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
             return rep.at(&t, base, "the explicit form needs both heights_m and probabilities");
         }
         prior = HeightPrior::fromHistogram(name, *spec.heights_m, *spec.probabilities,
-                                           spec.bin_width_m.value_or(0), *spec.upright);
+                                           spec.bin_width_m.value.value_or(0), *spec.upright);
     }
     if (!prior) {
         return rep.at(&t, base, prior.error().message);
