@@ -264,9 +264,12 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
         result.converged_at_update = u;
     }
     if (result.converged_at_update >= 0) {
+        int covered = 0;
         for (auto u = static_cast<std::size_t>(result.converged_at_update);
              u < result.series.size(); ++u) {
-            errors.push_back(result.series[u].rel_error);
+            const UpdatePoint& up = result.series[u];
+            errors.push_back(up.rel_error);
+            covered += (up.summary.ci95.lo <= d && d <= up.summary.ci95.hi) ? 1 : 0;
         }
         result.median_rel_error = median(errors);
         Scalar mean = 0;
@@ -279,12 +282,6 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
             var += (e - mean) * (e - mean);
         }
         result.std_rel_error = std::sqrt(var / static_cast<Scalar>(errors.size()));
-        int covered = 0;
-        for (auto u = static_cast<std::size_t>(result.converged_at_update);
-             u < result.series.size(); ++u) {
-            const auto& ci = result.series[u].summary.ci95;
-            covered += (ci.lo <= d && d <= ci.hi) ? 1 : 0;
-        }
         result.ci95_coverage = static_cast<Scalar>(covered) / static_cast<Scalar>(errors.size());
     }
     if (!result.series.empty()) {
