@@ -1,0 +1,231 @@
+#pragma once
+
+// EKF MonoSLAM without a known target (Civera, Davison, Montiel: inverse-depth
+// features, 2008; 1-point RANSAC, 2010).
+//
+// One frame:
+//   predict(t_ns)                  constant-velocity motion model
+//   predictMeasurements()          which features should be in view, where, and
+//                                  their innovation covariance S (active search)
+//   update(matches)                the front end's matches -> 1-point RANSAC,
+//                                  low-innovation inlier update, rescue of
+//                                  high-innovation inliers, second update
+//   manageMap()                    delete unreliable features, convert
+//                                  inverse-depth features to XYZ, health check
+//   addFeature(px)                 undelayed initialisation of new features
+//
+// The world frame is the first camera frame and lengths are in SLAM units of
+// unknown scale. Every buffer is sized at create(); the per-frame steps do not
+// allocate.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/result.h>
+#include <scaled/core/scale/vertical_extent.h>
+#include <scaled/core/slam/feature_model.h>
+#include <scaled/core/slam/motion_model.h>
+#include <scaled/core/slam/slam_types.h>
+
+namespace scaled::core::slam {
+
+struct SlamConfig {
+    MotionNoise motion{Scalar(1), Scalar(1)};
+    Scalar pixel_sigma_px = 1;          // measurement noise of a matched feature
+    Scalar init_sigma_v = Scalar(0.1);  // initial velocity std, SLAM units/s
+    Scalar init_sigma_w = Scalar(0.1);  // initial angular velocity std, rad/s
+    // Undelayed initialisation: inverse depth rho0 +- sigma_rho (1/SLAM unit).
+    // The default puts the first features at depth 1: that defines the unit.
+    Scalar rho0 = Scalar(1);
+    Scalar sigma_rho = Scalar(1);
+    Scalar linearity_threshold = Scalar(0.1);  // inverse depth -> XYZ below this
+
+    int max_features = 60;        // map capacity (state size 13 + 6 * max_features)
+    int max_measured = 40;        // features searched per frame
+    int min_visible = 20;         // add features when fewer are predicted in view
+    Scalar image_margin_px = 10;  // a prediction this close to the border is not searched
+
+    // Active search and 1-point RANSAC.
+    Scalar chi2_gate = Scalar(9.21);          // 2 dof, 99%: search ellipse and rescue gate
+    Scalar ransac_threshold_px = Scalar(2);   // low-innovation inlier threshold
+    Scalar ransac_confidence = Scalar(0.99);  // for the adaptive number of hypotheses
+    int ransac_max_hypotheses = 100;
+    std::uint64_t seed = 1;
+
+    // Map management.
+    int delete_min_attempts = 10;           // judge a feature after this many searches
+    Scalar delete_min_ratio = Scalar(0.5);  // delete below this matches/attempts ratio
+
+    // Divergence.
+    int min_inliers = 3;          // fewer accepted matches in a frame: a bad frame
+    int lost_after_frames = 10;   // this many bad frames in a row: lost
+    Scalar max_dt_s = Scalar(1);  // a larger frame gap is refused (the caller re-initialises)
+};
+
+// Checks ranges; the message names the field and value.
+Result<bool> validate(const SlamConfig& config);
+
+enum class SlamHealth : std::uint8_t {
+    kUninitialised,
+    kOk,
+    kNonFinite,            // NaN or Inf in the state or covariance
+    kNotPositiveDefinite,  // covariance lost positive definiteness
+    kLost,                 // too few accepted matches for lost_after_frames frames
+    kBadTimestamp,         // non-increasing or too large frame interval
+};
+const char* toString(SlamHealth health);
+
+// A feature the filter expects in view, for the front end to search.
+struct FeaturePrediction {
+    int slot = 0;              // index into the filter's feature list this frame
+    std::uint64_t id = 0;      // stable feature id
+    Vec2 h_px = Vec2::Zero();  // predicted pixel
+    Mat2 S = Mat2::Zero();     // innovation covariance, px^2 (measurement noise included)
+};
+
+// The front end's answer for one prediction (index into predictMeasurements()).
+struct FeatureMatch {
+    int prediction = 0;
+    Vec2 z_px = Vec2::Zero();
+};
+
+struct UpdateReport {
+    int predicted = 0;  // features searched
+    int matched = 0;    // matches the front end returned
+    int low_innovation_inliers = 0;
+    int rescued = 0;
+    int hypotheses = 0;
+    bool bad_frame = false;
+};
+
+// What the scale estimator needs about one map point.
+struct MapPoint {
+    std::uint64_t id = 0;
+    FeatureKind kind = FeatureKind::kInverseDepth;
+    Vec3 p_FinW = Vec3::Zero();  // SLAM units
+    Mat3 P_FinW = Mat3::Zero();  // first-order covariance of p_FinW
+    Vec2 px = Vec2::Zero();      // projection in the current frame (valid if in_view)
+    bool in_view = false;        // predicted inside the image this frame
+    bool measured = false;       // accepted as a match this frame
+};
+
+struct FeatureInfo {
+    std::uint64_t id = 0;
+    FeatureKind kind = FeatureKind::kInverseDepth;
+    int offset = 0;  // into the state vector
+    int attempts = 0;
+    int matches = 0;
+    std::int64_t last_seen_frame = 0;  // last frame it was predicted in view
+    bool in_view = false;
+    bool measured = false;
+    Vec2 px = Vec2::Zero();
+};
+
+using Mat6x6 = Eigen::Matrix<Scalar, 6, 6>;
+
+class EkfSlam {
+public:
+    static Result<EkfSlam> create(const PinholeRadialCamera& camera, const SlamConfig& config);
+
+    // Starts a new map at the camera pose of this frame (identity, the world
+    // frame). gravity_down_C: unit gravity direction in this camera's frame.
+    void initialise(std::int64_t t_ns, const Vec3& gravity_down_C);
+
+    // Motion model up to t_ns. kBadTimestamp if t_ns is not after the last frame
+    // or the gap exceeds max_dt_s (state unchanged).
+    SlamHealth predict(std::int64_t t_ns);
+
+    // Features predicted in view (at most max_measured, oldest first).
+    std::span<const FeaturePrediction> predictMeasurements();
+
+    // Matches for some of the predictions. Runs 1-point RANSAC and the updates.
+    UpdateReport update(std::span<const FeatureMatch> matches);
+
+    // Deletes unreliable features, converts inverse-depth features that became
+    // linear, and checks the filter's health.
+    SlamHealth manageMap();
+
+    // Undelayed initialisation of a feature at a pixel of the current frame.
+    // Returns its id, or 0 if the map is full or the pixel cannot be unprojected.
+    std::uint64_t addFeature(const Vec2& px);
+    std::uint64_t addFeature(const Vec2& px, Scalar rho, Scalar sigma_rho);
+    // Makes room for n new features by deleting those out of view the longest.
+    int makeRoom(int n);
+
+    [[nodiscard]] SlamHealth health() const { return health_; }
+    [[nodiscard]] std::int64_t frameIndex() const { return frame_; }
+    [[nodiscard]] std::int64_t timestampNs() const { return t_ns_; }
+    [[nodiscard]] CameraPose pose() const;
+    [[nodiscard]] Vec3 velocityW() const { return x_.segment<3>(kVel); }
+    // Covariance of (position, rotation error delta) with R_true = R_est Exp(delta).
+    [[nodiscard]] Mat6x6 poseCovariance() const;
+    [[nodiscard]] Vec3 upW() const { return up_W_; }
+    void setGravityDownW(const Vec3& down_W) { up_W_ = -down_W.normalized(); }
+
+    [[nodiscard]] std::span<const FeatureInfo> features() const { return features_; }
+    [[nodiscard]] int stateDim() const { return n_; }
+    [[nodiscard]] int visibleCount() const { return visible_count_; }
+    // Map points for the scale estimator, written into out (cleared first;
+    // reserve max_features to keep it allocation-free). Inverse-depth features
+    // with rho <= 0 (at or beyond infinity) are left out.
+    void mapPoints(std::vector<MapPoint>& out) const;
+
+    [[nodiscard]] const SlamConfig& config() const { return config_; }
+    [[nodiscard]] const PinholeRadialCamera& camera() const { return camera_; }
+    // The full state and covariance (active part), for tests and logs.
+    [[nodiscard]] Eigen::Ref<const VecX> state() const { return x_.head(n_); }
+    [[nodiscard]] Eigen::Ref<const MatX> covariance() const { return P_.topLeftCorner(n_, n_); }
+
+private:
+    EkfSlam(const PinholeRadialCamera& camera, const SlamConfig& config);
+
+    struct Candidate {
+        int slot = 0;
+        Vec2 z = Vec2::Zero();
+        FeatureProjection proj;
+    };
+
+    std::uint64_t addInverseDepth(const Vec2& px, Scalar rho, Scalar sigma_rho);
+    bool projectSlot(const VecX& x, int slot, bool jacobians, FeatureProjection& out) const;
+    Mat2 innovationCovariance(int slot, const FeatureProjection& proj) const;
+    // EKF update with the candidates in cand_[0..count); false if S is not PD.
+    bool ekfUpdate(int count);
+    void removeDims(int offset, int dims);
+    void removeSlot(int slot);
+    void convertToXyz(int slot);
+    void normalizeQuaternion();
+    void symmetrize();
+    SlamHealth checkHealth();
+    std::uint64_t nextRandom();
+
+    PinholeRadialCamera camera_;
+    SlamConfig config_;
+    int capacity_ = 0;  // maximum state dimension
+    int n_ = 0;         // active state dimension
+    VecX x_;
+    MatX P_;
+    std::vector<FeatureInfo> features_;
+    std::vector<FeaturePrediction> predictions_;
+    std::vector<Candidate> cand_;  // matched candidates of this frame
+    std::vector<int> inliers_;     // indices into cand_
+    std::vector<int> best_inliers_;
+    std::vector<unsigned char> accepted_;  // per candidate
+    // Scratch for updates, sized at create().
+    MatX PHt_;  // capacity x 2 max_measured
+    MatX S_;    // 2 max_measured square
+    VecX nu_;   // 2 max_measured
+    VecX x_hyp_;
+    MatX rows_;  // 6 x capacity
+    Vec3 up_W_ = Vec3(0, -1, 0);
+    std::int64_t t_ns_ = 0;
+    std::int64_t frame_ = 0;
+    std::uint64_t next_id_ = 1;
+    std::uint64_t rng_ = 1;
+    int bad_frames_ = 0;
+    int visible_count_ = 0;
+    SlamHealth health_ = SlamHealth::kUninitialised;
+};
+
+}  // namespace scaled::core::slam

@@ -1,0 +1,683 @@
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <Eigen/Cholesky>
+
+#include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/slam/quaternion.h>
+
+namespace scaled::core::slam {
+
+namespace {
+
+bool finitePositive(Scalar v) {
+    return std::isfinite(v) && v > 0;
+}
+
+Error fieldError(const char* field, Scalar value, const char* allowed) {
+    return makeError(
+        ErrorCode::kInvalidArgument,
+        std::string("slam.") + field + " = " + std::to_string(value) + ": must be " + allowed);
+}
+
+}  // namespace
+
+Result<bool> validate(const SlamConfig& c) {
+    if (!finitePositive(c.motion.sigma_a)) {
+        return fieldError("sigma_a", c.motion.sigma_a, "> 0");
+    }
+    if (!finitePositive(c.motion.sigma_alpha)) {
+        return fieldError("sigma_alpha", c.motion.sigma_alpha, "> 0");
+    }
+    if (!finitePositive(c.pixel_sigma_px)) {
+        return fieldError("pixel_sigma_px", c.pixel_sigma_px, "> 0");
+    }
+    if (!(std::isfinite(c.init_sigma_v) && c.init_sigma_v >= 0)) {
+        return fieldError("init_sigma_v", c.init_sigma_v, ">= 0");
+    }
+    if (!(std::isfinite(c.init_sigma_w) && c.init_sigma_w >= 0)) {
+        return fieldError("init_sigma_w", c.init_sigma_w, ">= 0");
+    }
+    if (!(std::isfinite(c.rho0) && c.rho0 >= 0)) {
+        return fieldError("rho0", c.rho0, ">= 0");
+    }
+    if (!finitePositive(c.sigma_rho)) {
+        return fieldError("sigma_rho", c.sigma_rho, "> 0");
+    }
+    if (!finitePositive(c.linearity_threshold)) {
+        return fieldError("linearity_threshold", c.linearity_threshold, "> 0");
+    }
+    if (c.max_features < 1 || c.max_features > 1000) {
+        return fieldError("max_features", Scalar(c.max_features), "in [1, 1000]");
+    }
+    if (c.max_measured < 1 || c.max_measured > c.max_features) {
+        return fieldError("max_measured", Scalar(c.max_measured), "in [1, max_features]");
+    }
+    if (c.min_visible < 0 || c.min_visible > c.max_features) {
+        return fieldError("min_visible", Scalar(c.min_visible), "in [0, max_features]");
+    }
+    if (!(std::isfinite(c.image_margin_px) && c.image_margin_px >= 0)) {
+        return fieldError("image_margin_px", c.image_margin_px, ">= 0");
+    }
+    if (!finitePositive(c.chi2_gate)) {
+        return fieldError("chi2_gate", c.chi2_gate, "> 0");
+    }
+    if (!finitePositive(c.ransac_threshold_px)) {
+        return fieldError("ransac_threshold_px", c.ransac_threshold_px, "> 0");
+    }
+    if (!(c.ransac_confidence > 0 && c.ransac_confidence < 1)) {
+        return fieldError("ransac_confidence", c.ransac_confidence, "in (0, 1)");
+    }
+    if (c.ransac_max_hypotheses < 1 || c.ransac_max_hypotheses > 10000) {
+        return fieldError("ransac_max_hypotheses", Scalar(c.ransac_max_hypotheses),
+                          "in [1, 10000]");
+    }
+    if (c.delete_min_attempts < 1) {
+        return fieldError("delete_min_attempts", Scalar(c.delete_min_attempts), ">= 1");
+    }
+    if (!(c.delete_min_ratio >= 0 && c.delete_min_ratio <= 1)) {
+        return fieldError("delete_min_ratio", c.delete_min_ratio, "in [0, 1]");
+    }
+    if (c.min_inliers < 1) {
+        return fieldError("min_inliers", Scalar(c.min_inliers), ">= 1");
+    }
+    if (c.lost_after_frames < 1) {
+        return fieldError("lost_after_frames", Scalar(c.lost_after_frames), ">= 1");
+    }
+    if (!finitePositive(c.max_dt_s)) {
+        return fieldError("max_dt_s", c.max_dt_s, "> 0");
+    }
+    return true;
+}
+
+const char* toString(SlamHealth health) {
+    switch (health) {
+        case SlamHealth::kUninitialised:
+            return "uninitialised";
+        case SlamHealth::kOk:
+            return "ok";
+        case SlamHealth::kNonFinite:
+            return "non-finite state";
+        case SlamHealth::kNotPositiveDefinite:
+            return "covariance not positive definite";
+        case SlamHealth::kLost:
+            return "lost";
+        case SlamHealth::kBadTimestamp:
+            return "bad timestamp";
+    }
+    return "unknown";
+}
+
+Result<EkfSlam> EkfSlam::create(const PinholeRadialCamera& camera, const SlamConfig& config) {
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
+    }
+    return EkfSlam(camera, config);
+}
+
+EkfSlam::EkfSlam(const PinholeRadialCamera& camera, const SlamConfig& config)
+    : camera_(camera),
+      config_(config),
+      capacity_(kCameraDim + 6 * config.max_features),
+      x_(VecX::Zero(capacity_)),
+      P_(MatX::Zero(capacity_, capacity_)),
+      PHt_(MatX::Zero(capacity_, 2 * config.max_measured)),
+      S_(MatX::Zero(2 * config.max_measured, 2 * config.max_measured)),
+      nu_(VecX::Zero(2 * config.max_measured)),
+      x_hyp_(VecX::Zero(capacity_)),
+      rows_(MatX::Zero(6, capacity_)) {
+    features_.reserve(static_cast<size_t>(config.max_features));
+    predictions_.reserve(static_cast<size_t>(config.max_measured));
+    cand_.reserve(static_cast<size_t>(config.max_measured));
+    inliers_.reserve(static_cast<size_t>(config.max_measured));
+    best_inliers_.reserve(static_cast<size_t>(config.max_measured));
+    accepted_.reserve(static_cast<size_t>(config.max_measured));
+}
+
+void EkfSlam::initialise(std::int64_t t_ns, const Vec3& gravity_down_C) {
+    n_ = kCameraDim;
+    x_.setZero();
+    P_.setZero();
+    x_(kQuat) = 1;
+    const Scalar var_v = config_.init_sigma_v * config_.init_sigma_v;
+    const Scalar var_w = config_.init_sigma_w * config_.init_sigma_w;
+    P_.block<3, 3>(kVel, kVel) = Mat3::Identity() * var_v;
+    P_.block<3, 3>(kAngVel, kAngVel) = Mat3::Identity() * var_w;
+    features_.clear();
+    predictions_.clear();
+    cand_.clear();
+    up_W_ = -gravity_down_C.normalized();
+    t_ns_ = t_ns;
+    frame_ = 0;
+    bad_frames_ = 0;
+    visible_count_ = 0;
+    rng_ = config_.seed * 0x9E3779B97F4A7C15ULL + 1;
+    health_ = SlamHealth::kOk;
+}
+
+std::uint64_t EkfSlam::nextRandom() {
+    // xorshift64*: deterministic on every platform.
+    rng_ ^= rng_ >> 12;
+    rng_ ^= rng_ << 25;
+    rng_ ^= rng_ >> 27;
+    return rng_ * 0x2545F4914F6CDD1DULL;
+}
+
+SlamHealth EkfSlam::predict(std::int64_t t_ns) {
+    if (health_ == SlamHealth::kUninitialised) {
+        return health_;
+    }
+    const Scalar dt = Scalar(t_ns - t_ns_) * Scalar(1e-9);
+    if (!(dt > 0) || dt > config_.max_dt_s) {
+        return SlamHealth::kBadTimestamp;
+    }
+    Mat13 F;
+    Mat13 Q;
+    const Vec13 xc = x_.head<kCameraDim>();
+    x_.head<kCameraDim>() = predictCamera(xc, dt, config_.motion, &F, &Q);
+    // P_cc = F P_cc F^T + Q, P_cf = F P_cf.
+    // F P_cf column by column (allocation-free), mirrored into P_fc.
+    for (int j = kCameraDim; j < n_; ++j) {
+        const Vec13 col = P_.block<kCameraDim, 1>(0, j);
+        P_.block<kCameraDim, 1>(0, j) = F * col;
+        P_.block<1, kCameraDim>(j, 0) = P_.block<kCameraDim, 1>(0, j).transpose();
+    }
+    const Mat13 Pcc = P_.topLeftCorner<kCameraDim, kCameraDim>();
+    P_.topLeftCorner<kCameraDim, kCameraDim>() = F * Pcc * F.transpose() + Q;
+    t_ns_ = t_ns;
+    ++frame_;
+    return health_;
+}
+
+bool EkfSlam::projectSlot(const VecX& x, int slot, bool jacobians, FeatureProjection& out) const {
+    const FeatureInfo& f = features_[static_cast<size_t>(slot)];
+    const Vec3 r = x.segment<3>(kPos);
+    const Vec4 q = x.segment<4>(kQuat);
+    auto p = projectFeature(camera_, r, q, f.kind, x.data() + f.offset, jacobians);
+    if (!p) {
+        return false;
+    }
+    out = *p;
+    return true;
+}
+
+Mat2 EkfSlam::innovationCovariance(int slot, const FeatureProjection& proj) const {
+    const FeatureInfo& f = features_[static_cast<size_t>(slot)];
+    const auto Ppp = P_.topLeftCorner<kPoseDim, kPoseDim>();
+    Mat2 S = proj.H_pose * Ppp * proj.H_pose.transpose();
+    Mat2 cross;
+    if (f.kind == FeatureKind::kInverseDepth) {
+        const Mat26& Hf = proj.H_feature;
+        cross = proj.H_pose * P_.block<kPoseDim, 6>(0, f.offset) * Hf.transpose();
+        S += Hf * P_.block<6, 6>(f.offset, f.offset) * Hf.transpose();
+    } else {
+        const Mat23 Hf = proj.H_feature.leftCols<3>();
+        cross = proj.H_pose * P_.block<kPoseDim, 3>(0, f.offset) * Hf.transpose();
+        S += Hf * P_.block<3, 3>(f.offset, f.offset) * Hf.transpose();
+    }
+    S += cross + cross.transpose();
+    S.diagonal().array() += config_.pixel_sigma_px * config_.pixel_sigma_px;
+    return S;
+}
+
+std::span<const FeaturePrediction> EkfSlam::predictMeasurements() {
+    predictions_.clear();
+    visible_count_ = 0;
+    const Scalar margin = config_.image_margin_px;
+    const Scalar w = Scalar(camera_.width()) - 1 - margin;
+    const Scalar h = Scalar(camera_.height()) - 1 - margin;
+    FeatureProjection proj;
+    for (int s = 0; s < static_cast<int>(features_.size()); ++s) {
+        FeatureInfo& f = features_[static_cast<size_t>(s)];
+        f.in_view = false;
+        f.measured = false;
+        if (!projectSlot(x_, s, true, proj)) {
+            continue;
+        }
+        const Vec2& u = proj.h_px;
+        if (u.x() < margin || u.y() < margin || u.x() > w || u.y() > h) {
+            continue;
+        }
+        f.in_view = true;
+        f.px = u;
+        f.last_seen_frame = frame_;
+        ++visible_count_;
+        if (static_cast<int>(predictions_.size()) < config_.max_measured) {
+            FeaturePrediction p;
+            p.slot = s;
+            p.id = f.id;
+            p.h_px = u;
+            p.S = innovationCovariance(s, proj);
+            predictions_.push_back(p);
+        }
+    }
+    return predictions_;
+}
+
+bool EkfSlam::ekfUpdate(int count) {
+    if (count <= 0) {
+        return true;
+    }
+    const int m = 2 * count;
+    auto PHt = PHt_.topLeftCorner(n_, m);
+    auto S = S_.topLeftCorner(m, m);
+    auto nu = nu_.head(m);
+    // P H^T, using the sparsity of H: pose columns and the feature's columns.
+    for (int i = 0; i < count; ++i) {
+        const Candidate& c = cand_[static_cast<size_t>(inliers_[static_cast<size_t>(i)])];
+        const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
+        const int d = dimOf(f.kind);
+        PHt.middleCols<2>(2 * i).noalias() =
+            P_.topLeftCorner(n_, kPoseDim) * c.proj.H_pose.transpose();
+        PHt.middleCols<2>(2 * i).noalias() +=
+            P_.block(0, f.offset, n_, d) * c.proj.H_feature.leftCols(d).transpose();
+        nu.segment<2>(2 * i) = c.z - c.proj.h_px;
+    }
+    // S = H P H^T + R.
+    for (int i = 0; i < count; ++i) {
+        const Candidate& c = cand_[static_cast<size_t>(inliers_[static_cast<size_t>(i)])];
+        const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
+        const int d = dimOf(f.kind);
+        S.middleRows<2>(2 * i).noalias() = c.proj.H_pose * PHt.topRows<kPoseDim>();
+        S.middleRows<2>(2 * i).noalias() +=
+            c.proj.H_feature.leftCols(d) * PHt.middleRows(f.offset, d);
+    }
+    S.diagonal().array() += config_.pixel_sigma_px * config_.pixel_sigma_px;
+    Eigen::Ref<MatX> S_ref(S);
+    // Symmetrise before factorising (round-off).
+    for (int j = 0; j < m; ++j) {
+        for (int i = j + 1; i < m; ++i) {
+            const Scalar a = Scalar(0.5) * (S_ref(i, j) + S_ref(j, i));
+            S_ref(i, j) = a;
+            S_ref(j, i) = a;
+        }
+    }
+    Eigen::LLT<Eigen::Ref<MatX>> llt(S_ref);
+    if (llt.info() != Eigen::Success) {
+        return false;
+    }
+    // W = P H^T L^-T, so that K nu = W L^-1 nu and K S K^T = W W^T.
+    llt.matrixU().solveInPlace<Eigen::OnTheRight>(PHt);
+    llt.matrixL().solveInPlace(nu);
+    x_.head(n_).noalias() += PHt * nu;
+    P_.topLeftCorner(n_, n_).selfadjointView<Eigen::Lower>().rankUpdate(PHt, Scalar(-1));
+    symmetrize();
+    return true;
+}
+
+void EkfSlam::symmetrize() {
+    for (int j = 0; j < n_; ++j) {
+        for (int i = 0; i < j; ++i) {
+            P_(i, j) = P_(j, i);
+        }
+    }
+}
+
+UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
+    UpdateReport report;
+    report.predicted = static_cast<int>(predictions_.size());
+    for (const FeaturePrediction& p : predictions_) {
+        ++features_[static_cast<size_t>(p.slot)].attempts;
+    }
+    cand_.clear();
+    for (const FeatureMatch& m : matches) {
+        if (m.prediction < 0 || m.prediction >= static_cast<int>(predictions_.size()) ||
+            !m.z_px.allFinite()) {
+            continue;
+        }
+        Candidate c;
+        c.slot = predictions_[static_cast<size_t>(m.prediction)].slot;
+        c.z = m.z_px;
+        if (!projectSlot(x_, c.slot, true, c.proj)) {
+            continue;
+        }
+        cand_.push_back(c);
+    }
+    const int nc = static_cast<int>(cand_.size());
+    report.matched = nc;
+
+    // 1-point RANSAC: each hypothesis is the EKF state update from one match;
+    // the matches it predicts within ransac_threshold_px are its support.
+    best_inliers_.clear();
+    if (nc > 0) {
+        const Scalar th2 = config_.ransac_threshold_px * config_.ransac_threshold_px;
+        int hypotheses = config_.ransac_max_hypotheses;
+        FeatureProjection proj;
+        for (int k = 0; k < hypotheses && k < config_.ransac_max_hypotheses; ++k) {
+            const int i = static_cast<int>(nextRandom() % static_cast<std::uint64_t>(nc));
+            const Candidate& c = cand_[static_cast<size_t>(i)];
+            const FeaturePrediction* pred = nullptr;
+            for (const auto& p : predictions_) {
+                if (p.slot == c.slot) {
+                    pred = &p;
+                    break;
+                }
+            }
+            const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
+            const int d = dimOf(f.kind);
+            auto PHt = PHt_.topLeftCorner(n_, 2);
+            PHt.noalias() = P_.topLeftCorner(n_, kPoseDim) * c.proj.H_pose.transpose();
+            PHt.noalias() +=
+                P_.block(0, f.offset, n_, d) * c.proj.H_feature.leftCols(d).transpose();
+            const Mat2 S_inv = pred->S.inverse();
+            const Vec2 nu = c.z - c.proj.h_px;
+            x_hyp_.head(n_) = x_.head(n_);
+            x_hyp_.head(n_).noalias() += PHt * (S_inv * nu);
+            inliers_.clear();
+            for (int j = 0; j < nc; ++j) {
+                const Candidate& cj = cand_[static_cast<size_t>(j)];
+                if (projectSlot(x_hyp_, cj.slot, false, proj) &&
+                    (cj.z - proj.h_px).squaredNorm() < th2) {
+                    inliers_.push_back(j);
+                }
+            }
+            ++report.hypotheses;
+            if (inliers_.size() > best_inliers_.size()) {
+                best_inliers_.assign(inliers_.begin(), inliers_.end());
+                const Scalar eps = Scalar(best_inliers_.size()) / Scalar(nc);
+                if (eps >= 1) {
+                    break;
+                }
+                const Scalar need = std::log(1 - config_.ransac_confidence) / std::log(1 - eps);
+                hypotheses = static_cast<int>(std::ceil(std::min(need, Scalar(1e6))));
+            }
+        }
+    }
+
+    // Low-innovation inliers: one EKF update with all of them.
+    accepted_.assign(static_cast<size_t>(nc), 0);
+    inliers_.assign(best_inliers_.begin(), best_inliers_.end());
+    const bool ok1 = ekfUpdate(static_cast<int>(inliers_.size()));
+    if (ok1) {
+        report.low_innovation_inliers = static_cast<int>(inliers_.size());
+        for (const int i : inliers_) {
+            accepted_[static_cast<size_t>(i)] = 1;
+        }
+    }
+
+    // Rescue: the other matches, re-predicted after the first update, that
+    // now pass the chi-square gate; then a second update with them.
+    if (ok1 && !inliers_.empty()) {
+        inliers_.clear();
+        for (int j = 0; j < nc; ++j) {
+            if (accepted_[static_cast<size_t>(j)] != 0) {
+                continue;
+            }
+            Candidate& c = cand_[static_cast<size_t>(j)];
+            if (!projectSlot(x_, c.slot, true, c.proj)) {
+                continue;
+            }
+            const Mat2 S = innovationCovariance(c.slot, c.proj);
+            const Vec2 nu = c.z - c.proj.h_px;
+            if (nu.dot(S.inverse() * nu) < config_.chi2_gate) {
+                inliers_.push_back(j);
+            }
+        }
+        if (ekfUpdate(static_cast<int>(inliers_.size()))) {
+            report.rescued = static_cast<int>(inliers_.size());
+            for (const int i : inliers_) {
+                accepted_[static_cast<size_t>(i)] = 1;
+            }
+        }
+    }
+    normalizeQuaternion();
+
+    for (int j = 0; j < nc; ++j) {
+        if (accepted_[static_cast<size_t>(j)] != 0) {
+            FeatureInfo& f = features_[static_cast<size_t>(cand_[static_cast<size_t>(j)].slot)];
+            ++f.matches;
+            f.measured = true;
+        }
+    }
+    const int accepted = report.low_innovation_inliers + report.rescued;
+    report.bad_frame = accepted < config_.min_inliers && !features_.empty();
+    bad_frames_ = report.bad_frame ? bad_frames_ + 1 : 0;
+    return report;
+}
+
+void EkfSlam::normalizeQuaternion() {
+    Mat4 J;
+    const Vec4 q = x_.segment<4>(kQuat);
+    x_.segment<4>(kQuat) = quatNormalized(q, &J);
+    for (int j = 0; j < n_; ++j) {
+        const Vec4 col = P_.block<4, 1>(kQuat, j);
+        P_.block<4, 1>(kQuat, j) = J * col;
+    }
+    for (int i = 0; i < n_; ++i) {
+        const Eigen::Matrix<Scalar, 1, 4> row = P_.block<1, 4>(i, kQuat);
+        P_.block<1, 4>(i, kQuat) = row * J.transpose();
+    }
+}
+
+void EkfSlam::removeDims(int offset, int dims) {
+    const int n = n_;
+    for (int i = offset; i + dims < n; ++i) {
+        x_(i) = x_(i + dims);
+    }
+    for (int j = 0; j < n; ++j) {
+        for (int i = offset; i + dims < n; ++i) {
+            P_(i, j) = P_(i + dims, j);
+        }
+    }
+    for (int j = offset; j + dims < n; ++j) {
+        P_.col(j).head(n - dims) = P_.col(j + dims).head(n - dims);
+    }
+    n_ = n - dims;
+    x_.segment(n_, dims).setZero();
+    P_.block(n_, 0, dims, n).setZero();
+    P_.block(0, n_, n, dims).setZero();
+    for (FeatureInfo& f : features_) {
+        if (f.offset > offset) {
+            f.offset -= dims;
+        }
+    }
+}
+
+void EkfSlam::removeSlot(int slot) {
+    const FeatureInfo f = features_[static_cast<size_t>(slot)];
+    features_.erase(features_.begin() + slot);
+    removeDims(f.offset, dimOf(f.kind));
+}
+
+void EkfSlam::convertToXyz(int slot) {
+    FeatureInfo& f = features_[static_cast<size_t>(slot)];
+    const int o = f.offset;
+    Mat36 J;
+    const Vec6 y = x_.segment<6>(o);
+    const Vec3 p = inverseDepthToXyz(y, &J);
+    auto rows = rows_.topLeftCorner(3, n_);
+    rows.noalias() = J * P_.block(o, 0, 6, n_);
+    const Mat3 Pff = rows.middleCols<6>(o) * J.transpose();
+    P_.block(o, 0, 3, n_) = rows;
+    P_.block(0, o, n_, 3) = rows.transpose();
+    P_.block<3, 3>(o, o) = Pff;
+    x_.segment<3>(o) = p;
+    f.kind = FeatureKind::kXyz;
+    // The three trailing dimensions of the old parameterisation go.
+    const int n = n_;
+    for (int i = o + 3; i + 3 < n; ++i) {
+        x_(i) = x_(i + 3);
+    }
+    for (int j = 0; j < n; ++j) {
+        for (int i = o + 3; i + 3 < n; ++i) {
+            P_(i, j) = P_(i + 3, j);
+        }
+    }
+    for (int j = o + 3; j + 3 < n; ++j) {
+        P_.col(j).head(n - 3) = P_.col(j + 3).head(n - 3);
+    }
+    n_ = n - 3;
+    x_.segment(n_, 3).setZero();
+    P_.block(n_, 0, 3, n).setZero();
+    P_.block(0, n_, n, 3).setZero();
+    for (FeatureInfo& g : features_) {
+        if (g.offset > o) {
+            g.offset -= 3;
+        }
+    }
+}
+
+SlamHealth EkfSlam::manageMap() {
+    if (health_ == SlamHealth::kUninitialised) {
+        return health_;
+    }
+    for (int s = static_cast<int>(features_.size()) - 1; s >= 0; --s) {
+        const FeatureInfo& f = features_[static_cast<size_t>(s)];
+        const bool unreliable = f.attempts >= config_.delete_min_attempts &&
+                                Scalar(f.matches) < config_.delete_min_ratio * Scalar(f.attempts);
+        bool behind = false;
+        if (f.kind == FeatureKind::kInverseDepth) {
+            const Scalar rho = x_(f.offset + 5);
+            const Scalar sd = std::sqrt(std::max(P_(f.offset + 5, f.offset + 5), Scalar(0)));
+            behind = rho < -3 * sd;
+        }
+        if (unreliable || behind) {
+            removeSlot(s);
+        }
+    }
+    const Vec3 r = x_.segment<3>(kPos);
+    for (int s = 0; s < static_cast<int>(features_.size()); ++s) {
+        const FeatureInfo& f = features_[static_cast<size_t>(s)];
+        if (f.kind != FeatureKind::kInverseDepth) {
+            continue;
+        }
+        const Scalar var_rho = P_(f.offset + 5, f.offset + 5);
+        const Scalar L =
+            linearityIndex(x_.segment<6>(f.offset), std::sqrt(std::max(var_rho, Scalar(0))), r);
+        if (L < config_.linearity_threshold) {
+            convertToXyz(s);
+        }
+    }
+    health_ = checkHealth();
+    return health_;
+}
+
+SlamHealth EkfSlam::checkHealth() {
+    if (!x_.head(n_).allFinite() || !P_.topLeftCorner(n_, n_).allFinite()) {
+        return SlamHealth::kNonFinite;
+    }
+    for (int i = 0; i < n_; ++i) {
+        if (!(P_(i, i) >= 0)) {
+            return SlamHealth::kNotPositiveDefinite;
+        }
+    }
+    // The pose block must stay positive definite: its Cholesky (with a tiny
+    // jitter for the gauge-fixed first frames) must succeed.
+    Eigen::Matrix<Scalar, kCameraDim, kCameraDim> Pc = P_.topLeftCorner<kCameraDim, kCameraDim>();
+    Pc.diagonal().array() += Scalar(1e-9);
+    Eigen::LLT<Eigen::Matrix<Scalar, kCameraDim, kCameraDim>> llt(Pc);
+    if (llt.info() != Eigen::Success) {
+        return SlamHealth::kNotPositiveDefinite;
+    }
+    if (bad_frames_ >= config_.lost_after_frames) {
+        return SlamHealth::kLost;
+    }
+    return SlamHealth::kOk;
+}
+
+std::uint64_t EkfSlam::addFeature(const Vec2& px) {
+    return addInverseDepth(px, config_.rho0, config_.sigma_rho);
+}
+
+std::uint64_t EkfSlam::addFeature(const Vec2& px, Scalar rho, Scalar sigma_rho) {
+    return addInverseDepth(px, rho, sigma_rho);
+}
+
+std::uint64_t EkfSlam::addInverseDepth(const Vec2& px, Scalar rho, Scalar sigma_rho) {
+    if (health_ == SlamHealth::kUninitialised ||
+        static_cast<int>(features_.size()) >= config_.max_features || n_ + 6 > capacity_) {
+        return 0;
+    }
+    const auto init = initInverseDepth(camera_, x_.segment<3>(kPos), x_.segment<4>(kQuat), px, rho);
+    if (!init) {
+        return 0;
+    }
+    const int o = n_;
+    const int n = n_;
+    auto rows = rows_.topLeftCorner(6, n);
+    rows.noalias() = init->J_pose * P_.topLeftCorner(kPoseDim, n);
+    P_.block(o, 0, 6, n) = rows;
+    P_.block(0, o, n, 6) = rows.transpose();
+    const Scalar var_px = config_.pixel_sigma_px * config_.pixel_sigma_px;
+    Mat6 Pff = rows.leftCols<kPoseDim>() * init->J_pose.transpose() +
+               var_px * init->J_px * init->J_px.transpose();
+    Pff(5, 5) += sigma_rho * sigma_rho;
+    P_.block<6, 6>(o, o) = Pff;
+    x_.segment<6>(o) = init->y;
+    n_ = n + 6;
+    FeatureInfo f;
+    f.id = next_id_++;
+    f.kind = FeatureKind::kInverseDepth;
+    f.offset = o;
+    f.last_seen_frame = frame_;
+    f.in_view = true;
+    f.px = px;
+    features_.push_back(f);
+    return f.id;
+}
+
+int EkfSlam::makeRoom(int n) {
+    int removed = 0;
+    while (removed<n&& static_cast<int>(features_.size()) + n - removed> config_.max_features) {
+        int victim = -1;
+        std::int64_t oldest = frame_;
+        for (int s = 0; s < static_cast<int>(features_.size()); ++s) {
+            const FeatureInfo& f = features_[static_cast<size_t>(s)];
+            if (!f.in_view && f.last_seen_frame < oldest) {
+                oldest = f.last_seen_frame;
+                victim = s;
+            }
+        }
+        if (victim < 0) {
+            break;
+        }
+        removeSlot(victim);
+        ++removed;
+    }
+    return removed;
+}
+
+CameraPose EkfSlam::pose() const {
+    CameraPose p;
+    p.R_CtoW = rotationFromQuat(x_.segment<4>(kQuat));
+    p.p_CinW = x_.segment<3>(kPos);
+    return p;
+}
+
+Mat6x6 EkfSlam::poseCovariance() const {
+    // delta = 2 vec(q_est^-1 (x) q_true) to first order: d delta / d q = 2 [0 I] L(q^-1).
+    const Vec4 q = x_.segment<4>(kQuat);
+    Vec4 q_inv(q(0), -q(1), -q(2), -q(3));
+    Eigen::Matrix<Scalar, 6, kPoseDim> J = Eigen::Matrix<Scalar, 6, kPoseDim>::Zero();
+    J.topLeftCorner<3, 3>().setIdentity();
+    J.bottomRightCorner<3, 4>() = 2 * quatLeftMatrix(q_inv).bottomRows<3>();
+    return J * P_.topLeftCorner<kPoseDim, kPoseDim>() * J.transpose();
+}
+
+void EkfSlam::mapPoints(std::vector<MapPoint>& out) const {
+    out.clear();
+    for (const FeatureInfo& f : features_) {
+        MapPoint m;
+        m.id = f.id;
+        m.kind = f.kind;
+        m.px = f.px;
+        m.in_view = f.in_view;
+        m.measured = f.measured;
+        if (f.kind == FeatureKind::kXyz) {
+            m.p_FinW = x_.segment<3>(f.offset);
+            m.P_FinW = P_.block<3, 3>(f.offset, f.offset);
+        } else {
+            const Vec6 y = x_.segment<6>(f.offset);
+            if (!(y(5) > 0)) {
+                continue;
+            }
+            Mat36 J;
+            m.p_FinW = inverseDepthToXyz(y, &J);
+            m.P_FinW = J * P_.block<6, 6>(f.offset, f.offset) * J.transpose();
+        }
+        out.push_back(m);
+    }
+}
+
+}  // namespace scaled::core::slam
