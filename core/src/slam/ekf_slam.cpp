@@ -3,6 +3,7 @@
 #include <string>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
 
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/core/slam/quaternion.h>
@@ -661,9 +662,14 @@ void EkfSlam::mapPoints(std::vector<MapPoint>& out) const {
         MapPoint m;
         m.id = f.id;
         m.kind = f.kind;
-        m.px = f.px;
-        m.in_view = f.in_view;
         m.measured = f.measured;
+        FeatureProjection proj;
+        if (projectSlot(x_, static_cast<int>(&f - features_.data()), false, proj)) {
+            m.px = proj.h_px;
+            m.in_view = proj.h_px.x() >= 0 && proj.h_px.y() >= 0 &&
+                        proj.h_px.x() <= Scalar(camera_.width() - 1) &&
+                        proj.h_px.y() <= Scalar(camera_.height() - 1);
+        }
         if (f.kind == FeatureKind::kXyz) {
             m.p_FinW = x_.segment<3>(f.offset);
             m.P_FinW = P_.block<3, 3>(f.offset, f.offset);

@@ -106,8 +106,8 @@ struct MapPoint {
     FeatureKind kind = FeatureKind::kInverseDepth;
     Vec3 p_FinW = Vec3::Zero();  // SLAM units
     Mat3 P_FinW = Mat3::Zero();  // first-order covariance of p_FinW
-    Vec2 px = Vec2::Zero();      // projection in the current frame (valid if in_view)
-    bool in_view = false;        // predicted inside the image this frame
+    Vec2 px = Vec2::Zero();      // projection by the current (updated) state
+    bool in_view = false;        // px inside the image
     bool measured = false;       // accepted as a match this frame
 };
 

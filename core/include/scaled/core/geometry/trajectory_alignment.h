@@ -1,0 +1,34 @@
+#pragma once
+
+// Sim(3) alignment of an estimated trajectory to ground truth (Umeyama 1991)
+// and the error figures the evaluation tools report.
+
+#include <span>
+
+#include <scaled/core/result.h>
+#include <scaled/core/types.h>
+
+namespace scaled::core {
+
+// gt ~= scale * R * est + t.
+struct Sim3Alignment {
+    Scalar scale = 1;
+    Mat3 R = Mat3::Identity();
+    Vec3 t = Vec3::Zero();
+    Scalar ate_rmse = 0;  // RMSE of |gt - (scale R est + t)|, ground-truth units
+    int count = 0;
+};
+
+// Needs at least 3 matched positions that are not all collinear.
+// With_scale = false gives the SE(3) alignment (scale fixed to 1).
+Result<Sim3Alignment> alignTrajectories(std::span<const Vec3> est, std::span<const Vec3> gt,
+                                        bool with_scale = true);
+
+// Length of the polyline through the positions.
+Scalar pathLength(std::span<const Vec3> positions);
+
+// Scale drift: the Sim(3) scale fitted on the first third divided by the one
+// fitted on the last third (1 = no drift). Needs 9 positions or more.
+Result<Scalar> scaleDriftBetweenThirds(std::span<const Vec3> est, std::span<const Vec3> gt);
+
+}  // namespace scaled::core

@@ -1,0 +1,201 @@
+#pragma once
+
+// A point-level simulation of the EKF MonoSLAM loop without images: known 3-D
+// points on the walls of a room, a smooth camera path, and a perfect "front
+// end" that returns each searched feature's true projection plus Gaussian
+// noise (optionally gross outliers). Used for filter behaviour and
+// consistency (NEES) tests where image matching must not interfere.
+
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <random>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/slam/quaternion.h>
+
+namespace scaled::test {
+
+using core::Scalar;
+using core::Vec2;
+using core::Vec3;
+
+struct PointSimOptions {
+    std::uint32_t seed = 1;
+    int frames = 300;
+    Scalar fps = 30;
+    Scalar pixel_noise_px = 0.5;
+    Scalar outlier_fraction = 0;  // matches replaced by a wrong pixel 5-15 px away
+    // Features are initialised with their true inverse depth and this relative
+    // depth std (known scale, for NEES); <= 0 uses the filter's rho0/sigma_rho.
+    Scalar known_depth_rel_sigma = 0;
+};
+
+// Camera-to-world pose of the simulated camera at time t (world z up, camera
+// looking roughly along +y, moving along a smooth loop).
+inline core::CameraPose pointSimPose(Scalar t) {
+    core::Mat3 R0;  // camera x right = world x, camera y down = -world z, z forward = world y
+    R0 << 1, 0, 0, 0, 0, 1, 0, -1, 0;
+    const Scalar yaw = Scalar(0.35) * std::sin(Scalar(0.4) * t);
+    const Scalar pitch = Scalar(0.1) * std::sin(Scalar(0.7) * t + 1);
+    using AA = Eigen::AngleAxis<Scalar>;
+    core::CameraPose pose;
+    pose.R_CtoW = AA(yaw, Vec3::UnitZ()).toRotationMatrix() * R0 *
+                  AA(pitch, Vec3::UnitX()).toRotationMatrix();
+    pose.p_CinW =
+        Vec3(Scalar(0.6) * std::sin(Scalar(0.5) * t), Scalar(0.3) * std::sin(Scalar(0.3) * t),
+             Scalar(1.5) + Scalar(0.1) * std::sin(Scalar(0.9) * t));
+    return pose;
+}
+
+class PointSlamSim {
+public:
+    PointSlamSim(const core::PinholeRadialCamera& cam, const PointSimOptions& opt)
+        : cam_(cam), opt_(opt), rng_(opt.seed) {
+        // Points on three walls and the floor of a room around the path.
+        std::uniform_real_distribution<Scalar> u(-1, 1);
+        for (int i = 0; i < 1500; ++i) {
+            const int wall = i % 4;
+            Vec3 p;
+            if (wall == 0) {
+                p = Vec3(4 * u(rng_), 4, Scalar(1.5) + Scalar(1.5) * u(rng_));  // far wall
+            } else if (wall == 1) {
+                p = Vec3(-3, 2 + 2 * u(rng_), Scalar(1.5) + Scalar(1.5) * u(rng_));
+            } else if (wall == 2) {
+                p = Vec3(3, 2 + 2 * u(rng_), Scalar(1.5) + Scalar(1.5) * u(rng_));
+            } else {
+                p = Vec3(3 * u(rng_), 2 + 2 * u(rng_), 0);
+            }
+            points_.push_back(p);
+        }
+        T0_ = pointSimPose(0);
+    }
+
+    // Ground truth in the SLAM world frame (the first camera frame).
+    [[nodiscard]] core::CameraPose truthInC0(Scalar t) const {
+        const core::CameraPose p = pointSimPose(t);
+        core::CameraPose out;
+        out.R_CtoW = T0_.R_CtoW.transpose() * p.R_CtoW;
+        out.p_CinW = T0_.R_CtoW.transpose() * (p.p_CinW - T0_.p_CinW);
+        return out;
+    }
+    [[nodiscard]] Vec3 gravityDownC0() const { return T0_.R_CtoW.transpose() * Vec3(0, 0, -1); }
+    [[nodiscard]] std::int64_t timeNs(int k) const {
+        return static_cast<std::int64_t>(std::llround(Scalar(k) / opt_.fps * Scalar(1e9)));
+    }
+
+    // Runs one frame k of the loop on the filter (predict must not be called
+    // for k = 0). Returns the update report.
+    core::slam::UpdateReport step(core::slam::EkfSlam& slam, int k) {
+        const Scalar t = Scalar(k) / opt_.fps;
+        const core::CameraPose truth = pointSimPose(t);
+        core::slam::UpdateReport report;
+        if (k > 0) {
+            slam.predict(timeNs(k));
+            const auto preds = slam.predictMeasurements();
+            matches_.clear();
+            outlier_ids_.clear();
+            std::normal_distribution<Scalar> noise(0, opt_.pixel_noise_px);
+            std::uniform_real_distribution<Scalar> unit(0, 1);
+            for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
+                const auto it = point_of_.find(preds[static_cast<size_t>(i)].id);
+                if (it == point_of_.end()) {
+                    continue;
+                }
+                const auto z = project(truth, points_[it->second]);
+                if (!z) {
+                    continue;
+                }
+                Vec2 zn = *z + Vec2(noise(rng_), noise(rng_));
+                if (unit(rng_) < opt_.outlier_fraction) {
+                    const Scalar a = 2 * Scalar(M_PI) * unit(rng_);
+                    zn = *z + (5 + 10 * unit(rng_)) * Vec2(std::cos(a), std::sin(a));
+                    outlier_ids_.push_back(preds[static_cast<size_t>(i)].id);
+                }
+                matches_.push_back({i, zn});
+            }
+            report = slam.update(matches_);
+            slam.manageMap();
+        }
+        addFeatures(slam, truth);
+        return report;
+    }
+
+    [[nodiscard]] const std::vector<std::uint64_t>& outlierIds() const { return outlier_ids_; }
+    [[nodiscard]] const Vec3& pointOf(std::uint64_t id) const { return points_[point_of_.at(id)]; }
+    [[nodiscard]] Vec3 pointInC0(std::uint64_t id) const {
+        return T0_.R_CtoW.transpose() * (pointOf(id) - T0_.p_CinW);
+    }
+
+private:
+    [[nodiscard]] std::optional<Vec2> project(const core::CameraPose& pose, const Vec3& p) const {
+        const Vec3 pc = pose.R_CtoW.transpose() * (p - pose.p_CinW);
+        if (pc.z() < Scalar(0.2)) {
+            return std::nullopt;
+        }
+        auto px = cam_.project(pc);
+        if (!px || px->x() < 15 || px->y() < 15 || px->x() > Scalar(cam_.width() - 16) ||
+            px->y() > Scalar(cam_.height() - 16)) {
+            return std::nullopt;
+        }
+        return px;
+    }
+
+    void addFeatures(core::slam::EkfSlam& slam, const core::CameraPose& truth) {
+        if (slam.visibleCount() >= slam.config().min_visible && !slam.features().empty()) {
+            return;
+        }
+        const int want = slam.config().min_visible + 5 - slam.visibleCount();
+        slam.makeRoom(want);
+        int added = 0;
+        std::uniform_int_distribution<size_t> pick(0, points_.size() - 1);
+        for (int tries = 0; tries < 3000 && added < want; ++tries) {
+            const size_t k = pick(rng_);
+            const auto px = project(truth, points_[k]);
+            if (!px) {
+                continue;
+            }
+            bool free = true;
+            for (const auto& f : slam.features()) {
+                if (f.in_view && (f.px - *px).norm() < 30) {
+                    free = false;
+                    break;
+                }
+            }
+            if (!free) {
+                continue;
+            }
+            std::uint64_t id = 0;
+            if (opt_.known_depth_rel_sigma > 0) {
+                // A depth prior consistent with its own sigma: the true
+                // inverse depth perturbed by a draw of that sigma.
+                const Scalar rho = 1 / (points_[k] - truth.p_CinW).norm();
+                const Scalar sigma = opt_.known_depth_rel_sigma * rho;
+                std::normal_distribution<Scalar> draw(0, sigma);
+                id = slam.addFeature(*px, rho + draw(rng_), sigma);
+            } else {
+                id = slam.addFeature(*px);
+            }
+            if (id == 0) {
+                break;
+            }
+            point_of_[id] = k;
+            ++added;
+        }
+    }
+
+    core::PinholeRadialCamera cam_;
+    PointSimOptions opt_;
+    std::mt19937 rng_;
+    std::vector<Vec3> points_;
+    std::map<std::uint64_t, size_t> point_of_;
+    std::vector<core::slam::FeatureMatch> matches_;
+    std::vector<std::uint64_t> outlier_ids_;
+    core::CameraPose T0_;
+};
+
+}  // namespace scaled::test

@@ -1,0 +1,249 @@
+// EKF MonoSLAM behaviour on the point-level simulation (no images).
+
+#include <algorithm>
+#include <set>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
+#include <gtest/gtest.h>
+
+#include <scaled/core/geometry/trajectory_alignment.h>
+#include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/slam/quaternion.h>
+
+#include "point_slam_sim.h"
+#include "scene.h"
+
+namespace scaled::core::slam {
+namespace {
+
+using test::PointSimOptions;
+using test::PointSlamSim;
+
+SlamConfig simConfig() {
+    SlamConfig c;
+    c.motion = {Scalar(2), Scalar(2)};
+    c.pixel_sigma_px = 1;
+    c.max_features = 60;
+    c.max_measured = 40;
+    c.min_visible = 20;
+    return c;
+}
+
+struct RunResult {
+    std::vector<Vec3> est;
+    std::vector<Vec3> gt;
+    int bad_frames = 0;
+    int xyz_features = 0;
+    SlamHealth health = SlamHealth::kOk;
+};
+
+RunResult run(const PointSimOptions& opt, const SlamConfig& config, EkfSlam* out = nullptr) {
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, config);
+    EXPECT_TRUE(slam.ok());
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    RunResult r;
+    std::set<std::uint64_t> xyz_ids;
+    for (int k = 0; k < opt.frames; ++k) {
+        const auto report = sim.step(*slam, k);
+        r.bad_frames += report.bad_frame ? 1 : 0;
+        r.est.push_back(slam->pose().p_CinW);
+        r.gt.push_back(sim.truthInC0(Scalar(k) / opt.fps).p_CinW);
+        for (const auto& f : slam->features()) {
+            if (f.kind == FeatureKind::kXyz) {
+                xyz_ids.insert(f.id);
+            }
+        }
+    }
+    r.xyz_features = static_cast<int>(xyz_ids.size());
+    r.health = slam->health();
+    if (out != nullptr) {
+        *out = std::move(*slam);
+    }
+    return r;
+}
+
+TEST(EkfSlam, ValidateNamesTheField) {
+    SlamConfig c;
+    c.sigma_rho = -1;
+    const auto r = validate(c);
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("sigma_rho"), std::string::npos);
+    c = SlamConfig{};
+    c.max_measured = c.max_features + 1;
+    EXPECT_FALSE(EkfSlam::create(test::makeCamera(), c).ok());
+}
+
+TEST(EkfSlam, TracksTheSimulatedPathWithArbitraryScale) {
+    PointSimOptions opt;
+    opt.frames = 300;
+    const auto r = run(opt, simConfig());
+    EXPECT_EQ(r.health, SlamHealth::kOk);
+    EXPECT_EQ(r.bad_frames, 0);
+    const auto a = alignTrajectories(r.est, r.gt);
+    ASSERT_TRUE(a.ok()) << a.error().message;
+    const Scalar len = pathLength(r.gt);
+    EXPECT_LT(a->ate_rmse, Scalar(0.01) * len) << "path " << len << " m";
+    // The unit is the initial depth guess (rho0 = 1), not metres: the scale is
+    // not 1 but must be positive and finite.
+    EXPECT_GT(a->scale, 0);
+}
+
+TEST(EkfSlam, KnownDepthGivesMetricScale) {
+    PointSimOptions opt;
+    opt.frames = 150;
+    opt.known_depth_rel_sigma = Scalar(0.02);
+    const auto r = run(opt, simConfig());
+    const auto a = alignTrajectories(r.est, r.gt);
+    ASSERT_TRUE(a.ok());
+    EXPECT_NEAR(a->scale, 1, 0.05);
+    // With the scale pinned, depth uncertainties shrink below the linearity
+    // threshold and features are converted to XYZ. (With an unknown scale the
+    // global scale uncertainty keeps sigma_rho / rho large: few convert.)
+    EXPECT_GT(r.xyz_features, 20);
+}
+
+TEST(EkfSlam, OnePointRansacRejectsGrossOutliers) {
+    PointSimOptions opt;
+    opt.frames = 200;
+    opt.outlier_fraction = Scalar(0.2);
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, simConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    int outliers = 0;
+    int accepted_outliers = 0;
+    std::vector<Vec3> est;
+    std::vector<Vec3> gt;
+    for (int k = 0; k < opt.frames; ++k) {
+        sim.step(*slam, k);
+        for (const auto id : sim.outlierIds()) {
+            ++outliers;
+            for (const auto& f : slam->features()) {
+                if (f.id == id && f.measured) {
+                    ++accepted_outliers;
+                }
+            }
+        }
+        est.push_back(slam->pose().p_CinW);
+        gt.push_back(sim.truthInC0(Scalar(k) / opt.fps).p_CinW);
+    }
+    ASSERT_GT(outliers, 500);
+    // Outliers 5-15 px off: a few of the smallest can pass the rescue gate
+    // when the filter is uncertain; nearly all must go.
+    EXPECT_LT(accepted_outliers, outliers / 20) << accepted_outliers << " of " << outliers;
+    const auto a = alignTrajectories(est, gt);
+    ASSERT_TRUE(a.ok());
+    EXPECT_LT(a->ate_rmse, Scalar(0.02) * pathLength(gt));
+}
+
+TEST(EkfSlam, MapPointsCarryConsistentCovariances) {
+    PointSimOptions opt;
+    opt.frames = 120;
+    opt.known_depth_rel_sigma = Scalar(0.02);
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, simConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    for (int k = 0; k < opt.frames; ++k) {
+        sim.step(*slam, k);
+    }
+    std::vector<MapPoint> pts;
+    slam->mapPoints(pts);
+    ASSERT_GT(pts.size(), 15U);
+    int in_view = 0;
+    Scalar nees = 0;
+    for (const auto& p : pts) {
+        // Symmetric positive definite 3x3, and the truth within reach of it.
+        EXPECT_LE((p.P_FinW - p.P_FinW.transpose()).cwiseAbs().maxCoeff(), 1e-12);
+        Eigen::SelfAdjointEigenSolver<Mat3> es(p.P_FinW);
+        EXPECT_GT(es.eigenvalues().minCoeff(), 0);
+        const Vec3 e = p.p_FinW - sim.pointInC0(p.id);
+        nees += e.dot(p.P_FinW.ldlt().solve(e));
+        in_view += p.in_view ? 1 : 0;
+        if (p.in_view) {
+            const auto px =
+                cam.project(slam->pose().R_CtoW.transpose() * (p.p_FinW - slam->pose().p_CinW));
+            ASSERT_TRUE(px.has_value());
+            EXPECT_LE((*px - p.px).norm(), 1e-6);
+        }
+    }
+    EXPECT_GT(in_view, 10);
+    // Mean point NEES of a 3-dof error: expect about 3; a loose bound catches
+    // gross inconsistency (100x overconfidence).
+    EXPECT_LT(nees / Scalar(pts.size()), 30);
+}
+
+TEST(EkfSlam, RefusesBadTimestampsAndReportsLostTrack) {
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSimOptions opt;
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, simConfig());
+    ASSERT_TRUE(slam.ok());
+    EXPECT_EQ(slam->predict(1), SlamHealth::kUninitialised);
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    sim.step(*slam, 0);
+    ASSERT_GT(slam->features().size(), 10U);
+    EXPECT_EQ(slam->predict(sim.timeNs(0)), SlamHealth::kBadTimestamp);
+    EXPECT_EQ(slam->predict(sim.timeNs(0) + 2'000'000'000), SlamHealth::kBadTimestamp);
+    // No matches at all: the front end lost everything (e.g. a covered lens).
+    for (int k = 1; k <= slam->config().lost_after_frames; ++k) {
+        ASSERT_EQ(slam->predict(sim.timeNs(k)), SlamHealth::kOk);
+        slam->predictMeasurements();
+        const auto rep = slam->update({});
+        EXPECT_TRUE(rep.bad_frame);
+        slam->manageMap();
+    }
+    EXPECT_EQ(slam->health(), SlamHealth::kLost);
+    // Re-initialisation starts a fresh map.
+    slam->initialise(sim.timeNs(20), sim.gravityDownC0());
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+    EXPECT_TRUE(slam->features().empty());
+    EXPECT_EQ(slam->stateDim(), kCameraDim);
+}
+
+TEST(EkfSlam, DeletesFeaturesThatAreNeverFoundAndCapsTheMap) {
+    const auto cam = test::makeCamera(0, 0, 500);
+    SlamConfig c = simConfig();
+    c.max_features = 12;
+    c.max_measured = 12;
+    c.min_visible = 12;
+    auto slam = EkfSlam::create(cam, c);
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(0, Vec3(0, 1, 0));
+    for (int i = 0; i < 20; ++i) {
+        slam->addFeature(Vec2(50 + 25 * i, 240));
+    }
+    EXPECT_EQ(slam->features().size(), 12U) << "the map is capped";
+    EXPECT_EQ(slam->stateDim(), kCameraDim + 6 * 12);
+    // Search the features for delete_min_attempts frames and find only the
+    // first 6: the others are deleted.
+    for (int k = 1; k <= c.delete_min_attempts; ++k) {
+        ASSERT_EQ(slam->predict(k * 33'333'333LL), SlamHealth::kOk);
+        const auto preds = slam->predictMeasurements();
+        std::vector<FeatureMatch> m;
+        for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
+            if (preds[static_cast<size_t>(i)].id <= 6) {
+                m.push_back({i, preds[static_cast<size_t>(i)].h_px});
+            }
+        }
+        slam->update(m);
+        slam->manageMap();
+    }
+    ASSERT_EQ(slam->features().size(), 6U);
+    for (const auto& f : slam->features()) {
+        EXPECT_LE(f.id, 6U);
+    }
+    EXPECT_EQ(slam->stateDim(), kCameraDim + 6 * 6);
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+    // The covariance stayed symmetric through deletions.
+    const auto P = slam->covariance();
+    EXPECT_LE((P - P.transpose()).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+}  // namespace
+}  // namespace scaled::core::slam
