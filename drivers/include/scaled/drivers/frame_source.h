@@ -1,0 +1,112 @@
+#pragma once
+
+// Frames from a camera or a recorded sequence. FrameSource is the interface the
+// tracker reads from; openDataset() replays a dataset directory from disk:
+//
+//   TUM RGB-D layout  rgb.txt (`t rgb/x.png`), optional depth.txt, groundtruth.txt
+//                     (`t tx ty tz qx qy qz qw`, camera-to-world, metres), camera.txt
+//                     (`width height fx fy cx cy [k1 k2]`), gravity.txt (unit down vector
+//                     in the ground-truth world frame).
+//   KITTI odometry    image_0/NNNNNN.png, times.txt (one time in seconds per line),
+//                     optional poses.txt (3x4 row-major camera-to-world per line) and
+//                     calib.txt (`P0: 12 numbers`).
+//
+// All index files are parsed once, in openDataset(); images are read by next().
+// Every parse error is a core::Error whose message reads `FILE:LINE: what is
+// wrong (the offending text)`; nothing throws.
+//
+// Partial downloads: when the images listed at the end of an index do not
+// exist (e.g. the TUM rgb.txt of a whole sequence next to its first 16 images),
+// openDataset() keeps the frames up to the last image that exists and adds a
+// note to SequenceInfo::notes (DatasetOptions::drop_missing_tail). A missing
+// image before that point is an error of next(), naming the index file and line.
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/result.h>
+#include <scaled/core/scale/vertical_extent.h>
+#include <scaled/core/types.h>
+
+namespace scaled::drivers {
+
+struct Frame {
+    int64_t id = 0;    // 0-based index in the sequence
+    int64_t t_ns = 0;  // timestamp in nanoseconds, strictly increasing along the sequence
+    cv::Mat gray;      // CV_8UC1
+    cv::Mat color;     // CV_8UC3 BGR; for grayscale datasets (KITTI image_0) the gray image
+                       // expanded to three channels
+    std::optional<core::CameraPose> T_CtoW_gt;        // ground-truth pose, metres
+    std::optional<std::filesystem::path> depth_path;  // associated depth image, if it exists
+    std::filesystem::path image_path;                 // where the pixels came from (logs)
+};
+
+struct SequenceInfo {
+    std::string name;                          // the dataset directory's name
+    std::filesystem::path dir;                 // dataset directory (empty for live sources)
+    core::CameraIntrinsics intrinsics{};       // valid only when has_intrinsics
+    bool has_intrinsics = false;               // false: the caller must supply intrinsics
+    std::optional<core::Vec3> gravity_down_W;  // unit, in the ground-truth world frame
+    double depth_scale_m = 0;        // metres per depth-image unit; 0 when there is no depth
+    std::size_t frame_count = 0;     // frames next() will return from the start
+    std::size_t listed_count = 0;    // frames the index lists (>= frame_count)
+    std::vector<std::string> notes;  // things a user should know (dropped frames, missing GT)
+};
+
+class FrameSource {
+public:
+    FrameSource() = default;
+    FrameSource(const FrameSource&) = delete;
+    FrameSource& operator=(const FrameSource&) = delete;
+    FrameSource(FrameSource&&) = delete;
+    FrameSource& operator=(FrameSource&&) = delete;
+    virtual ~FrameSource() = default;
+
+    [[nodiscard]] virtual const SequenceInfo& info() const = 0;
+
+    // Reads the frame at the cursor into `frame` and advances the cursor.
+    // true: a frame was read; false: end of the sequence (frame untouched).
+    // An unreadable frame is an Error (the message names the image and, for a
+    // missing image, the index file and line that listed it); the cursor moves
+    // past it, so the caller may log it and go on.
+    virtual core::Result<bool> next(Frame& frame) = 0;
+
+    // Moves the cursor to frame `index` (for --frames A:B). index == frame_count
+    // is the end (returns false); beyond that is a kInvalidArgument error.
+    virtual core::Result<bool> seek(std::size_t index) = 0;
+};
+
+enum class DatasetFormat { kTum, kKitti };
+
+struct DatasetOptions {
+    // Detected when empty: rgb.txt -> TUM; times.txt and image_0/ -> KITTI.
+    std::optional<DatasetFormat> format;
+    // TUM: ground truth and depth are associated to an image by nearest timestamp
+    // when they are at most this far apart (else the frame has none).
+    double max_assoc_dt_s = 0.02;
+    // Overrides the dataset's intrinsics. width_px/height_px of 0 are taken
+    // from the first image.
+    std::optional<core::CameraIntrinsics> intrinsics;
+    // TUM: gravity comes from gravity.txt only (nothing is derived from the
+    // ground truth). KITTI: when set, gravity = +y axis of the first camera
+    // (KITTI's cameras are mounted level), in the ground-truth world frame.
+    bool gravity_from_groundtruth = false;
+    // Overrides depth_scale_m. Default for TUM: 0.001 when a comment of depth.txt
+    // mentions millimetres (7-Scenes conversions), else 1/5000 (TUM RGB-D).
+    std::optional<double> depth_scale_m;
+    // Drop the frames after the last image that exists (partial downloads).
+    // When false, every listed frame is kept and next() reports the missing ones.
+    bool drop_missing_tail = true;
+};
+
+core::Result<std::unique_ptr<FrameSource>> openDataset(const std::filesystem::path& dir,
+                                                       const DatasetOptions& opt = {});
+
+}  // namespace scaled::drivers
