@@ -32,7 +32,9 @@
 namespace scaled::core::slam {
 
 struct SlamConfig {
-    MotionNoise motion{Scalar(1), Scalar(1)};
+    // Tuned on handheld indoor sequences (7-Scenes redkitchen, docs/accuracy.md)
+    // with the unit set by rho0 = 1: sigma_a in SLAM units/s^2.
+    MotionNoise motion{Scalar(8), Scalar(1)};
     Scalar pixel_sigma_px = 1;          // measurement noise of a matched feature
     Scalar init_sigma_v = Scalar(0.1);  // initial velocity std, SLAM units/s
     Scalar init_sigma_w = Scalar(0.1);  // initial angular velocity std, rad/s
@@ -42,9 +44,9 @@ struct SlamConfig {
     Scalar sigma_rho = Scalar(1);
     Scalar linearity_threshold = Scalar(0.1);  // inverse depth -> XYZ below this
 
-    int max_features = 60;        // map capacity (state size 13 + 6 * max_features)
-    int max_measured = 40;        // features searched per frame
-    int min_visible = 20;         // add features when fewer are predicted in view
+    int max_features = 80;        // map capacity (state size 13 + 6 * max_features)
+    int max_measured = 50;        // features searched per frame
+    int min_visible = 40;         // add features when fewer are predicted in view
     Scalar image_margin_px = 10;  // a prediction this close to the border is not searched
 
     // Active search and 1-point RANSAC.

@@ -1,0 +1,125 @@
+// Tracker cost per frame (front end + EKF, detection excluded) at 640x480 with
+// 25, 50 and 100 features measured per frame, one thread: on rendered frames
+// of the synthetic room (always available) and on 7-Scenes redkitchen (when
+// ../shared is present). Results: docs/benchmarks.md.
+
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include <scaled/drivers/frame_source.h>
+#include <scaled/synth/renderer.h>
+#include <scaled/synth/scene.h>
+#include <scaled/synth/trajectory.h>
+#include <scaled/vision/mono_tracker.h>
+
+namespace {
+
+using namespace scaled;
+
+struct Sequence {
+    std::unique_ptr<core::PinholeRadialCamera> camera;
+    std::vector<std::int64_t> t_ns;
+    std::vector<cv::Mat> gray;
+};
+
+constexpr int kFrames = 150;
+
+const Sequence& syntheticSequence() {
+    static const Sequence seq = [] {
+        Sequence s;
+        core::CameraIntrinsics k{500, 500, 320, 240, 0, 0, 640, 480};
+        s.camera = std::make_unique<core::PinholeRadialCamera>(
+            core::PinholeRadialCamera::create(k).value());
+        auto scene = synth::Scene::create();
+        synth::RenderOptions ro;
+        ro.noise_sigma = 2.0;
+        synth::Renderer renderer(*scene, ro);
+        const auto frames = synth::Trajectory::create()->makeSequence(kFrames);
+        for (std::size_t i = 0; i < frames.size(); ++i) {
+            cv::Mat g;
+            renderer.render(*s.camera, frames[i].pose_CtoW, g, nullptr, i);
+            s.t_ns.push_back(frames[i].t_ns);
+            s.gray.push_back(g);
+        }
+        return s;
+    }();
+    return seq;
+}
+
+const Sequence* redkitchenSequence() {
+    static const std::unique_ptr<Sequence> seq = []() -> std::unique_ptr<Sequence> {
+        const char* env = std::getenv("SCALED_SHARED_DIR");
+        const std::filesystem::path shared =
+            env != nullptr ? std::filesystem::path(env)
+                           : std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared";
+        auto src = drivers::openDataset(shared / "data" / "redkitchen");
+        if (!src) {
+            return nullptr;
+        }
+        auto s = std::make_unique<Sequence>();
+        s->camera = std::make_unique<core::PinholeRadialCamera>(
+            core::PinholeRadialCamera::create((*src)->info().intrinsics).value());
+        drivers::Frame f;
+        for (int i = 0; i < kFrames; ++i) {
+            auto got = (*src)->next(f);
+            if (!got || !*got) {
+                return nullptr;
+            }
+            s->t_ns.push_back(f.t_ns);
+            s->gray.push_back(f.gray.clone());
+        }
+        return s;
+    }();
+    return seq.get();
+}
+
+void runTracker(benchmark::State& state, const Sequence& seq) {
+    const int n = static_cast<int>(state.range(0));
+    vision::TrackerConfig config;
+    config.slam.max_measured = n;
+    config.slam.min_visible = n;
+    config.slam.max_features = n + n / 2;
+    config.max_new_per_frame = std::max(10, n / 4);
+    auto tracker = vision::MonoTracker::create(*seq.camera, config);
+    std::size_t i = 0;
+    double measured = 0;
+    double frames = 0;
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
+        if (i == seq.gray.size()) {
+            state.PauseTiming();
+            tracker->reset();
+            i = 0;
+            state.ResumeTiming();
+        }
+        const auto stats = tracker->processFrame(seq.t_ns[i], seq.gray[i]);
+        measured += stats.inliers + stats.rescued;
+        frames += 1;
+        ++i;
+    }
+    state.counters["measured"] = measured / frames;
+}
+
+void BM_TrackerSynthetic(benchmark::State& state) {
+    runTracker(state, syntheticSequence());
+}
+
+void BM_TrackerRedkitchen(benchmark::State& state) {
+    const Sequence* seq = redkitchenSequence();
+    if (seq == nullptr) {
+        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
+        return;
+    }
+    runTracker(state, *seq);
+}
+
+BENCHMARK(BM_TrackerSynthetic)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerRedkitchen)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,176 @@
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include <scaled/synth/renderer.h>
+#include <scaled/synth/trajectory.h>
+
+#include "synth_test_util.h"
+
+namespace scaled::synth {
+namespace {
+
+using test::defaultScene;
+using test::makeCamera;
+
+// Rotation angle between two rotation matrices, radians.
+double angleBetween(const core::Mat3& a, const core::Mat3& b) {
+    const Eigen::AngleAxisd aa((a.transpose() * b).cast<double>());
+    return std::abs(aa.angle());
+}
+
+TEST(SynthTrajectory, RejectsBadConfig) {
+    TrajectoryConfig c;
+    c.speed_scale = 0;
+    EXPECT_FALSE(Trajectory::create(c).ok());
+    c.speed_scale = 10;
+    EXPECT_FALSE(Trajectory::create(c).ok());
+    c = TrajectoryConfig{};
+    c.duration_s = -1;
+    EXPECT_FALSE(Trajectory::create(c).ok());
+    c = TrajectoryConfig{};
+    c.duration_s = std::nan("");
+    EXPECT_FALSE(Trajectory::create(c).ok());
+}
+
+TEST(SynthTrajectory, GravityPointsDown) {
+    EXPECT_EQ(gravityDirectionW(), Vec3(0, 0, -1));
+}
+
+TEST(SynthTrajectory, SequenceTimestampsAndPathLength) {
+    const auto traj = Trajectory::create().value();
+    EXPECT_EQ(traj.frameCount(), 1800);
+    EXPECT_EQ(traj.frameCount(10), 600);
+    const auto seq = traj.makeSequence(91, 30);
+    ASSERT_EQ(seq.size(), 91U);
+    EXPECT_EQ(seq[0].t_ns, 0);
+    EXPECT_EQ(seq[1].t_ns, 33333333);
+    EXPECT_EQ(seq[90].t_ns, 3000000000);
+    for (std::size_t i = 0; i < seq.size(); ++i) {
+        const auto p = traj.poseAt(static_cast<double>(seq[i].t_ns) * 1e-9);
+        EXPECT_EQ(p.p_CinW, seq[i].pose_CtoW.p_CinW);
+    }
+    // Path length against a fine numerical integration of the same curve.
+    double fine = 0;
+    for (int i = 1; i <= 3000; ++i) {
+        fine += static_cast<double>(
+            (traj.poseAt(i * 1e-3).p_CinW - traj.poseAt((i - 1) * 1e-3).p_CinW).norm());
+    }
+    EXPECT_NEAR(pathLength(seq), fine, 1e-3 * fine);
+    EXPECT_EQ(pathLength({}), 0);
+    EXPECT_TRUE(traj.makeSequence(0).empty());
+    EXPECT_TRUE(traj.makeSequence(10, 0).empty());
+}
+
+TEST(SynthTrajectory, SeedSelectsTheTrajectory) {
+    TrajectoryConfig c;
+    const auto a = Trajectory::create(c).value();
+    const auto b = Trajectory::create(c).value();
+    c.seed = 2;
+    const auto other = Trajectory::create(c).value();
+    EXPECT_EQ(a.poseAt(1.5).p_CinW, b.poseAt(1.5).p_CinW);
+    EXPECT_EQ(a.poseAt(1.5).R_CtoW, b.poseAt(1.5).R_CtoW);
+    EXPECT_GT((a.poseAt(1.5).p_CinW - other.poseAt(1.5).p_CinW).norm(), 0.05);
+}
+
+TEST(SynthTrajectory, SpeedScaleScalesTime) {
+    TrajectoryConfig c;
+    c.speed_scale = 2;
+    const auto fast = Trajectory::create(c).value();
+    const auto slow = Trajectory::create().value();
+    EXPECT_NEAR((fast.poseAt(1.0).p_CinW - slow.poseAt(2.0).p_CinW).norm(), 0.0, 1e-12);
+}
+
+TEST(SynthTrajectory, IsSmoothHandheldAndInsideTheRoom) {
+    const Scene& scene = defaultScene();
+    for (const std::uint64_t seed : {1U, 2U, 3U}) {
+        TrajectoryConfig c;
+        c.seed = seed;
+        const auto traj = Trajectory::create(c).value();
+        const double fps = 30;
+        const auto seq = traj.makeSequence(traj.frameCount(fps), fps);
+        ASSERT_EQ(seq.size(), 1800U);
+        const double dt = 1.0 / fps;
+        double speed_sum = 0;
+        Vec3 v_prev = Vec3::Zero();
+        for (std::size_t i = 0; i < seq.size(); ++i) {
+            const auto& pose = seq[i].pose_CtoW;
+            // A rotation.
+            EXPECT_NEAR((pose.R_CtoW.transpose() * pose.R_CtoW - core::Mat3::Identity()).norm(),
+                        0.0, 1e-12);
+            EXPECT_NEAR(pose.R_CtoW.determinant(), 1.0, 1e-12);
+            // Inside the room and away from the furniture by half a metre.
+            EXPECT_TRUE(scene.isFree(pose.p_CinW, Scalar(0.5)))
+                << "seed " << seed << " frame " << i << " at " << pose.p_CinW.transpose();
+            // Nearly level: the optical axis within 20 degrees of horizontal, small roll
+            // (the camera x axis stays nearly horizontal).
+            EXPECT_LT(std::abs(pose.R_CtoW(2, 2)), std::sin(20.0 * std::numbers::pi / 180.0));
+            EXPECT_LT(std::abs(pose.R_CtoW(2, 0)), std::sin(5.0 * std::numbers::pi / 180.0));
+            if (i == 0) {
+                continue;
+            }
+            const auto& prev = seq[i - 1].pose_CtoW;
+            const Vec3 v = (pose.p_CinW - prev.p_CinW) / dt;
+            const double speed = static_cast<double>(v.norm());
+            speed_sum += speed;
+            EXPECT_GT(speed, 0.25) << "frame " << i;
+            EXPECT_LT(speed, 0.7) << "frame " << i;
+            EXPECT_LT(angleBetween(prev.R_CtoW, pose.R_CtoW) / dt, 1.2) << "frame " << i;
+            if (i >= 2) {
+                EXPECT_LT(static_cast<double>((v - v_prev).norm()) / dt, 1.0)
+                    << "acceleration, frame " << i;
+            }
+            v_prev = v;
+        }
+        const double mean_speed = speed_sum / static_cast<double>(seq.size() - 1);
+        EXPECT_GT(mean_speed, 0.35);
+        EXPECT_LT(mean_speed, 0.55);
+        // The loop closes: it goes around the room at least once in a minute.
+        EXPECT_GT(pathLength(seq), 20.0);
+    }
+}
+
+TEST(SynthTrajectory, EveryFrameSeesTexturedSurfacesAtUsableDepth) {
+    const auto cam = makeCamera(320, 240, Scalar(262.5));
+    const auto traj = Trajectory::create().value();
+    const auto seq = traj.makeSequence(traj.frameCount(30), 30);
+    // Every frame: the centre and the corners of the image see a surface 0.5-6 m away.
+    for (std::size_t i = 0; i < seq.size(); ++i) {
+        for (const Vec2& px :
+             {Vec2(160, 120), Vec2(0, 0), Vec2(319, 0), Vec2(0, 239), Vec2(319, 239)}) {
+            const auto d = defaultScene().depthAt(cam, seq[i].pose_CtoW, px);
+            ASSERT_TRUE(d) << "frame " << i;
+            EXPECT_GT(*d, 0.5) << "frame " << i;
+            EXPECT_LT(*d, 6.0) << "frame " << i;
+        }
+    }
+    // Every half second, whole images: depths in range, walls at a few metres, texture.
+    RenderOptions fast;
+    fast.antialias = false;
+    Renderer renderer(defaultScene(), fast);
+    cv::Mat img;
+    cv::Mat depth;
+    for (std::size_t i = 0; i < seq.size(); i += 15) {
+        renderer.render(cam, seq[i].pose_CtoW, img, &depth);
+        const cv::Mat in_range = (depth >= 0.5) & (depth <= 6.0);
+        const double frac = cv::countNonZero(in_range) / static_cast<double>(depth.total());
+        EXPECT_GT(frac, 0.99) << "frame " << i;
+        // Median depth: looking at walls, not into a corner or down at the floor.
+        std::vector<float> d(depth.begin<float>(), depth.end<float>());
+        std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2), d.end());
+        const float median = d[d.size() / 2];
+        EXPECT_GT(median, 1.0f) << "frame " << i;
+        EXPECT_LT(median, 4.0f) << "frame " << i;
+        std::vector<cv::Point2f> corners;
+        cv::goodFeaturesToTrack(img, corners, 500, 0.01, 6);
+        EXPECT_GT(corners.size(), 150U) << "frame " << i;
+    }
+}
+
+}  // namespace
+}  // namespace scaled::synth

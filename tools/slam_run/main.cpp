@@ -1,0 +1,346 @@
+// slam-run: the EKF MonoSLAM tracker over a dataset, with a TUM-format
+// trajectory and a JSON summary (ground-truth metrics where available).
+//
+//   slam-run --dataset DIR [--format tum|kitti] [--frames A:B] [--out traj.txt] [--json]
+//            [--intrinsics fx,fy,cx,cy] [--max-features N] [--max-measured N]
+//            [--no-warp] [--seed N] [--verbose]
+//
+// Exit codes (sysexits): 0 ok, 64 usage, 65 bad data, 66 dataset not found,
+// 73 cannot write the trajectory.
+
+#include <charconv>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <unistd.h>
+
+#include <scaled/drivers/trajectory_io.h>
+
+#include "slam_run.h"
+
+namespace {
+
+using scaled::core::Scalar;
+
+constexpr int kExUsage = 64;
+constexpr int kExDataErr = 65;
+constexpr int kExNoInput = 66;
+constexpr int kExCantCreat = 73;
+
+void usage(std::FILE* out) {
+    std::fputs(
+        "usage: slam-run --dataset DIR [--format tum|kitti] [--frames A:B] [--out TRAJ.txt]\n"
+        "                [--json] [--intrinsics fx,fy,cx,cy] [--max-features N]\n"
+        "                [--max-measured N] [--no-warp] [--seed N] [--verbose]\n"
+        "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, writes the\n"
+        "trajectory (TUM format, SLAM units, world = first camera) and prints a summary.\n",
+        out);
+}
+
+template <typename T>
+bool parseNumber(std::string_view s, T& out) {
+    const auto* end = s.data() + s.size();
+    const auto r = std::from_chars(s.data(), end, out);
+    return r.ec == std::errc() && r.ptr == end;
+}
+
+bool parseRange(std::string_view s, std::size_t& a, std::optional<std::size_t>& b) {
+    const auto colon = s.find(':');
+    if (colon == std::string_view::npos) {
+        return false;
+    }
+    const auto first = s.substr(0, colon);
+    const auto last = s.substr(colon + 1);
+    a = 0;
+    if (!first.empty() && !parseNumber(first, a)) {
+        return false;
+    }
+    if (!last.empty()) {
+        std::size_t e = 0;
+        if (!parseNumber(last, e) || e <= a) {
+            return false;
+        }
+        b = e;
+    }
+    return true;
+}
+
+bool parseIntrinsics(std::string_view s, scaled::core::CameraIntrinsics& k) {
+    double v[4];
+    for (int i = 0; i < 4; ++i) {
+        const auto comma = s.find(',');
+        const auto part = s.substr(0, comma);
+        char* end = nullptr;
+        const std::string str(part);
+        v[i] = std::strtod(str.c_str(), &end);
+        if (str.empty() || end != str.c_str() + str.size()) {
+            return false;
+        }
+        if (i < 3 && comma == std::string_view::npos) {
+            return false;
+        }
+        s = comma == std::string_view::npos ? std::string_view() : s.substr(comma + 1);
+    }
+    k.fx = Scalar(v[0]);
+    k.fy = Scalar(v[1]);
+    k.cx = Scalar(v[2]);
+    k.cy = Scalar(v[3]);
+    return s.empty();
+}
+
+// --set KEY=VALUE: the tracker's tuning knobs, for experiments.
+bool setParameter(std::string_view kv, scaled::vision::TrackerConfig& c) {
+    const auto eq = kv.find('=');
+    if (eq == std::string_view::npos) {
+        return false;
+    }
+    const std::string key(kv.substr(0, eq));
+    const std::string val(kv.substr(eq + 1));
+    char* end = nullptr;
+    const double v = std::strtod(val.c_str(), &end);
+    if (val.empty() || end != val.c_str() + val.size()) {
+        return false;
+    }
+    auto& s = c.slam;
+    const auto i = static_cast<int>(v);
+    if (key == "sigma_a") {
+        s.motion.sigma_a = Scalar(v);
+    } else if (key == "sigma_alpha") {
+        s.motion.sigma_alpha = Scalar(v);
+    } else if (key == "pixel_sigma_px") {
+        s.pixel_sigma_px = Scalar(v);
+    } else if (key == "init_sigma_v") {
+        s.init_sigma_v = Scalar(v);
+    } else if (key == "init_sigma_w") {
+        s.init_sigma_w = Scalar(v);
+    } else if (key == "rho0") {
+        s.rho0 = Scalar(v);
+    } else if (key == "sigma_rho") {
+        s.sigma_rho = Scalar(v);
+    } else if (key == "linearity_threshold") {
+        s.linearity_threshold = Scalar(v);
+    } else if (key == "max_features") {
+        s.max_features = i;
+    } else if (key == "max_measured") {
+        s.max_measured = i;
+    } else if (key == "min_visible") {
+        s.min_visible = i;
+    } else if (key == "image_margin_px") {
+        s.image_margin_px = Scalar(v);
+    } else if (key == "chi2_gate") {
+        s.chi2_gate = Scalar(v);
+    } else if (key == "ransac_threshold_px") {
+        s.ransac_threshold_px = Scalar(v);
+    } else if (key == "ransac_max_hypotheses") {
+        s.ransac_max_hypotheses = i;
+    } else if (key == "delete_min_attempts") {
+        s.delete_min_attempts = i;
+    } else if (key == "delete_min_ratio") {
+        s.delete_min_ratio = Scalar(v);
+    } else if (key == "min_inliers") {
+        s.min_inliers = i;
+    } else if (key == "lost_after_frames") {
+        s.lost_after_frames = i;
+    } else if (key == "min_ncc") {
+        c.match.min_ncc = v;
+    } else if (key == "max_search_pixels") {
+        c.match.max_search_pixels = i;
+    } else if (key == "patch_size") {
+        c.patch_size = i;
+    } else if (key == "patch_source_size") {
+        c.patch_source_size = i;
+    } else if (key == "warp_patches") {
+        c.warp_patches = v != 0;
+    } else if (key == "free_radius_px") {
+        c.free_radius_px = i;
+    } else if (key == "max_new_per_frame") {
+        c.max_new_per_frame = i;
+    } else if (key == "corner_quality") {
+        c.corners.quality_level = v;
+    } else if (key == "corner_min_distance_px") {
+        c.corners.min_distance_px = i;
+    } else {
+        return false;
+    }
+    return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::filesystem::path dataset;
+    std::filesystem::path out;
+    bool json = false;
+    bool verbose = false;
+    scaled::drivers::DatasetOptions dopt;
+    scaled::tools::SlamRunOptions ropt;
+    std::optional<scaled::core::CameraIntrinsics> intrinsics;
+    for (int i = 1; i < argc; ++i) {
+        const std::string_view a = argv[i];
+        auto value = [&]() -> std::optional<std::string_view> {
+            if (i + 1 >= argc) {
+                std::fprintf(stderr, "slam-run: %s needs a value\n", argv[i]);
+                return std::nullopt;
+            }
+            return std::string_view(argv[++i]);
+        };
+        if (a == "--help" || a == "-h") {
+            usage(stdout);
+            return 0;
+        }
+        if (a == "--json") {
+            json = true;
+            continue;
+        }
+        if (a == "--verbose") {
+            verbose = true;
+            continue;
+        }
+        if (a == "--no-warp") {
+            ropt.tracker.warp_patches = false;
+            continue;
+        }
+        const auto v = value();
+        if (!v) {
+            return kExUsage;
+        }
+        bool ok = true;
+        if (a == "--dataset") {
+            dataset = std::string(*v);
+        } else if (a == "--out") {
+            out = std::string(*v);
+        } else if (a == "--format") {
+            if (*v == "tum") {
+                dopt.format = scaled::drivers::DatasetFormat::kTum;
+            } else if (*v == "kitti") {
+                dopt.format = scaled::drivers::DatasetFormat::kKitti;
+            } else {
+                ok = false;
+            }
+        } else if (a == "--frames") {
+            ok = parseRange(*v, ropt.first_frame, ropt.end_frame);
+        } else if (a == "--intrinsics") {
+            scaled::core::CameraIntrinsics k;
+            ok = parseIntrinsics(*v, k);
+            intrinsics = k;
+        } else if (a == "--max-features") {
+            ok = parseNumber(*v, ropt.tracker.slam.max_features);
+        } else if (a == "--max-measured") {
+            ok = parseNumber(*v, ropt.tracker.slam.max_measured);
+        } else if (a == "--set") {
+            ok = setParameter(*v, ropt.tracker);
+        } else if (a == "--seed") {
+            ok = parseNumber(*v, ropt.tracker.slam.seed);
+        } else {
+            std::fprintf(stderr, "slam-run: unknown option %s\n", argv[i - 1]);
+            usage(stderr);
+            return kExUsage;
+        }
+        if (!ok) {
+            std::fprintf(stderr, "slam-run: bad value for %s: '%s'\n", argv[i - 1], argv[i]);
+            return kExUsage;
+        }
+    }
+    if (dataset.empty()) {
+        std::fprintf(stderr, "slam-run: --dataset DIR is required\n");
+        usage(stderr);
+        return kExUsage;
+    }
+    if (!std::filesystem::is_directory(dataset)) {
+        std::fprintf(stderr, "slam-run: %s: no such dataset directory\n", dataset.c_str());
+        return kExNoInput;
+    }
+    auto source = scaled::drivers::openDataset(dataset, dopt);
+    if (!source) {
+        std::fprintf(stderr, "slam-run: %s\n", source.error().message.c_str());
+        return kExDataErr;
+    }
+    auto& src = **source;
+    scaled::core::CameraIntrinsics k = src.info().intrinsics;
+    if (intrinsics) {
+        // Image size from the dataset when it knows it; else from the first frame.
+        const int w = k.width_px;
+        const int h = k.height_px;
+        k = *intrinsics;
+        k.width_px = w;
+        k.height_px = h;
+    } else if (!src.info().has_intrinsics) {
+        std::fprintf(stderr,
+                     "slam-run: %s has no calibration file (camera.txt or calib.txt): give "
+                     "--intrinsics fx,fy,cx,cy\n",
+                     dataset.c_str());
+        return kExDataErr;
+    }
+    if (k.width_px <= 0 || k.height_px <= 0) {
+        scaled::drivers::Frame first;
+        if (auto got = src.next(first); !got || !*got) {
+            std::fprintf(stderr, "slam-run: %s: cannot read the first frame%s%s\n", dataset.c_str(),
+                         got ? "" : ": ", got ? "" : got.error().message.c_str());
+            return kExDataErr;
+        }
+        k.width_px = first.gray.cols;
+        k.height_px = first.gray.rows;
+    }
+    const auto camera = scaled::core::PinholeRadialCamera::create(k);
+    if (!camera) {
+        std::fprintf(stderr, "slam-run: %s\n", camera.error().message.c_str());
+        return kExDataErr;
+    }
+    const bool tty = isatty(STDERR_FILENO) == 1;
+    if (verbose) {
+        ropt.progress = [](std::size_t done, std::size_t, const scaled::vision::TrackStats& s) {
+            std::fprintf(stderr,
+                         "frame %zu %s map %d visible %d searched %d matched %d inliers %d "
+                         "rescued %d added %d ncc_evals %d\n",
+                         done - 1, scaled::core::slam::toString(s.health), s.features, s.visible,
+                         s.predicted, s.matched, s.inliers, s.rescued, s.added,
+                         s.search_evaluations);
+        };
+    } else if (tty) {
+        ropt.progress = [](std::size_t done, std::size_t total,
+                           const scaled::vision::TrackStats& s) {
+            if (done % 10 == 0 || done == total) {
+                std::fprintf(stderr, "\r%zu/%zu frames  %s  features %d  measured %d   ", done,
+                             total, scaled::core::slam::toString(s.health), s.features,
+                             s.inliers + s.rescued);
+                if (done == total) {
+                    std::fputc('\n', stderr);
+                }
+            }
+        };
+    }
+    const auto result = scaled::tools::runSlam(src, *camera, ropt);
+    if (!result) {
+        std::fprintf(stderr, "slam-run: %s\n", result.error().message.c_str());
+        return kExDataErr;
+    }
+    for (const auto& note : src.info().notes) {
+        std::fprintf(stderr, "slam-run: note: %s\n", note.c_str());
+    }
+    if (!out.empty()) {
+        if (auto w = scaled::drivers::writeTumTrajectory(out, result->t_ns, result->poses); !w) {
+            std::fprintf(stderr, "slam-run: %s\n", w.error().message.c_str());
+            return kExCantCreat;
+        }
+    }
+    if (json) {
+        std::printf("%s\n", scaled::tools::toJson(*result, dataset.string()).c_str());
+    } else {
+        const auto& r = *result;
+        std::printf("frames %zu, tracked %zu, re-initialisations %d\n", r.frames, r.tracked_frames,
+                    r.reinitialisations);
+        std::printf("features measured per frame %.1f (map %.1f), %.2f ms per frame (max %.2f)\n",
+                    r.mean_features_measured, r.mean_features_in_map, r.ms_per_frame,
+                    r.ms_per_frame_max);
+        if (r.has_gt) {
+            std::printf(
+                "path %.3f m, ATE %.4f m (%.2f%% of the path), scale %.4f m/unit, "
+                "drift between thirds %.3f\n",
+                r.path_length_m, r.ate_rmse_m, 100 * r.ate_rmse_m / r.path_length_m, r.scale_to_gt,
+                r.scale_drift_thirds);
+        }
+    }
+    return 0;
+}

@@ -1,0 +1,168 @@
+#include "slam_run.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include <scaled/core/geometry/trajectory_alignment.h>
+
+namespace scaled::tools {
+
+namespace {
+
+using core::Scalar;
+using core::Vec3;
+
+struct Segment {
+    std::vector<std::int64_t> t_ns;
+    std::vector<core::CameraPose> poses;
+    std::vector<std::optional<Vec3>> gt;
+};
+
+}  // namespace
+
+core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
+                                    const core::PinholeRadialCamera& camera,
+                                    const SlamRunOptions& options) {
+    auto tracker = vision::MonoTracker::create(camera, options.tracker);
+    if (!tracker) {
+        return tracker.error();
+    }
+    const auto& info = source.info();
+    const std::size_t end =
+        std::min(options.end_frame.value_or(info.frame_count), info.frame_count);
+    if (options.first_frame >= end) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "frames: empty range " + std::to_string(options.first_frame) + ":" +
+                                   std::to_string(end) + " of " + std::to_string(info.frame_count) +
+                                   " frames");
+    }
+    if (auto s = source.seek(options.first_frame); !s) {
+        return s.error();
+    }
+    SlamRunResult result;
+    std::vector<Segment> segments(1);
+    drivers::Frame frame;
+    double ms_sum = 0;
+    double measured_sum = 0;
+    double map_sum = 0;
+    bool need_gravity = true;
+    for (std::size_t i = options.first_frame; i < end; ++i) {
+        auto got = source.next(frame);
+        if (!got) {
+            return got.error();
+        }
+        if (!*got) {
+            break;
+        }
+        if (need_gravity) {
+            // The vertical in the frame of the camera that starts the map.
+            Vec3 down_C(0, 1, 0);
+            result.gravity_source = "assumed level camera (down = +y)";
+            if (info.gravity_down_W && frame.T_CtoW_gt) {
+                down_C = frame.T_CtoW_gt->R_CtoW.transpose() * *info.gravity_down_W;
+                result.gravity_source = "dataset gravity and ground-truth pose";
+            }
+            tracker->setGravityDownC(down_C);
+            need_gravity = false;
+        }
+        const auto t0 = std::chrono::steady_clock::now();
+        const vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray);
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                .count();
+        ms_sum += ms;
+        result.ms_per_frame_max = std::max(result.ms_per_frame_max, ms);
+        ++result.frames;
+        if (stats.health == core::slam::SlamHealth::kOk) {
+            ++result.tracked_frames;
+            measured_sum += stats.inliers + stats.rescued;
+            map_sum += stats.features;
+            Segment& seg = segments.back();
+            seg.t_ns.push_back(frame.t_ns);
+            seg.poses.push_back(tracker->filter().pose());
+            seg.gt.push_back(frame.T_CtoW_gt ? std::optional<Vec3>(frame.T_CtoW_gt->p_CinW)
+                                             : std::nullopt);
+        } else {
+            // Lost or diverged: the next frame starts a new map (new scale).
+            ++result.reinitialisations;
+            tracker->reset();
+            need_gravity = true;
+            segments.emplace_back();
+        }
+        if (options.progress) {
+            options.progress(i + 1 - options.first_frame, end - options.first_frame, stats);
+        }
+    }
+    result.ms_per_frame = result.frames > 0 ? ms_sum / double(result.frames) : 0;
+    result.mean_features_measured =
+        result.tracked_frames > 0 ? measured_sum / double(result.tracked_frames) : 0;
+    result.mean_features_in_map =
+        result.tracked_frames > 0 ? map_sum / double(result.tracked_frames) : 0;
+
+    const auto longest = std::max_element(
+        segments.begin(), segments.end(),
+        [](const Segment& a, const Segment& b) { return a.poses.size() < b.poses.size(); });
+    result.t_ns = longest->t_ns;
+    result.poses = longest->poses;
+    const bool all_gt =
+        !longest->gt.empty() && std::all_of(longest->gt.begin(), longest->gt.end(),
+                                            [](const auto& g) { return g.has_value(); });
+    if (all_gt) {
+        std::vector<Vec3> est;
+        for (std::size_t k = 0; k < longest->gt.size(); ++k) {
+            result.gt_positions.push_back(*longest->gt[k]);
+            est.push_back(longest->poses[k].p_CinW);
+        }
+        const auto a = core::alignTrajectories(est, result.gt_positions);
+        if (a) {
+            result.has_gt = true;
+            result.ate_rmse_m = static_cast<double>(a->ate_rmse);
+            result.scale_to_gt = static_cast<double>(a->scale);
+            result.path_length_m = static_cast<double>(core::pathLength(result.gt_positions));
+            const auto drift = core::scaleDriftBetweenThirds(est, result.gt_positions);
+            result.scale_drift_thirds = drift ? static_cast<double>(*drift) : 0;
+        }
+    }
+    return result;
+}
+
+std::string toJson(const SlamRunResult& r, const std::string& dataset) {
+    auto num = [](double v) {
+        if (!std::isfinite(v)) {
+            return std::string("null");
+        }
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "%.6g", v);
+        return std::string(buf);
+    };
+    std::string escaped;
+    for (const char c : dataset) {
+        if (c == '"' || c == '\\') {
+            escaped += '\\';
+        }
+        escaped += c;
+    }
+    std::string s = "{\"dataset\":\"" + escaped + "\"";
+    s += ",\"frames\":" + std::to_string(r.frames);
+    s += ",\"tracked_frames\":" + std::to_string(r.tracked_frames);
+    s += ",\"reinitialisations\":" + std::to_string(r.reinitialisations);
+    s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
+    s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);
+    s += ",\"ms_per_frame\":" + num(r.ms_per_frame);
+    s += ",\"ms_per_frame_max\":" + num(r.ms_per_frame_max);
+    s += ",\"trajectory_frames\":" + std::to_string(r.poses.size());
+    if (r.has_gt) {
+        s += ",\"path_length_m\":" + num(r.path_length_m);
+        s += ",\"ate_rmse_m\":" + num(r.ate_rmse_m);
+        s += ",\"ate_percent_of_path\":" +
+             num(r.path_length_m > 0 ? 100 * r.ate_rmse_m / r.path_length_m : 0);
+        s += ",\"scale_to_gt\":" + num(r.scale_to_gt);
+        s += ",\"scale_drift_thirds\":" + num(r.scale_drift_thirds);
+    }
+    s += ",\"gravity_source\":\"" + r.gravity_source + "\"}";
+    return s;
+}
+
+}  // namespace scaled::tools

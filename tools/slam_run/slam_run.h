@@ -1,0 +1,55 @@
+#pragma once
+
+// Runs the tracker (EKF MonoSLAM + image front end) over a dataset and
+// evaluates the trajectory against ground truth: the library behind slam-run,
+// also used by the integration tests.
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <scaled/core/result.h>
+#include <scaled/drivers/frame_source.h>
+#include <scaled/vision/mono_tracker.h>
+
+namespace scaled::tools {
+
+struct SlamRunOptions {
+    vision::TrackerConfig tracker;
+    std::size_t first_frame = 0;
+    std::optional<std::size_t> end_frame;  // exclusive
+    // Called after every frame (progress display); may be empty.
+    std::function<void(std::size_t done, std::size_t total, const vision::TrackStats&)> progress;
+};
+
+struct SlamRunResult {
+    std::size_t frames = 0;
+    std::size_t tracked_frames = 0;  // frames the filter ended healthy
+    int reinitialisations = 0;
+    double mean_features_measured = 0;  // accepted matches per tracked frame
+    double mean_features_in_map = 0;
+    double ms_per_frame = 0;  // tracker only (image decoding excluded)
+    double ms_per_frame_max = 0;
+    // Trajectory of the tracked frames of the longest map segment (SLAM frame).
+    std::vector<std::int64_t> t_ns;
+    std::vector<core::CameraPose> poses;
+    std::vector<core::Vec3> gt_positions;  // matching ground truth, when present
+    // Ground-truth metrics (when every tracked frame has ground truth).
+    bool has_gt = false;
+    double path_length_m = 0;
+    double ate_rmse_m = 0;
+    double scale_to_gt = 0;         // metres per SLAM unit of the Sim(3) alignment
+    double scale_drift_thirds = 0;  // first-third scale / last-third scale
+    std::string gravity_source;     // where the vertical came from
+};
+
+core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
+                                    const core::PinholeRadialCamera& camera,
+                                    const SlamRunOptions& options);
+
+// The JSON summary slam-run prints (one object, one line).
+std::string toJson(const SlamRunResult& r, const std::string& dataset);
+
+}  // namespace scaled::tools

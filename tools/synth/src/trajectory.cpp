@@ -1,0 +1,129 @@
+#include <cmath>
+#include <cstddef>
+#include <numbers>
+
+#include <Eigen/Geometry>
+
+#include <scaled/synth/trajectory.h>
+
+#include "rng.h"
+
+namespace scaled::synth {
+
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+constexpr double kMaxSpeedScale = 4.0;
+
+// Loop shape.
+constexpr double kSemiAxisX = 1.2;
+constexpr double kSemiAxisY = 0.9;
+constexpr double kBulge = 0.05;       // relative third-harmonic radius modulation
+constexpr double kOmega = 0.42;       // rad/s around the loop at speed_scale 1
+constexpr double kHeight = 1.45;      // m
+constexpr double kHeightAmp = 0.08;   // m
+constexpr double kHeightOmega = 0.9;  // rad/s
+// Orientation.
+constexpr double kYawAmp = 0.35;     // rad, sweep around the outward direction
+constexpr double kYawOmega = 0.5;    // rad/s
+constexpr double kPitch0 = -0.15;    // rad, looking slightly down
+constexpr double kPitchAmp = 0.05;   // rad
+constexpr double kPitchOmega = 1.3;  // rad/s
+constexpr double kRollAmp = 0.04;    // rad
+constexpr double kRollOmega = 1.1;   // rad/s
+
+using Vec3d = Eigen::Vector3d;
+using Mat3d = Eigen::Matrix3d;
+
+}  // namespace
+
+core::Result<Trajectory> Trajectory::create(const TrajectoryConfig& config) {
+    if (!std::isfinite(config.speed_scale) || !(config.speed_scale > 0.0) ||
+        config.speed_scale > kMaxSpeedScale) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "synth trajectory: speed_scale must be in (0, 4]");
+    }
+    if (!std::isfinite(config.duration_s) || !(config.duration_s > 0.0)) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "synth trajectory: duration_s must be positive");
+    }
+    if (!config.centre_W.allFinite()) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "synth trajectory: centre_W must be finite");
+    }
+    return Trajectory(config);
+}
+
+Trajectory::Trajectory(const TrajectoryConfig& config) : config_(config) {
+    detail::SplitMix64 rng(detail::combineSeed(config.seed, 0x7472616aULL));
+    theta0_ = rng.uniform(0.0, kTwoPi);
+    omega_ = kOmega * rng.uniform(0.95, 1.05);
+    bulge_phase_ = rng.uniform(0.0, kTwoPi);
+    height_phase_ = rng.uniform(0.0, kTwoPi);
+    yaw_phase_ = rng.uniform(0.0, kTwoPi);
+    pitch_phase_ = rng.uniform(0.0, kTwoPi);
+    roll_phase_ = rng.uniform(0.0, kTwoPi);
+}
+
+core::CameraPose Trajectory::poseAt(double t_s) const {
+    const double t = t_s * config_.speed_scale;
+    const double theta = theta0_ + omega_ * t;
+    const double radius = 1.0 + kBulge * std::sin(3.0 * theta + bulge_phase_);
+    const Vec3d p(static_cast<double>(config_.centre_W.x()) + kSemiAxisX * radius * std::cos(theta),
+                  static_cast<double>(config_.centre_W.y()) + kSemiAxisY * radius * std::sin(theta),
+                  kHeight + kHeightAmp * std::sin(kHeightOmega * t + height_phase_));
+
+    const double yaw = theta + kYawAmp * std::sin(kYawOmega * t + yaw_phase_);
+    const double pitch = kPitch0 + kPitchAmp * std::sin(kPitchOmega * t + pitch_phase_);
+    const double roll = kRollAmp * std::sin(kRollOmega * t + roll_phase_);
+
+    // A level camera looking along world +x: columns are the camera axes in the world.
+    Mat3d level;
+    level << 0, 0, 1,  //
+        -1, 0, 0,      //
+        0, -1, 0;
+    using AngleAxis = Eigen::AngleAxisd;
+    const Mat3d R = AngleAxis(yaw, Vec3d::UnitZ()).toRotationMatrix() * level *
+                    AngleAxis(pitch, Vec3d::UnitX()).toRotationMatrix() *
+                    AngleAxis(roll, Vec3d::UnitZ()).toRotationMatrix();
+    core::CameraPose pose;
+    pose.R_CtoW = R.cast<core::Scalar>();
+    pose.p_CinW = p.cast<core::Scalar>();
+    return pose;
+}
+
+std::vector<Frame> Trajectory::makeSequence(int n_frames, double fps) const {
+    std::vector<Frame> frames;
+    if (n_frames <= 0 || !std::isfinite(fps) || !(fps > 0.0)) {
+        return frames;
+    }
+    frames.reserve(static_cast<std::size_t>(n_frames));
+    for (int i = 0; i < n_frames; ++i) {
+        Frame f;
+        f.t_ns = std::llround(static_cast<double>(i) * 1e9 / fps);
+        f.pose_CtoW = poseAt(static_cast<double>(f.t_ns) * 1e-9);
+        frames.push_back(f);
+    }
+    return frames;
+}
+
+int Trajectory::frameCount(double fps) const {
+    if (!std::isfinite(fps) || !(fps > 0.0)) {
+        return 0;
+    }
+    return static_cast<int>(std::lround(config_.duration_s * fps));
+}
+
+core::Vec3 gravityDirectionW() {
+    return {core::Scalar(0), core::Scalar(0), core::Scalar(-1)};
+}
+
+core::Scalar pathLength(const std::vector<Frame>& sequence) {
+    core::Scalar length = 0;
+    for (std::size_t i = 1; i < sequence.size(); ++i) {
+        length += (sequence[i].pose_CtoW.p_CinW - sequence[i - 1].pose_CtoW.p_CinW).norm();
+    }
+    return length;
+}
+
+}  // namespace scaled::synth
