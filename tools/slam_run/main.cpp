@@ -317,6 +317,9 @@ int main(int argc, char** argv) {
         return kExDataErr;
     }
     for (const auto& note : src.info().notes) {
+        if (intrinsics && note.starts_with("no intrinsics")) {
+            continue;  // given on the command line
+        }
         std::fprintf(stderr, "slam-run: note: %s\n", note.c_str());
     }
     if (!out.empty()) {

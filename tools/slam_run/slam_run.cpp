@@ -76,7 +76,10 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
         result.ms_per_frame_max = std::max(result.ms_per_frame_max, ms);
         ++result.frames;
         if (stats.health == core::slam::SlamHealth::kOk) {
-            ++result.tracked_frames;
+            // A frame that starts a replacement map was not tracked.
+            if (!stats.new_map || result.frames == 1) {
+                ++result.tracked_frames;
+            }
             measured_sum += stats.inliers + stats.rescued;
             map_sum += stats.features;
             Segment& seg = segments.back();

@@ -26,7 +26,7 @@ struct SlamRunOptions {
 
 struct SlamRunResult {
     std::size_t frames = 0;
-    std::size_t tracked_frames = 0;  // frames the filter ended healthy
+    std::size_t tracked_frames = 0;  // frames tracked (healthy, not starting a replacement map)
     int reinitialisations = 0;
     double mean_features_measured = 0;  // accepted matches per tracked frame
     double mean_features_in_map = 0;

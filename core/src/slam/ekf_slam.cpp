@@ -123,9 +123,9 @@ EkfSlam::EkfSlam(const PinholeRadialCamera& camera, const SlamConfig& config)
       capacity_(kCameraDim + 6 * config.max_features),
       x_(VecX::Zero(capacity_)),
       P_(MatX::Zero(capacity_, capacity_)),
-      PHt_(MatX::Zero(capacity_, 2 * config.max_measured)),
-      S_(MatX::Zero(2 * config.max_measured, 2 * config.max_measured)),
-      nu_(VecX::Zero(2 * config.max_measured)),
+      PHt_(MatX::Zero(capacity_, 2 * Eigen::Index{config.max_measured})),
+      S_(MatX::Zero(2 * Eigen::Index{config.max_measured}, 2 * Eigen::Index{config.max_measured})),
+      nu_(VecX::Zero(2 * Eigen::Index{config.max_measured})),
       x_hyp_(VecX::Zero(capacity_)),
       rows_(MatX::Zero(6, capacity_)) {
     features_.reserve(static_cast<size_t>(config.max_features));
@@ -260,12 +260,12 @@ bool EkfSlam::ekfUpdate(int count) {
     if (count <= 0) {
         return true;
     }
-    const int m = 2 * count;
+    const Eigen::Index m = 2 * Eigen::Index{count};
     auto PHt = PHt_.topLeftCorner(n_, m);
     auto S = S_.topLeftCorner(m, m);
     auto nu = nu_.head(m);
     // P H^T, using the sparsity of H: pose columns and the feature's columns.
-    for (int i = 0; i < count; ++i) {
+    for (Eigen::Index i = 0; i < count; ++i) {
         const Candidate& c = cand_[static_cast<size_t>(inliers_[static_cast<size_t>(i)])];
         const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
         const int d = dimOf(f.kind);
@@ -276,7 +276,7 @@ bool EkfSlam::ekfUpdate(int count) {
         nu.segment<2>(2 * i) = c.z - c.proj.h_px;
     }
     // S = H P H^T + R.
-    for (int i = 0; i < count; ++i) {
+    for (Eigen::Index i = 0; i < count; ++i) {
         const Candidate& c = cand_[static_cast<size_t>(inliers_[static_cast<size_t>(i)])];
         const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
         const int d = dimOf(f.kind);
@@ -287,8 +287,8 @@ bool EkfSlam::ekfUpdate(int count) {
     S.diagonal().array() += config_.pixel_sigma_px * config_.pixel_sigma_px;
     Eigen::Ref<MatX> S_ref(S);
     // Symmetrise before factorising (round-off).
-    for (int j = 0; j < m; ++j) {
-        for (int i = j + 1; i < m; ++i) {
+    for (Eigen::Index j = 0; j < m; ++j) {
+        for (Eigen::Index i = j + 1; i < m; ++i) {
             const Scalar a = Scalar(0.5) * (S_ref(i, j) + S_ref(j, i));
             S_ref(i, j) = a;
             S_ref(j, i) = a;
@@ -300,7 +300,11 @@ bool EkfSlam::ekfUpdate(int count) {
     }
     // W = P H^T L^-T, so that K nu = W L^-1 nu and K S K^T = W W^T.
     llt.matrixU().solveInPlace<Eigen::OnTheRight>(PHt);
-    llt.matrixL().solveInPlace(nu);
+    // L^-1 nu by forward substitution (m <= 2 max_measured).
+    const auto& LL = llt.matrixLLT();
+    for (Eigen::Index i = 0; i < m; ++i) {
+        nu(i) = (nu(i) - LL.row(i).head(i).dot(nu.head(i))) / LL(i, i);
+    }
     x_.head(n_).noalias() += PHt * nu;
     P_.topLeftCorner(n_, n_).selfadjointView<Eigen::Lower>().rankUpdate(PHt, Scalar(-1));
     symmetrize();

@@ -105,7 +105,7 @@ Vec3 rotateInverse(const Vec4& q, const Vec3& a, Mat34* J_q) {
 
 Vec4 quatNormalized(const Vec4& q, Mat4* J) {
     const Scalar n = q.norm();
-    const Vec4 u = q / n;
+    Vec4 u = q / n;
     if (J != nullptr) {
         *J = (Mat4::Identity() - u * u.transpose()) / n;
     }
