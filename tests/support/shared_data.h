@@ -25,7 +25,7 @@ inline std::filesystem::path sharedDataset(const char* name) {
 
 // Skips the current test when a dataset under ../shared/data is absent.
 #define SCALED_REQUIRE_DATASET(dir, name)                                                  \
-    const std::filesystem::path dir = ::scaled::test::sharedDataset(name);                \
+    const std::filesystem::path dir = ::scaled::test::sharedDataset(name);                 \
     if (!std::filesystem::is_directory(dir)) {                                             \
         GTEST_SKIP() << "data/" << (name) << " not found in "                              \
                      << ::scaled::test::sharedDir().string() << ", set SCALED_SHARED_DIR"; \

@@ -558,22 +558,32 @@ SlamHealth EkfSlam::manageMap() {
     return health_;
 }
 
-SlamHealth EkfSlam::checkHealth() {
-    if (!x_.head(n_).allFinite() || !P_.topLeftCorner(n_, n_).allFinite()) {
+SlamHealth assessNumericalHealth(Eigen::Ref<const VecX> x, Eigen::Ref<const MatX> P) {
+    if (!x.allFinite() || !P.allFinite()) {
         return SlamHealth::kNonFinite;
     }
-    for (int i = 0; i < n_; ++i) {
-        if (!(P_(i, i) >= 0)) {
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+        if (!(P(i, i) >= 0)) {
             return SlamHealth::kNotPositiveDefinite;
         }
     }
-    // The pose block must stay positive definite: its Cholesky (with a tiny
-    // jitter for the gauge-fixed first frames) must succeed.
-    Eigen::Matrix<Scalar, kCameraDim, kCameraDim> Pc = P_.topLeftCorner<kCameraDim, kCameraDim>();
-    Pc.diagonal().array() += Scalar(1e-9);
-    Eigen::LLT<Eigen::Matrix<Scalar, kCameraDim, kCameraDim>> llt(Pc);
-    if (llt.info() != Eigen::Success) {
-        return SlamHealth::kNotPositiveDefinite;
+    if (P.rows() >= kCameraDim) {
+        // The camera block must stay positive definite: its Cholesky (with a
+        // tiny jitter for the gauge-fixed first frame) must succeed.
+        Mat13 Pc = P.topLeftCorner<kCameraDim, kCameraDim>();
+        Pc.diagonal().array() += Scalar(1e-9);
+        const Eigen::LLT<Mat13> llt(Pc);
+        if (llt.info() != Eigen::Success) {
+            return SlamHealth::kNotPositiveDefinite;
+        }
+    }
+    return SlamHealth::kOk;
+}
+
+SlamHealth EkfSlam::checkHealth() {
+    const SlamHealth numerical = assessNumericalHealth(x_.head(n_), P_.topLeftCorner(n_, n_));
+    if (numerical != SlamHealth::kOk) {
+        return numerical;
     }
     if (bad_frames_ >= config_.lost_after_frames) {
         return SlamHealth::kLost;
@@ -591,7 +601,8 @@ std::uint64_t EkfSlam::addFeature(const Vec2& px, Scalar rho, Scalar sigma_rho) 
 
 std::uint64_t EkfSlam::addInverseDepth(const Vec2& px, Scalar rho, Scalar sigma_rho) {
     if (health_ == SlamHealth::kUninitialised ||
-        static_cast<int>(features_.size()) >= config_.max_features || n_ + 6 > capacity_) {
+        static_cast<int>(features_.size()) >= config_.max_features || n_ + 6 > capacity_ ||
+        !px.allFinite() || !std::isfinite(rho) || !(sigma_rho > 0) || !std::isfinite(sigma_rho)) {
         return 0;
     }
     const auto init = initInverseDepth(camera_, x_.segment<3>(kPos), x_.segment<4>(kQuat), px, rho);

@@ -1,6 +1,7 @@
 // EKF MonoSLAM behaviour on the point-level simulation (no images).
 
 #include <algorithm>
+#include <limits>
 #include <set>
 #include <vector>
 
@@ -204,6 +205,44 @@ TEST(EkfSlam, RefusesBadTimestampsAndReportsLostTrack) {
     EXPECT_EQ(slam->health(), SlamHealth::kOk);
     EXPECT_TRUE(slam->features().empty());
     EXPECT_EQ(slam->stateDim(), kCameraDim);
+}
+
+TEST(EkfSlam, NumericalHealthDetectsNanAndLossOfPositiveDefiniteness) {
+    const int n = kCameraDim + 6;
+    VecX x = VecX::Zero(n);
+    x(kQuat) = 1;
+    MatX P = MatX::Identity(n, n) * 1e-2;
+    EXPECT_EQ(assessNumericalHealth(x, P), SlamHealth::kOk);
+    VecX xn = x;
+    xn(kCameraDim + 5) = std::numeric_limits<Scalar>::quiet_NaN();
+    EXPECT_EQ(assessNumericalHealth(xn, P), SlamHealth::kNonFinite);
+    MatX Pn = P;
+    Pn(3, 15) = std::numeric_limits<Scalar>::infinity();
+    EXPECT_EQ(assessNumericalHealth(x, Pn), SlamHealth::kNonFinite);
+    MatX Pneg = P;
+    Pneg(kCameraDim + 2, kCameraDim + 2) = -1e-6;
+    EXPECT_EQ(assessNumericalHealth(x, Pneg), SlamHealth::kNotPositiveDefinite);
+    // Positive diagonal but indefinite camera block (correlation > 1).
+    MatX Pind = P;
+    Pind(0, 1) = Pind(1, 0) = 0.05;
+    EXPECT_EQ(assessNumericalHealth(x, Pind), SlamHealth::kNotPositiveDefinite);
+}
+
+TEST(EkfSlam, RejectsNonFiniteInputsWithoutCorruptingTheState) {
+    const auto cam = test::makeCamera(0, 0, 500);
+    auto slam = EkfSlam::create(cam, simConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(0, Vec3(0, 1, 0));
+    const Scalar nan = std::numeric_limits<Scalar>::quiet_NaN();
+    EXPECT_EQ(slam->addFeature(Vec2(nan, 100)), 0U);
+    ASSERT_NE(slam->addFeature(Vec2(320, 240)), 0U);
+    ASSERT_EQ(slam->predict(33'333'333), SlamHealth::kOk);
+    ASSERT_EQ(slam->predictMeasurements().size(), 1U);
+    const FeatureMatch bad{0, Vec2(nan, 240)};
+    const auto rep = slam->update(std::span<const FeatureMatch>(&bad, 1));
+    EXPECT_EQ(rep.matched, 0);
+    EXPECT_EQ(slam->manageMap(), SlamHealth::kOk);
+    EXPECT_TRUE(slam->state().allFinite());
 }
 
 TEST(EkfSlam, DeletesFeaturesThatAreNeverFoundAndCapsTheMap) {

@@ -79,6 +79,11 @@ enum class SlamHealth : std::uint8_t {
 };
 const char* toString(SlamHealth health);
 
+// Numerical health of a state and covariance: kNonFinite (NaN/Inf anywhere),
+// kNotPositiveDefinite (a negative variance, or the 13x13 camera block fails
+// Cholesky), else kOk. The filter runs it after every frame.
+SlamHealth assessNumericalHealth(Eigen::Ref<const VecX> x, Eigen::Ref<const MatX> P);
+
 // A feature the filter expects in view, for the front end to search.
 struct FeaturePrediction {
     int slot = 0;              // index into the filter's feature list this frame
@@ -150,7 +155,8 @@ public:
     SlamHealth manageMap();
 
     // Undelayed initialisation of a feature at a pixel of the current frame.
-    // Returns its id, or 0 if the map is full or the pixel cannot be unprojected.
+    // Returns its id, or 0 if the map is full, the pixel cannot be unprojected
+    // or an input is not finite (sigma_rho must be > 0).
     std::uint64_t addFeature(const Vec2& px);
     std::uint64_t addFeature(const Vec2& px, Scalar rho, Scalar sigma_rho);
     // Makes room for n new features by deleting those out of view the longest.
