@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <memory>
 #include <opencv2/core.hpp>
+#include <opencv2/core/utility.hpp>
 #include <vector>
 
 #include <benchmark/benchmark.h>
@@ -105,10 +106,12 @@ void runTracker(benchmark::State& state, const Sequence& seq) {
 }
 
 void BM_TrackerSynthetic(benchmark::State& state) {
+    cv::setNumThreads(1);  // one thread: OpenCV's corner response would otherwise fan out
     runTracker(state, syntheticSequence());
 }
 
 void BM_TrackerRedkitchen(benchmark::State& state) {
+    cv::setNumThreads(1);
     const Sequence* seq = redkitchenSequence();
     if (seq == nullptr) {
         state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");

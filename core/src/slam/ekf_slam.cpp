@@ -558,7 +558,7 @@ SlamHealth EkfSlam::manageMap() {
     return health_;
 }
 
-SlamHealth assessNumericalHealth(Eigen::Ref<const VecX> x, Eigen::Ref<const MatX> P) {
+SlamHealth assessNumericalHealth(const Eigen::Ref<const VecX>& x, const Eigen::Ref<const MatX>& P) {
     if (!x.allFinite() || !P.allFinite()) {
         return SlamHealth::kNonFinite;
     }

@@ -82,7 +82,7 @@ const char* toString(SlamHealth health);
 // Numerical health of a state and covariance: kNonFinite (NaN/Inf anywhere),
 // kNotPositiveDefinite (a negative variance, or the 13x13 camera block fails
 // Cholesky), else kOk. The filter runs it after every frame.
-SlamHealth assessNumericalHealth(Eigen::Ref<const VecX> x, Eigen::Ref<const MatX> P);
+SlamHealth assessNumericalHealth(const Eigen::Ref<const VecX>& x, const Eigen::Ref<const MatX>& P);
 
 // A feature the filter expects in view, for the front end to search.
 struct FeaturePrediction {
