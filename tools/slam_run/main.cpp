@@ -135,6 +135,8 @@ bool setParameter(std::string_view kv, scaled::vision::TrackerConfig& c) {
         s.ransac_threshold_px = Scalar(v);
     } else if (key == "ransac_max_hypotheses") {
         s.ransac_max_hypotheses = i;
+    } else if (key == "ransac_min_hypotheses") {
+        s.ransac_min_hypotheses = i;
     } else if (key == "delete_min_attempts") {
         s.delete_min_attempts = i;
     } else if (key == "delete_min_ratio") {

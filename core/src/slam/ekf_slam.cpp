@@ -70,6 +70,10 @@ Result<bool> validate(const SlamConfig& c) {
     if (!(c.ransac_confidence > 0 && c.ransac_confidence < 1)) {
         return fieldError("ransac_confidence", c.ransac_confidence, "in (0, 1)");
     }
+    if (c.ransac_min_hypotheses < 1 || c.ransac_min_hypotheses > c.ransac_max_hypotheses) {
+        return fieldError("ransac_min_hypotheses", Scalar(c.ransac_min_hypotheses),
+                          "in [1, ransac_max_hypotheses]");
+    }
     if (c.ransac_max_hypotheses < 1 || c.ransac_max_hypotheses > 10000) {
         return fieldError("ransac_max_hypotheses", Scalar(c.ransac_max_hypotheses),
                           "in [1, 10000]");
@@ -348,6 +352,7 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
     if (nc > 0) {
         const Scalar th2 = config_.ransac_threshold_px * config_.ransac_threshold_px;
         int hypotheses = config_.ransac_max_hypotheses;
+        Scalar best_sse = 0;
         FeatureProjection proj;
         for (int k = 0; k < hypotheses && k < config_.ransac_max_hypotheses; ++k) {
             const int i = static_cast<int>(nextRandom() % static_cast<std::uint64_t>(nc));
@@ -370,22 +375,31 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
             x_hyp_.head(n_) = x_.head(n_);
             x_hyp_.head(n_).noalias() += PHt * (S_inv * nu);
             inliers_.clear();
+            Scalar sse = 0;
             for (int j = 0; j < nc; ++j) {
                 const Candidate& cj = cand_[static_cast<size_t>(j)];
-                if (projectSlot(x_hyp_, cj.slot, false, proj) &&
-                    (cj.z - proj.h_px).squaredNorm() < th2) {
+                if (!projectSlot(x_hyp_, cj.slot, false, proj)) {
+                    continue;
+                }
+                const Scalar e2 = (cj.z - proj.h_px).squaredNorm();
+                if (e2 < th2) {
                     inliers_.push_back(j);
+                    sse += e2;
                 }
             }
             ++report.hypotheses;
-            if (inliers_.size() > best_inliers_.size()) {
+            // Most support wins; equal support goes to the smaller residual.
+            const bool better = inliers_.size() > best_inliers_.size() ||
+                                (inliers_.size() == best_inliers_.size() && sse < best_sse);
+            if (better) {
                 best_inliers_.assign(inliers_.begin(), inliers_.end());
+                best_sse = sse;
                 const Scalar eps = Scalar(best_inliers_.size()) / Scalar(nc);
-                if (eps >= 1) {
-                    break;
-                }
-                const Scalar need = std::log(1 - config_.ransac_confidence) / std::log(1 - eps);
-                hypotheses = static_cast<int>(std::ceil(std::min(need, Scalar(1e6))));
+                const Scalar need =
+                    eps >= 1 ? Scalar(1)
+                             : std::log(1 - config_.ransac_confidence) / std::log(1 - eps);
+                hypotheses = std::max(config_.ransac_min_hypotheses,
+                                      static_cast<int>(std::ceil(std::min(need, Scalar(1e6)))));
             }
         }
     }

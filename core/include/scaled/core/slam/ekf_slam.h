@@ -53,6 +53,7 @@ struct SlamConfig {
     Scalar chi2_gate = Scalar(9.21);          // 2 dof, 99%: search ellipse and rescue gate
     Scalar ransac_threshold_px = Scalar(2);   // low-innovation inlier threshold
     Scalar ransac_confidence = Scalar(0.99);  // for the adaptive number of hypotheses
+    int ransac_min_hypotheses = 1;  // at least this many, whatever the adaptive count says
     int ransac_max_hypotheses = 100;
     std::uint64_t seed = 1;
 
