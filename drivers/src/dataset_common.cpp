@@ -15,6 +15,8 @@
 #include <system_error>
 #include <utility>
 
+#include <scaled/drivers/trajectory_io.h>
+
 namespace scaled::drivers::detail {
 
 using core::ErrorCode;
@@ -466,6 +468,21 @@ std::optional<std::size_t> nearestWithin(const std::vector<int64_t>& times, int6
 
 std::unique_ptr<FrameSource> makeReplaySource(ReplayIndex index) {
     return std::make_unique<ReplaySource>(std::move(index));
+}
+
+core::Result<std::int64_t> IncreasingTimestamps::next(std::string_view field, std::size_t line) {
+    auto t = parseTimestampNs(field);
+    if (!t) {
+        return t.error();
+    }
+    if (last_t_ns_ && *t <= *last_t_ns_) {
+        return core::makeError(
+            core::ErrorCode::kParse,
+            "timestamp does not increase (previous at line " + std::to_string(last_line_) + ")");
+    }
+    last_t_ns_ = *t;
+    last_line_ = line;
+    return *t;
 }
 
 }  // namespace scaled::drivers::detail

@@ -110,4 +110,16 @@ std::optional<std::size_t> nearestWithin(const std::vector<int64_t>& times, int6
 
 std::unique_ptr<FrameSource> makeReplaySource(ReplayIndex index);
 
+// Reads the timestamps of an index file and insists they strictly increase.
+class IncreasingTimestamps {
+public:
+    // The timestamp in `field` (seconds as text), read on `line`. The error says
+    // what is wrong, without a location: callers wrap it with lineError.
+    core::Result<std::int64_t> next(std::string_view field, std::size_t line);
+
+private:
+    std::optional<std::int64_t> last_t_ns_;
+    std::size_t last_line_ = 0;
+};
+
 }  // namespace scaled::drivers::detail

@@ -44,6 +44,7 @@ Result<std::vector<KittiTime>> readKittiTimes(const std::filesystem::path& times
         return text.error();
     }
     std::vector<KittiTime> out;
+    detail::IncreasingTimestamps times;
     for (const detail::TextLine& line : detail::dataLines(*text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
@@ -52,13 +53,9 @@ Result<std::vector<KittiTime>> readKittiTimes(const std::filesystem::path& times
         if (fields.size() != 1) {
             return bad("expected 1 field (time in seconds), got " + std::to_string(fields.size()));
         }
-        auto t = parseTimestampNs(fields[0]);
+        auto t = times.next(fields[0], line.number);
         if (!t) {
             return bad(t.error().message);
-        }
-        if (!out.empty() && *t <= out.back().t_ns) {
-            return bad("timestamp does not increase (previous at line " +
-                       std::to_string(out.back().line) + ")");
         }
         out.push_back({*t, line.number});
     }

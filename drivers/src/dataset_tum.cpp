@@ -31,6 +31,7 @@ constexpr double kMillimetre = 1e-3;
 Result<std::vector<TumListEntry>> parseImageList(const std::filesystem::path& list_file,
                                                  std::string_view text) {
     std::vector<TumListEntry> out;
+    detail::IncreasingTimestamps times;
     for (const detail::TextLine& line : detail::dataLines(text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
@@ -39,13 +40,9 @@ Result<std::vector<TumListEntry>> parseImageList(const std::filesystem::path& li
         if (fields.size() != 2) {
             return bad("expected 2 fields `timestamp file`, got " + std::to_string(fields.size()));
         }
-        auto t = parseTimestampNs(fields[0]);
+        auto t = times.next(fields[0], line.number);
         if (!t) {
             return bad(t.error().message);
-        }
-        if (!out.empty() && *t <= out.back().t_ns) {
-            return bad("timestamp does not increase (previous at line " +
-                       std::to_string(out.back().line) + ")");
         }
         out.push_back({*t, std::string(fields[1]), line.number});
     }

@@ -295,7 +295,7 @@ Result<std::vector<std::pair<int64_t, CameraPose>>> readTumTrajectory(
         return text.error();
     }
     std::vector<std::pair<int64_t, CameraPose>> out;
-    std::size_t prev_line = 0;
+    detail::IncreasingTimestamps times;
     for (const detail::TextLine& line : detail::dataLines(*text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
@@ -305,13 +305,9 @@ Result<std::vector<std::pair<int64_t, CameraPose>>> readTumTrajectory(
             return bad("expected 8 fields `t tx ty tz qx qy qz qw`, got " +
                        std::to_string(fields.size()));
         }
-        auto t = parseTimestampNs(fields[0]);
+        auto t = times.next(fields[0], line.number);
         if (!t) {
             return bad(t.error().message);
-        }
-        if (!out.empty() && *t <= out.back().first) {
-            return bad("timestamp does not increase (previous at line " +
-                       std::to_string(prev_line) + ")");
         }
         static constexpr std::array<std::string_view, 7> kNames = {"tx", "ty", "tz", "qx",
                                                                    "qy", "qz", "qw"};
@@ -333,7 +329,6 @@ Result<std::vector<std::pair<int64_t, CameraPose>>> readTumTrajectory(
         pose.R_CtoW = q.toRotationMatrix().cast<core::Scalar>();
         pose.p_CinW = Eigen::Vector3d(v[0], v[1], v[2]).cast<core::Scalar>();
         out.emplace_back(*t, pose);
-        prev_line = line.number;
     }
     return out;
 }
