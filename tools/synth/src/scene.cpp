@@ -154,31 +154,25 @@ bool Scene::isFree(const Vec3& p_W, Scalar margin_m) const {
     return true;
 }
 
-std::optional<Vec3> Scene::pointAt(const core::PinholeRadialCamera& cam,
+std::optional<RayHit> Scene::hitAt(const core::PinholeRadialCamera& cam,
                                    const core::CameraPose& pose, const Vec2& px) const {
     const auto ray_C = cam.unproject(px);
     if (!ray_C) {
         return std::nullopt;
     }
-    const auto hit = castRay(pose.p_CinW, pose.R_CtoW * *ray_C);
-    if (!hit) {
-        return std::nullopt;
-    }
-    return hit->p_W;
+    return castRay(pose.p_CinW, pose.R_CtoW * *ray_C);
+}
+
+std::optional<Vec3> Scene::pointAt(const core::PinholeRadialCamera& cam,
+                                   const core::CameraPose& pose, const Vec2& px) const {
+    const auto hit = hitAt(cam, pose, px);
+    return hit ? std::optional<Vec3>(hit->p_W) : std::nullopt;
 }
 
 std::optional<Scalar> Scene::depthAt(const core::PinholeRadialCamera& cam,
                                      const core::CameraPose& pose, const Vec2& px) const {
-    const auto ray_C = cam.unproject(px);
-    if (!ray_C) {
-        return std::nullopt;
-    }
-    // The ray is (x_u, y_u, 1): its parameter at the hit is the depth along z.
-    const auto hit = castRay(pose.p_CinW, pose.R_CtoW * *ray_C);
-    if (!hit) {
-        return std::nullopt;
-    }
-    return hit->t;
+    const auto hit = hitAt(cam, pose, px);
+    return hit ? std::optional<Scalar>(hit->t) : std::nullopt;
 }
 
 }  // namespace scaled::synth

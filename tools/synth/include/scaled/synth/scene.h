@@ -107,6 +107,10 @@ public:
 
 private:
     explicit Scene(SceneConfig config) : config_(std::move(config)) {}
+    // The surface hit by the camera ray through px (ray (x_u, y_u, 1), so the
+    // hit's t is the depth along z).
+    [[nodiscard]] std::optional<RayHit> hitAt(const core::PinholeRadialCamera& cam,
+                                              const core::CameraPose& pose, const Vec2& px) const;
 
     SceneConfig config_;
     std::vector<Face> faces_;
