@@ -33,7 +33,8 @@ void usage(std::FILE* out) {
     std::fputs(
         "usage: slam-run --dataset DIR [--format tum|kitti] [--frames A:B] [--out TRAJ.txt]\n"
         "                [--json] [--intrinsics fx,fy,cx,cy] [--max-features N]\n"
-        "                [--max-measured N] [--no-warp] [--seed N] [--verbose]\n"
+        "                [--max-measured N] [--no-warp] [--seed N] [--set KEY=VALUE]...\n"
+        "                [--verbose]\n"
         "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, writes the\n"
         "trajectory (TUM format, SLAM units, world = first camera) and prints a summary.\n",
         out);

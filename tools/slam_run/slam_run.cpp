@@ -34,8 +34,8 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
         std::min(options.end_frame.value_or(info.frame_count), info.frame_count);
     if (options.first_frame >= end) {
         return core::makeError(core::ErrorCode::kInvalidArgument,
-                               "frames: empty range " + std::to_string(options.first_frame) + ":" +
-                                   std::to_string(end) + " of " + std::to_string(info.frame_count) +
+                               "frames: range starts at " + std::to_string(options.first_frame) +
+                                   " but the dataset has " + std::to_string(info.frame_count) +
                                    " frames");
     }
     if (auto s = source.seek(options.first_frame); !s) {
