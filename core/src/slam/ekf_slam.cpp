@@ -237,7 +237,9 @@ std::span<const FeaturePrediction> EkfSlam::predictMeasurements() {
         FeatureInfo& f = features_[static_cast<size_t>(s)];
         f.in_view = false;
         f.measured = false;
-        if (!projectSlot(x_, s, true, proj)) {
+        // Jacobians only for features that will be searched.
+        const bool searched = static_cast<int>(predictions_.size()) < config_.max_measured;
+        if (!projectSlot(x_, s, searched, proj)) {
             continue;
         }
         const Vec2& u = proj.h_px;
@@ -248,7 +250,7 @@ std::span<const FeaturePrediction> EkfSlam::predictMeasurements() {
         f.px = u;
         f.last_seen_frame = frame_;
         ++visible_count_;
-        if (static_cast<int>(predictions_.size()) < config_.max_measured) {
+        if (searched) {
             FeaturePrediction p;
             p.slot = s;
             p.id = f.id;
@@ -336,7 +338,9 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
             continue;
         }
         Candidate c;
-        c.slot = predictions_[static_cast<size_t>(m.prediction)].slot;
+        const FeaturePrediction& pred = predictions_[static_cast<size_t>(m.prediction)];
+        c.slot = pred.slot;
+        c.S = pred.S;
         c.z = m.z_px;
         if (!projectSlot(x_, c.slot, true, c.proj)) {
             continue;
@@ -357,20 +361,13 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
         for (int k = 0; k < hypotheses && k < config_.ransac_max_hypotheses; ++k) {
             const int i = static_cast<int>(nextRandom() % static_cast<std::uint64_t>(nc));
             const Candidate& c = cand_[static_cast<size_t>(i)];
-            const FeaturePrediction* pred = nullptr;
-            for (const auto& p : predictions_) {
-                if (p.slot == c.slot) {
-                    pred = &p;
-                    break;
-                }
-            }
             const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
             const int d = dimOf(f.kind);
             auto PHt = PHt_.topLeftCorner(n_, 2);
             PHt.noalias() = P_.topLeftCorner(n_, kPoseDim) * c.proj.H_pose.transpose();
             PHt.noalias() +=
                 P_.block(0, f.offset, n_, d) * c.proj.H_feature.leftCols(d).transpose();
-            const Mat2 S_inv = pred->S.inverse();
+            const Mat2 S_inv = c.S.inverse();
             const Vec2 nu = c.z - c.proj.h_px;
             x_hyp_.head(n_) = x_.head(n_);
             x_hyp_.head(n_).noalias() += PHt * (S_inv * nu);
@@ -514,27 +511,7 @@ void EkfSlam::convertToXyz(int slot) {
     x_.segment<3>(o) = p;
     f.kind = FeatureKind::kXyz;
     // The three trailing dimensions of the old parameterisation go.
-    const int n = n_;
-    for (int i = o + 3; i + 3 < n; ++i) {
-        x_(i) = x_(i + 3);
-    }
-    for (int j = 0; j < n; ++j) {
-        for (int i = o + 3; i + 3 < n; ++i) {
-            P_(i, j) = P_(i + 3, j);
-        }
-    }
-    for (int j = o + 3; j + 3 < n; ++j) {
-        P_.col(j).head(n - 3) = P_.col(j + 3).head(n - 3);
-    }
-    n_ = n - 3;
-    x_.segment(n_, 3).setZero();
-    P_.block(n_, 0, 3, n).setZero();
-    P_.block(0, n_, n, 3).setZero();
-    for (FeatureInfo& g : features_) {
-        if (g.offset > o) {
-            g.offset -= 3;
-        }
-    }
+    removeDims(o + 3, 3);
 }
 
 SlamHealth EkfSlam::manageMap() {

@@ -33,6 +33,8 @@
 #include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/trajectory_io.h>
 
+#include "shared_data.h"
+
 namespace scaled::drivers {
 namespace {
 
@@ -44,30 +46,6 @@ using core::Scalar;
 // Tolerance on numbers read back from text (float-clean when Scalar is float).
 constexpr bool kFloat = std::is_same_v<Scalar, float>;
 constexpr double kReadTol = kFloat ? 1e-5 : 1e-9;
-
-fs::path sharedDir() {
-    if (const char* env = std::getenv("SCALED_SHARED_DIR"); env != nullptr && *env != '\0') {
-        return env;
-    }
-    return fs::path(SCALED_SOURCE_DIR) / ".." / "shared";
-}
-
-// The real dataset `name`, or nullopt when it is not there.
-std::optional<fs::path> realData(std::string_view name) {
-    const fs::path dir = sharedDir() / "data" / name;
-    std::error_code ec;
-    if (!fs::is_directory(dir, ec)) {
-        return std::nullopt;
-    }
-    return dir;
-}
-
-#define SKIP_WITHOUT(var, name)                                                       \
-    const auto var = realData(name);                                                  \
-    if (!(var)) {                                                                     \
-        GTEST_SKIP() << "data/" << (name) << " not found in " << sharedDir().string() \
-                     << ", set SCALED_SHARED_DIR";                                    \
-    }
 
 std::string readFile(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
@@ -199,8 +177,8 @@ double rotationError(const core::Mat3& R, const Eigen::Matrix3d& expected) {
 // ---------------------------------------------------------------- real data
 
 TEST(DatasetReal, RedkitchenOpensWithIntrinsicsGravityAndGroundTruth) {
-    SKIP_WITHOUT(dir, "redkitchen");
-    auto src = openDataset(*dir);
+    SCALED_REQUIRE_DATASET(dir, "redkitchen");
+    auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
     const SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.name, "redkitchen");
@@ -265,8 +243,8 @@ TEST(DatasetReal, RedkitchenOpensWithIntrinsicsGravityAndGroundTruth) {
 }
 
 TEST(DatasetReal, Kitti00HasCalibIntrinsicsTenHertzAndPoses) {
-    SKIP_WITHOUT(dir, "kitti00");
-    auto src = openDataset(*dir);
+    SCALED_REQUIRE_DATASET(dir, "kitti00");
+    auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
     const SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 160U);
@@ -325,7 +303,7 @@ TEST(DatasetReal, Kitti00HasCalibIntrinsicsTenHertzAndPoses) {
 
     DatasetOptions opt;
     opt.gravity_from_groundtruth = true;
-    auto with_g = openDataset(*dir, opt);
+    auto with_g = openDataset(dir, opt);
     ASSERT_TRUE(with_g) << with_g.error().message;
     ASSERT_TRUE((*with_g)->info().gravity_down_W.has_value());
     EXPECT_NEAR(static_cast<double>((*with_g)->info().gravity_down_W->y()), 1.0, 1e-6);
@@ -334,8 +312,8 @@ TEST(DatasetReal, Kitti00HasCalibIntrinsicsTenHertzAndPoses) {
 // rgb.txt of the TUM sequence lists 2586 images; only the first 16 are in
 // ../shared (a partial download). The default replays those 16 and says so.
 TEST(DatasetReal, TumOfficePartialDownloadReplaysTheImagesThatExist) {
-    SKIP_WITHOUT(dir, "tum-fr3-office");
-    auto src = openDataset(*dir);
+    SCALED_REQUIRE_DATASET(dir, "tum-fr3-office");
+    auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
     const SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 16U);
@@ -376,7 +354,7 @@ TEST(DatasetReal, TumOfficePartialDownloadReplaysTheImagesThatExist) {
     DatasetOptions opt;
     opt.intrinsics = core::CameraIntrinsics{
         Scalar(535.4), Scalar(539.2), Scalar(320.1), Scalar(247.6), 0, 0, 0, 0};
-    auto with_k = openDataset(*dir, opt);
+    auto with_k = openDataset(dir, opt);
     ASSERT_TRUE(with_k) << with_k.error().message;
     ASSERT_TRUE((*with_k)->info().has_intrinsics);
     EXPECT_EQ((*with_k)->info().intrinsics.width_px, 640);
@@ -385,10 +363,10 @@ TEST(DatasetReal, TumOfficePartialDownloadReplaysTheImagesThatExist) {
 }
 
 TEST(DatasetReal, TumOfficeStrictModeReportsTheFirstMissingImageWithItsLine) {
-    SKIP_WITHOUT(dir, "tum-fr3-office");
+    SCALED_REQUIRE_DATASET(dir, "tum-fr3-office");
     DatasetOptions opt;
     opt.drop_missing_tail = false;
-    auto src = openDataset(*dir, opt);
+    auto src = openDataset(dir, opt);
     ASSERT_TRUE(src) << src.error().message;
     EXPECT_EQ((*src)->info().frame_count, (*src)->info().listed_count);
     // The line of rgb.txt naming the 17th image.
@@ -396,7 +374,7 @@ TEST(DatasetReal, TumOfficeStrictModeReportsTheFirstMissingImageWithItsLine) {
     std::size_t data = 0;
     std::string name;
     {
-        std::istringstream in(readFile(*dir / "rgb.txt"));
+        std::istringstream in(readFile(dir / "rgb.txt"));
         std::string line;
         while (std::getline(in, line)) {
             ++line_no;

@@ -193,6 +193,7 @@ private:
     struct Candidate {
         int slot = 0;
         Vec2 z = Vec2::Zero();
+        Mat2 S = Mat2::Zero();  // innovation covariance of the prediction
         FeatureProjection proj;
     };
 
