@@ -3,7 +3,6 @@
 // of the synthetic room (always available) and on 7-Scenes redkitchen (when
 // ../shared is present). Results: docs/benchmarks.md.
 
-#include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <opencv2/core.hpp>
@@ -17,6 +16,8 @@
 #include <scaled/synth/scene.h>
 #include <scaled/synth/trajectory.h>
 #include <scaled/vision/mono_tracker.h>
+
+#include "shared_dir.h"
 
 namespace {
 
@@ -54,11 +55,7 @@ const Sequence& syntheticSequence() {
 
 const Sequence* redkitchenSequence() {
     static const std::unique_ptr<Sequence> seq = []() -> std::unique_ptr<Sequence> {
-        const char* env = std::getenv("SCALED_SHARED_DIR");
-        const std::filesystem::path shared =
-            env != nullptr ? std::filesystem::path(env)
-                           : std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared";
-        auto src = drivers::openDataset(shared / "data" / "redkitchen");
+        auto src = drivers::openDataset(test::sharedDataset("redkitchen"));
         if (!src) {
             return nullptr;
         }

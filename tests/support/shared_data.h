@@ -1,27 +1,12 @@
 #pragma once
 
-// Where the real data lives (../shared, or $SCALED_SHARED_DIR), and a skip
-// for tests that need it.
+// A skip for tests that need data from ../shared (see shared_dir.h).
 
-#include <cstdlib>
 #include <filesystem>
 
 #include <gtest/gtest.h>
 
-namespace scaled::test {
-
-inline std::filesystem::path sharedDir() {
-    if (const char* env = std::getenv("SCALED_SHARED_DIR"); env != nullptr && *env != '\0') {
-        return env;
-    }
-    return std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared";
-}
-
-inline std::filesystem::path sharedDataset(const char* name) {
-    return sharedDir() / "data" / name;
-}
-
-}  // namespace scaled::test
+#include "shared_dir.h"
 
 // Skips the current test when a dataset under ../shared/data is absent.
 #define SCALED_REQUIRE_DATASET(dir, name)                                                  \
