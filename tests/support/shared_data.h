@@ -15,3 +15,11 @@
         GTEST_SKIP() << "data/" << (name) << " not found in "                              \
                      << ::scaled::test::sharedDir().string() << ", set SCALED_SHARED_DIR"; \
     }
+
+// Skips the current test when a model file under ../shared/models is absent.
+#define SCALED_REQUIRE_MODEL(file, name)                                                   \
+    const std::filesystem::path file = ::scaled::test::sharedModel(name);                  \
+    if (!std::filesystem::is_regular_file(file)) {                                         \
+        GTEST_SKIP() << "models/" << (name) << " not found in "                            \
+                     << ::scaled::test::sharedDir().string() << ", set SCALED_SHARED_DIR"; \
+    }

@@ -19,4 +19,8 @@ inline std::filesystem::path sharedDataset(const char* name) {
     return sharedDir() / "data" / name;
 }
 
+inline std::filesystem::path sharedModel(const char* name) {
+    return sharedDir() / "models" / name;
+}
+
 }  // namespace scaled::test

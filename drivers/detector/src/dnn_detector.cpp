@@ -1,0 +1,514 @@
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <fstream>
+#include <opencv2/dnn.hpp>
+#include <opencv2/imgproc.hpp>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <system_error>
+#include <utility>
+
+#include <scaled/detector/dnn_detector.h>
+#include <scaled/detector/yolo_decode.h>
+
+namespace scaled::detector {
+
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+using core::Scalar;
+
+namespace {
+
+constexpr int kMinInputPx = 64;
+constexpr int kMaxInputPx = 1280;
+constexpr int kInputMultiple = 32;
+constexpr int kMaxThreads = 256;
+constexpr int kMaxDetectionsLimit = 10000;
+constexpr std::size_t kMaxClassNames = 10000;
+constexpr std::uintmax_t kMaxNamesBytes = std::uintmax_t{1} << 20U;
+constexpr int kBoxColumns = 5;  // cx, cy, w, h, objectness
+constexpr double kYoloxPad = 114;
+constexpr std::size_t kMaxShownChars = 200;
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+// The first line of an OpenCV error, shortened: enough to say what failed.
+std::string openCvReason(const cv::Exception& e) {
+    std::string msg = e.err.empty() ? e.msg : e.err;
+    if (const std::size_t nl = msg.find('\n'); nl != std::string::npos) {
+        msg.resize(nl);
+    }
+    if (msg.size() > kMaxShownChars) {
+        msg.resize(kMaxShownChars);
+        msg += "...";
+    }
+    return msg;
+}
+
+std::string fieldError(std::string_view field, const std::string& value, std::string_view rule) {
+    return "detector config: " + std::string(field) + " = " + value + ": " + std::string(rule);
+}
+
+std::string floatText(float v) {
+    std::ostringstream os;
+    os << v;
+    return os.str();
+}
+
+Result<bool> checkReadableFile(const std::filesystem::path& path, std::string_view what) {
+    std::error_code ec;
+    if (path.empty()) {
+        return makeError(ErrorCode::kInvalidArgument, std::string(what) + " path is empty");
+    }
+    if (!std::filesystem::is_regular_file(path, ec) || ec) {
+        return makeError(ErrorCode::kNotFound,
+                         path.string() + ": " + std::string(what) + " not found");
+    }
+    const std::uintmax_t size = std::filesystem::file_size(path, ec);
+    if (ec) {
+        return makeError(ErrorCode::kIo, path.string() + ": cannot read " + std::string(what) +
+                                             " (" + ec.message() + ")");
+    }
+    if (size == 0) {
+        return makeError(ErrorCode::kParse, path.string() + ": " + std::string(what) + " is empty");
+    }
+    std::ifstream probe(path, std::ios::binary);
+    if (!probe) {
+        return makeError(ErrorCode::kIo,
+                         path.string() + ": cannot open " + std::string(what) + " for reading");
+    }
+    return true;
+}
+
+// OpenCV's Darknet importer reads the weights without checking their length:
+// a truncated file loads silently with zeros. The weights file holds a header
+// (major, minor, revision as int32, then `seen` as int64 from version 0.2 on,
+// int32 before) and one float32 per parameter of the convolution and batch
+// norm layers, which is exactly what the imported layers hold (the region
+// layers' anchors come from the cfg).
+Result<bool> checkDarknetWeightsSize(cv::dnn::Net& net, const std::filesystem::path& weights) {
+    std::ifstream in(weights, std::ios::binary);
+    std::array<std::int32_t, 3> version{};
+    if (!in.read(reinterpret_cast<char*>(version.data()), sizeof version)) {
+        return makeError(ErrorCode::kParse,
+                         weights.string() + ": Darknet weights file shorter than its header");
+    }
+    const std::uintmax_t header =
+        sizeof version +
+        ((version[0] * 10 + version[1]) >= 2 ? sizeof(std::int64_t) : sizeof(std::int32_t));
+    std::error_code ec;
+    const std::uintmax_t bytes = std::filesystem::file_size(weights, ec);
+    std::size_t needed = 0;
+    for (const cv::String& name : net.getLayerNames()) {
+        const cv::Ptr<cv::dnn::Layer> layer = net.getLayer(name);
+        if (layer->type == "Region") {
+            continue;
+        }
+        for (const cv::Mat& blob : layer->blobs) {
+            needed += blob.total();
+        }
+    }
+    const std::uintmax_t needed_bytes = header + needed * sizeof(float);
+    if (ec || bytes != needed_bytes) {
+        return makeError(
+            ErrorCode::kParse,
+            weights.string() + ": Darknet weights file has " + std::to_string(bytes) +
+                " bytes but its cfg needs " + std::to_string(needed_bytes) +
+                (bytes < needed_bytes ? " (truncated?)" : " (weights of another cfg?)"));
+    }
+    return true;
+}
+
+}  // namespace
+
+const char* toString(ModelFamily family) {
+    switch (family) {
+        case ModelFamily::kYolox:
+            return "yolox";
+        case ModelFamily::kDarknet:
+            return "darknet";
+    }
+    return "?";
+}
+
+Result<ModelFamily> parseModelFamily(std::string_view text) {
+    if (text == "yolox") {
+        return ModelFamily::kYolox;
+    }
+    if (text == "darknet") {
+        return ModelFamily::kDarknet;
+    }
+    return makeError(ErrorCode::kInvalidArgument,
+                     "unknown model family '" + std::string(text) + "' (yolox or darknet)");
+}
+
+ModelFamily familyFromPath(const std::filesystem::path& model_path) {
+    std::string ext = model_path.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return ext == ".cfg" ? ModelFamily::kDarknet : ModelFamily::kYolox;
+}
+
+Result<bool> validate(const DetectorConfig& config) {
+    const int s = config.input_size_px;
+    if (s < kMinInputPx || s > kMaxInputPx || s % kInputMultiple != 0) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("input_size_px", std::to_string(s),
+                                    "must be a multiple of 32 in [64, 1280]"));
+    }
+    if (!(config.score_threshold > 0 && config.score_threshold <= 1)) {
+        return makeError(
+            ErrorCode::kInvalidArgument,
+            fieldError("score_threshold", floatText(config.score_threshold), "must be in (0, 1]"));
+    }
+    if (!(config.nms_iou_threshold > 0 && config.nms_iou_threshold <= 1)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("nms_iou_threshold", floatText(config.nms_iou_threshold),
+                                    "must be in (0, 1]"));
+    }
+    if (config.threads < 0 || config.threads > kMaxThreads) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("threads", std::to_string(config.threads),
+                                    "must be in [0, 256] (0: OpenCV's default)"));
+    }
+    if (config.max_detections < 1 || config.max_detections > kMaxDetectionsLimit) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("max_detections", std::to_string(config.max_detections),
+                                    "must be in [1, 10000]"));
+    }
+    for (const std::string& name : config.classes) {
+        if (name.empty()) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             fieldError("classes", "\"\"", "class names must not be empty"));
+        }
+    }
+    if (config.model_path.empty()) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("model_path", "\"\"", "a model file is required"));
+    }
+    return true;
+}
+
+Result<std::vector<std::string>> readClassNames(const std::filesystem::path& names_file) {
+    if (auto ok = checkReadableFile(names_file, "class names file"); !ok) {
+        return ok.error();
+    }
+    std::error_code ec;
+    if (std::filesystem::file_size(names_file, ec) > kMaxNamesBytes) {
+        return makeError(ErrorCode::kParse, names_file.string() +
+                                                ": class names file larger than 1 MiB (not "
+                                                "a names file?)");
+    }
+    std::ifstream in(names_file, std::ios::binary);
+    std::vector<std::string> names;
+    std::string line;
+    std::size_t number = 0;
+    std::size_t blank_line = 0;
+    while (std::getline(in, line)) {
+        ++number;
+        if (!line.empty() && line.back() == '\r') {
+            line.pop_back();
+        }
+        if (line.empty()) {
+            if (blank_line == 0) {
+                blank_line = number;
+            }
+            continue;
+        }
+        if (blank_line != 0) {
+            return makeError(ErrorCode::kParse,
+                             names_file.string() + ":" + std::to_string(blank_line) +
+                                 ": empty class name (class ids follow line order, so a blank "
+                                 "line would shift them)");
+        }
+        for (const char c : line) {
+            if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+                return makeError(ErrorCode::kParse, names_file.string() + ":" +
+                                                        std::to_string(number) +
+                                                        ": control character in class name");
+            }
+        }
+        names.push_back(line);
+        if (names.size() > kMaxClassNames) {
+            return makeError(ErrorCode::kParse,
+                             names_file.string() + ": more than 10000 class names");
+        }
+    }
+    if (in.bad()) {
+        return makeError(ErrorCode::kIo, names_file.string() + ": read error");
+    }
+    if (names.empty()) {
+        return makeError(ErrorCode::kParse, names_file.string() + ": no class names");
+    }
+    return names;
+}
+
+struct DnnDetector::Impl {
+    DetectorConfig config;
+    DetectorInfo info;
+    std::vector<std::string> names;
+    cv::dnn::Net net;
+    std::vector<cv::String> out_names;
+    std::vector<cv::Mat> outs;
+    std::vector<YoloxCell> grid;  // kYolox: one per output row
+    std::optional<YoloDecoder> decoder;
+    // Per-frame buffers, reused.
+    cv::Mat bgr;
+    cv::Mat resized;
+    cv::Mat canvas;
+    cv::Mat blob;
+
+    void applyThreads() const {
+        if (config.threads > 0 && cv::getNumThreads() != config.threads) {
+            cv::setNumThreads(config.threads);
+        }
+    }
+
+    Result<bool> preprocess(const cv::Mat& image);
+    Result<bool> forward();
+};
+
+Result<bool> DnnDetector::Impl::preprocess(const cv::Mat& image) {
+    const int s = config.input_size_px;
+    const cv::Mat* src = &image;
+    if (image.channels() == 1) {
+        cv::cvtColor(image, bgr, cv::COLOR_GRAY2BGR);
+        src = &bgr;
+    } else if (image.channels() == 4) {
+        cv::cvtColor(image, bgr, cv::COLOR_BGRA2BGR);
+        src = &bgr;
+    }
+    if (config.family == ModelFamily::kDarknet) {
+        cv::dnn::blobFromImage(*src, blob, 1.0 / 255.0, cv::Size(s, s), cv::Scalar(), true, false,
+                               CV_32F);
+        return true;
+    }
+    const double ratio =
+        std::min(static_cast<double>(s) / src->rows, static_cast<double>(s) / src->cols);
+    const int w = std::clamp(static_cast<int>(src->cols * ratio), 1, s);
+    const int h = std::clamp(static_cast<int>(src->rows * ratio), 1, s);
+    cv::resize(*src, resized, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+    canvas.create(s, s, CV_8UC3);
+    canvas.setTo(cv::Scalar::all(kYoloxPad));
+    resized.copyTo(canvas(cv::Rect(0, 0, w, h)));
+    cv::dnn::blobFromImage(canvas, blob, 1.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
+    return true;
+}
+
+Result<bool> DnnDetector::Impl::forward() {
+    applyThreads();
+    net.setInput(blob);
+    net.forward(outs, out_names);
+    return true;
+}
+
+DnnDetector::DnnDetector(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+DnnDetector::~DnnDetector() = default;
+
+const DetectorInfo& DnnDetector::info() const {
+    return impl_->info;
+}
+
+const DetectorConfig& DnnDetector::config() const {
+    return impl_->config;
+}
+
+std::span<const std::string> DnnDetector::classNames() const {
+    return impl_->names;
+}
+
+Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& config) {
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
+    }
+    auto impl = std::make_unique<Impl>();
+    impl->config = config;
+    DetectorInfo& info = impl->info;
+    info.family = config.family;
+    info.model_path = config.model_path;
+    info.input_size_px = config.input_size_px;
+    info.names_path = config.names_path.empty() ? config.model_path.parent_path() / "coco.names"
+                                                : config.names_path;
+    const bool darknet = config.family == ModelFamily::kDarknet;
+    if (darknet) {
+        info.weights_path =
+            config.weights_path.empty()
+                ? std::filesystem::path(config.model_path).replace_extension(".weights")
+                : config.weights_path;
+    }
+
+    if (auto ok = checkReadableFile(info.model_path, darknet ? "Darknet cfg file" : "ONNX model");
+        !ok) {
+        return ok.error();
+    }
+    if (darknet) {
+        if (auto ok = checkReadableFile(info.weights_path, "Darknet weights file"); !ok) {
+            return ok.error();
+        }
+    }
+    auto names = readClassNames(info.names_path);
+    if (!names) {
+        return names.error();
+    }
+    impl->names = std::move(*names);
+    info.class_count = static_cast<int>(impl->names.size());
+
+    std::vector<unsigned char> allowed(impl->names.size(), config.classes.empty() ? 1 : 0);
+    for (const std::string& wanted : config.classes) {
+        const auto it = std::find(impl->names.begin(), impl->names.end(), wanted);
+        if (it == impl->names.end()) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             fieldError("classes", "\"" + wanted + "\"",
+                                        "not a class of " + info.names_path.string()));
+        }
+        allowed[static_cast<std::size_t>(it - impl->names.begin())] = 1;
+    }
+
+    const std::string what = darknet ? info.model_path.string() + " + " + info.weights_path.string()
+                                     : info.model_path.string();
+    try {
+        impl->net = darknet ? cv::dnn::readNetFromDarknet(info.model_path.string(),
+                                                          info.weights_path.string())
+                            : cv::dnn::readNetFromONNX(info.model_path.string());
+    } catch (const cv::Exception& e) {
+        return makeError(ErrorCode::kParse, what + ": cannot load the " +
+                                                std::string(toString(config.family)) +
+                                                " model (OpenCV: " + openCvReason(e) + ")");
+    }
+    if (impl->net.empty()) {
+        return makeError(ErrorCode::kParse, what + ": the " + std::string(toString(config.family)) +
+                                                " model has no layers");
+    }
+
+    if (darknet) {
+        if (auto ok = checkDarknetWeightsSize(impl->net, info.weights_path); !ok) {
+            return ok.error();
+        }
+    }
+
+    // Warm-up at the configured size: checks that the network runs there and
+    // outputs what the decoder expects, and pays first-run costs now.
+    const int s = config.input_size_px;
+    try {
+        impl->net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+        impl->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+        impl->out_names = impl->net.getUnconnectedOutLayersNames();
+        const cv::Mat blank(s, s, CV_8UC3, cv::Scalar::all(kYoloxPad));
+        if (auto ok = impl->preprocess(blank); !ok) {
+            return ok.error();
+        }
+        (void)impl->forward();
+    } catch (const cv::Exception& e) {
+        return makeError(ErrorCode::kParse, what + ": the model does not run at input size " +
+                                                std::to_string(s) + " (OpenCV: " + openCvReason(e) +
+                                                ")");
+    }
+    const int cols = kBoxColumns + info.class_count;
+    if (impl->outs.empty()) {
+        return makeError(ErrorCode::kParse, what + ": the model has no outputs");
+    }
+    for (const cv::Mat& out : impl->outs) {
+        const int out_cols = out.dims >= 2 ? out.size[out.dims - 1] : 0;
+        if (out_cols != cols) {
+            return makeError(ErrorCode::kParse, what + ": the model outputs " +
+                                                    std::to_string(out_cols - kBoxColumns) +
+                                                    " classes per box but " +
+                                                    info.names_path.string() + " names " +
+                                                    std::to_string(info.class_count));
+        }
+        if (out.type() != CV_32F) {
+            return makeError(ErrorCode::kParse, what + ": the model output is not float32");
+        }
+    }
+    std::size_t rows = 0;
+    for (const cv::Mat& out : impl->outs) {
+        rows += out.total() / static_cast<std::size_t>(cols);
+    }
+    if (!darknet) {
+        impl->grid = makeYoloxGrid(s);
+        if (impl->outs.size() != 1 || rows != impl->grid.size()) {
+            return makeError(ErrorCode::kParse,
+                             what + ": expected one output of " +
+                                 std::to_string(impl->grid.size()) + " rows at input size " +
+                                 std::to_string(s) + " (YOLOX strides 8, 16, 32), got " +
+                                 std::to_string(impl->outs.size()) + " output(s) of " +
+                                 std::to_string(rows) + " rows in total");
+        }
+    }
+    impl->decoder.emplace(std::move(allowed), rows);
+    return std::unique_ptr<DnnDetector>(new DnnDetector(std::move(impl)));
+}
+
+Result<bool> DnnDetector::detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                                 DetectionResult& out) {
+    out.frame_id = frame_id;
+    out.t_ns = t_ns;
+    out.width_px = image.cols;
+    out.height_px = image.rows;
+    out.detections.clear();
+    out.timing = {};
+    if (image.empty() || image.depth() != CV_8U ||
+        (image.channels() != 1 && image.channels() != 3 && image.channels() != 4) ||
+        image.dims != 2) {
+        return makeError(
+            ErrorCode::kInvalidArgument,
+            "detect: expected a non-empty 8-bit image with 1, 3 or 4 channels (frame " +
+                std::to_string(frame_id) + ")");
+    }
+    Impl& m = *impl_;
+    YoloDecoder& decoder = *m.decoder;
+    decoder.clear();
+    try {
+        auto t0 = Clock::now();
+        (void)m.preprocess(image);
+        out.timing.pre_ms = msSince(t0);
+        t0 = Clock::now();
+        (void)m.forward();
+        out.timing.forward_ms = msSince(t0);
+        t0 = Clock::now();
+        const DetectorConfig& c = m.config;
+        if (c.family == ModelFamily::kYolox) {
+            const double ratio = std::min(static_cast<double>(c.input_size_px) / image.rows,
+                                          static_cast<double>(c.input_size_px) / image.cols);
+            decoder.addYolox(reinterpret_cast<const float*>(m.outs.front().data), m.grid, ratio,
+                             c.score_threshold);
+        } else {
+            const auto cols = static_cast<std::size_t>(kBoxColumns) +
+                              static_cast<std::size_t>(m.info.class_count);
+            for (const cv::Mat& o : m.outs) {
+                decoder.addDarknet(reinterpret_cast<const float*>(o.data), o.total() / cols,
+                                   image.cols, image.rows, c.score_threshold);
+            }
+        }
+        decoder.finish(m.names, c.score_threshold, c.nms_iou_threshold, c.max_detections, out);
+        out.timing.post_ms = msSince(t0);
+    } catch (const cv::Exception& e) {
+        out.detections.clear();
+        return makeError(ErrorCode::kIo, "detect: " + m.info.model_path.string() +
+                                             " failed on frame " + std::to_string(frame_id) +
+                                             " (OpenCV: " + openCvReason(e) + ")");
+    }
+    return true;
+}
+
+std::size_t toEstimatorDetections(const DetectionResult& result, std::span<core::Detection> out) {
+    const std::size_t n = std::min(out.size(), result.detections.size());
+    for (std::size_t i = 0; i < n; ++i) {
+        const ObjectDetection& d = result.detections[i];
+        out[i].box = d.box;
+        out[i].class_name = d.class_name;
+        out[i].score = static_cast<Scalar>(d.score);
+    }
+    return n;
+}
+
+}  // namespace scaled::detector

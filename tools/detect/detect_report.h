@@ -1,0 +1,36 @@
+#pragma once
+
+// What scaled-detect prints and draws (a library, so tests can check it).
+
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <scaled/core/result.h>
+#include <scaled/detector/dnn_detector.h>
+
+namespace scaled::tools {
+
+// "a,b , c" -> {"a", "b", "c"} (blanks around names trimmed, empty items kept
+// as empty strings so that validate() can name them).
+std::vector<std::string> splitList(std::string_view text);
+
+// An 8-bit image as stored (gray, BGR or BGRA). Errors name the file:
+// kNotFound, kParse (cannot decode).
+core::Result<cv::Mat> loadImage(const std::filesystem::path& path);
+
+// One line per detection: `class_name score x_min y_min x_max y_max`.
+std::string detectionsText(const detector::DetectionResult& result);
+
+// One JSON object (one line) with class "DETECTIONS": image, size, model,
+// family, input size, timing, and the detections.
+std::string detectionsJson(const std::filesystem::path& image, const detector::DetectorInfo& info,
+                           const detector::DetectionResult& result);
+
+// The image with boxes and labels, written to `out` (format from its extension).
+core::Result<bool> drawDetections(const cv::Mat& image, const detector::DetectionResult& result,
+                                  const std::filesystem::path& out);
+
+}  // namespace scaled::tools
