@@ -662,33 +662,41 @@ Mat6x6 EkfSlam::poseCovariance() const {
     return J * P_.topLeftCorner<kPoseDim, kPoseDim>() * J.transpose();
 }
 
+bool EkfSlam::mapPoint(int slot, MapPoint& out) const {
+    const FeatureInfo& f = features_[static_cast<std::size_t>(slot)];
+    out = MapPoint{};
+    out.id = f.id;
+    out.kind = f.kind;
+    out.measured = f.measured;
+    if (f.kind == FeatureKind::kXyz) {
+        out.p_FinW = x_.segment<3>(f.offset);
+        out.P_FinW = P_.block<3, 3>(f.offset, f.offset);
+    } else {
+        const Vec6 y = x_.segment<6>(f.offset);
+        if (!(y(5) > 0)) {
+            return false;  // at or beyond infinity: no finite point
+        }
+        Mat36 J;
+        out.p_FinW = inverseDepthToXyz(y, &J);
+        out.P_FinW = J * P_.block<6, 6>(f.offset, f.offset) * J.transpose();
+    }
+    FeatureProjection proj;
+    if (projectSlot(x_, slot, false, proj)) {
+        out.px = proj.h_px;
+        out.in_view = proj.h_px.x() >= 0 && proj.h_px.y() >= 0 &&
+                      proj.h_px.x() <= Scalar(camera_.width() - 1) &&
+                      proj.h_px.y() <= Scalar(camera_.height() - 1);
+    }
+    return true;
+}
+
 void EkfSlam::mapPoints(std::vector<MapPoint>& out) const {
     out.clear();
-    for (const FeatureInfo& f : features_) {
-        MapPoint m;
-        m.id = f.id;
-        m.kind = f.kind;
-        m.measured = f.measured;
-        FeatureProjection proj;
-        if (projectSlot(x_, static_cast<int>(&f - features_.data()), false, proj)) {
-            m.px = proj.h_px;
-            m.in_view = proj.h_px.x() >= 0 && proj.h_px.y() >= 0 &&
-                        proj.h_px.x() <= Scalar(camera_.width() - 1) &&
-                        proj.h_px.y() <= Scalar(camera_.height() - 1);
+    MapPoint m;
+    for (int slot = 0; slot < static_cast<int>(features_.size()); ++slot) {
+        if (mapPoint(slot, m)) {
+            out.push_back(m);
         }
-        if (f.kind == FeatureKind::kXyz) {
-            m.p_FinW = x_.segment<3>(f.offset);
-            m.P_FinW = P_.block<3, 3>(f.offset, f.offset);
-        } else {
-            const Vec6 y = x_.segment<6>(f.offset);
-            if (!(y(5) > 0)) {
-                continue;
-            }
-            Mat36 J;
-            m.p_FinW = inverseDepthToXyz(y, &J);
-            m.P_FinW = J * P_.block<6, 6>(f.offset, f.offset) * J.transpose();
-        }
-        out.push_back(m);
     }
 }
 

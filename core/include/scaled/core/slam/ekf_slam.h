@@ -180,6 +180,9 @@ public:
     // reserve max_features to keep it allocation-free). Inverse-depth features
     // with rho <= 0 (at or beyond infinity) are left out.
     void mapPoints(std::vector<MapPoint>& out) const;
+    // The map point of features()[slot]; false (out holds only id, kind and
+    // measured) for an inverse-depth feature with rho <= 0.
+    bool mapPoint(int slot, MapPoint& out) const;
 
     [[nodiscard]] const SlamConfig& config() const { return config_; }
     [[nodiscard]] const PinholeRadialCamera& camera() const { return camera_; }
