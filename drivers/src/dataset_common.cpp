@@ -64,38 +64,6 @@ std::string_view trimmed(std::string_view s) {
     return s;
 }
 
-std::string sizeText(int w, int h) {
-    return std::to_string(w) + "x" + std::to_string(h);
-}
-
-// gray + BGR from a decoded 8-bit image of 1, 3 or 4 channels.
-Result<bool> splitChannels(const cv::Mat& img, const std::filesystem::path& path, Frame& frame) {
-    try {
-        switch (img.channels()) {
-            case 1:
-                frame.gray = img;
-                cv::cvtColor(img, frame.color, cv::COLOR_GRAY2BGR);
-                break;
-            case 3:
-                frame.color = img;
-                cv::cvtColor(img, frame.gray, cv::COLOR_BGR2GRAY);
-                break;
-            case 4:
-                cv::cvtColor(img, frame.color, cv::COLOR_BGRA2BGR);
-                cv::cvtColor(img, frame.gray, cv::COLOR_BGRA2GRAY);
-                break;
-            default:
-                return makeError(ErrorCode::kParse, path.string() + ": unsupported image with " +
-                                                        std::to_string(img.channels()) +
-                                                        " channels");
-        }
-    } catch (const std::exception& e) {
-        return makeError(ErrorCode::kIo,
-                         path.string() + ": cannot convert image: " + std::string(e.what()));
-    }
-    return true;
-}
-
 class ReplaySource final : public FrameSource {
 public:
     explicit ReplaySource(ReplayIndex index) : index_(std::move(index)) {}
@@ -109,6 +77,9 @@ public:
         const std::size_t i = cursor_++;
         const ReplayFrame& f = index_.frames[i];
         if (!isRegularFile(f.image)) {
+            if (f.index_line == 0) {
+                return makeError(ErrorCode::kNotFound, f.image.string() + ": image file not found");
+            }
             return lineError(ErrorCode::kNotFound, index_.index_file, f.index_line,
                              "image file not found: " + f.image.string(), f.listed_as);
         }
@@ -125,7 +96,7 @@ public:
                                  sizeText(info.intrinsics.width_px, info.intrinsics.height_px));
         }
         Frame out;
-        if (auto split = splitChannels(*img, f.image, out); !split) {
+        if (auto split = toGrayAndColor(*img, f.image.string(), out); !split) {
             return split.error();
         }
         out.id = static_cast<int64_t>(i);
@@ -133,6 +104,11 @@ public:
         out.T_CtoW_gt = f.T_CtoW_gt;
         out.depth_path = f.depth_path;
         out.image_path = f.image;
+        out.accel_C = f.accel_C;
+        if (info.gravity_down_W && f.T_CtoW_gt) {
+            out.gravity_down_C =
+                (f.T_CtoW_gt->R_CtoW.transpose() * *info.gravity_down_W).normalized().eval();
+        }
         frame = std::move(out);
         return true;
     }
@@ -318,7 +294,7 @@ std::string datasetName(const std::filesystem::path& dir) {
     return name.empty() || name == "." || name == ".." ? dir.string() : name;
 }
 
-Result<cv::Mat> loadImage(const std::filesystem::path& path) {
+Result<cv::Mat> loadImageUnchanged(const std::filesystem::path& path) {
     std::error_code ec;
     const auto status = std::filesystem::status(path, ec);
     if (ec || !std::filesystem::exists(status)) {
@@ -351,20 +327,72 @@ Result<cv::Mat> loadImage(const std::filesystem::path& path) {
             return makeError(ErrorCode::kParse,
                              path.string() + ": cannot decode image (corrupt or unknown format)");
         }
-        if (img.depth() != CV_8U) {
-            return makeError(ErrorCode::kParse, path.string() +
-                                                    ": expected an 8-bit image (got OpenCV depth " +
-                                                    std::to_string(img.depth()) + ")");
-        }
-        if (img.channels() != 1 && img.channels() != 3 && img.channels() != 4) {
-            return makeError(ErrorCode::kParse, path.string() + ": unsupported image with " +
-                                                    std::to_string(img.channels()) + " channels");
-        }
         return img;
     } catch (const std::exception& e) {
         return makeError(ErrorCode::kParse,
                          path.string() + ": cannot decode image: " + std::string(e.what()));
     }
+}
+
+Result<cv::Mat> loadImage(const std::filesystem::path& path) {
+    auto img = loadImageUnchanged(path);
+    if (!img) {
+        return img;
+    }
+    if (img->depth() != CV_8U) {
+        return makeError(ErrorCode::kParse, path.string() +
+                                                ": expected an 8-bit image (got OpenCV depth " +
+                                                std::to_string(img->depth()) + ")");
+    }
+    if (img->channels() != 1 && img->channels() != 3 && img->channels() != 4) {
+        return makeError(ErrorCode::kParse, path.string() + ": unsupported image with " +
+                                                std::to_string(img->channels()) + " channels");
+    }
+    return img;
+}
+
+std::string sizeText(int width_px, int height_px) {
+    return std::to_string(width_px) + "x" + std::to_string(height_px);
+}
+
+Result<bool> toGrayAndColor(const cv::Mat& img, const std::string& source, Frame& frame) {
+    if (img.empty() || img.depth() != CV_8U) {
+        return makeError(ErrorCode::kParse, source + ": expected a non-empty 8-bit image");
+    }
+    try {
+        switch (img.channels()) {
+            case 1:
+                frame.gray = img;
+                cv::cvtColor(img, frame.color, cv::COLOR_GRAY2BGR);
+                break;
+            case 3:
+                frame.color = img;
+                cv::cvtColor(img, frame.gray, cv::COLOR_BGR2GRAY);
+                break;
+            case 4:
+                cv::cvtColor(img, frame.color, cv::COLOR_BGRA2BGR);
+                cv::cvtColor(img, frame.gray, cv::COLOR_BGRA2GRAY);
+                break;
+            default:
+                return makeError(ErrorCode::kParse, source + ": unsupported image with " +
+                                                        std::to_string(img.channels()) +
+                                                        " channels");
+        }
+    } catch (const std::exception& e) {
+        return makeError(ErrorCode::kIo,
+                         source + ": cannot convert image: " + std::string(e.what()));
+    }
+    return true;
+}
+
+Result<bool> validateFps(double fps) {
+    constexpr double kMaxFps = 1e9;  // a frame period of at least 1 ns
+    if (!(std::isfinite(fps) && fps > 0 && fps <= kMaxFps)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "DatasetOptions.folder_fps must be finite and in (0, 1e9] Hz (got " +
+                             shortNumber(fps) + ")");
+    }
+    return true;
 }
 
 Result<bool> trimMissingTail(ReplayIndex& index, const DatasetOptions& opt) {
@@ -397,39 +425,55 @@ Result<bool> trimMissingTail(ReplayIndex& index, const DatasetOptions& opt) {
     return true;
 }
 
-Result<bool> resolveIntrinsics(ReplayIndex& index,
-                               const std::optional<core::CameraIntrinsics>& from_dataset,
-                               std::string_view dataset_source, const DatasetOptions& opt) {
+Result<bool> chooseIntrinsics(SequenceInfo& info,
+                              const std::optional<core::CameraIntrinsics>& from_dataset,
+                              std::string_view dataset_source, const DatasetOptions& opt,
+                              const std::function<Result<cv::Size>()>& image_size) {
     std::optional<core::CameraIntrinsics> k = opt.intrinsics ? opt.intrinsics : from_dataset;
     const std::string source =
         opt.intrinsics ? std::string("DatasetOptions.intrinsics") : std::string(dataset_source);
     if (!k) {
-        index.info.has_intrinsics = false;
-        index.info.notes.push_back("no intrinsics in the dataset: the caller must supply them");
+        info.has_intrinsics = false;
+        info.notes.push_back("no intrinsics in the dataset: the caller must supply them");
         return true;
     }
     if (k->width_px == 0 || k->height_px == 0) {
-        const auto first =
-            std::find_if(index.frames.begin(), index.frames.end(),
-                         [](const ReplayFrame& f) { return isRegularFile(f.image); });
-        if (first == index.frames.end()) {
-            return makeError(ErrorCode::kNotFound,
-                             source + ": no image to take the image size from");
+        auto size = image_size();
+        if (!size) {
+            return size.error();
         }
-        auto img = loadImage(first->image);
-        if (!img) {
-            return img.error();
-        }
-        k->width_px = img->cols;
-        k->height_px = img->rows;
+        k->width_px = size->width;
+        k->height_px = size->height;
     }
     auto camera = core::PinholeRadialCamera::create(*k);
     if (!camera) {
         return makeError(ErrorCode::kInvalidArgument, source + ": " + camera.error().message);
     }
-    index.info.intrinsics = *k;
-    index.info.has_intrinsics = true;
+    info.intrinsics = *k;
+    info.has_intrinsics = true;
     return true;
+}
+
+Result<bool> resolveIntrinsics(ReplayIndex& index,
+                               const std::optional<core::CameraIntrinsics>& from_dataset,
+                               std::string_view dataset_source, const DatasetOptions& opt) {
+    return chooseIntrinsics(
+        index.info, from_dataset, dataset_source, opt, [&]() -> Result<cv::Size> {
+            const auto first =
+                std::find_if(index.frames.begin(), index.frames.end(),
+                             [](const ReplayFrame& f) { return isRegularFile(f.image); });
+            if (first == index.frames.end()) {
+                const std::string source = opt.intrinsics ? std::string("DatasetOptions.intrinsics")
+                                                          : std::string(dataset_source);
+                return makeError(ErrorCode::kNotFound,
+                                 source + ": no image to take the image size from");
+            }
+            auto img = loadImage(first->image);
+            if (!img) {
+                return img.error();
+            }
+            return img->size();
+        });
 }
 
 Result<int64_t> toleranceNs(double seconds) {

@@ -1,13 +1,15 @@
 #pragma once
 
-// Internals shared by the dataset readers (TUM, KITTI) and the trajectory
-// files: line-oriented text parsing with FILE:LINE error messages, image
-// decoding, and the replay FrameSource both dataset formats produce.
+// Internals shared by the dataset readers (TUM, KITTI, image folder, video)
+// and the trajectory files: line-oriented text parsing with FILE:LINE error
+// messages, image decoding, and the replay FrameSource the file-based formats
+// produce.
 // Not installed: include only from drivers/src.
 
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <optional>
@@ -72,6 +74,20 @@ std::string datasetName(const std::filesystem::path& dir);
 // Errors name the file: kNotFound, kIo (unreadable), kParse (cannot decode).
 core::Result<cv::Mat> loadImage(const std::filesystem::path& path);
 
+// Reads and decodes an image of any depth and channel count, unchanged
+// (IMREAD_UNCHANGED). Never throws; errors as loadImage().
+core::Result<cv::Mat> loadImageUnchanged(const std::filesystem::path& path);
+
+// frame.gray (CV_8UC1) and frame.color (CV_8UC3 BGR) from a decoded 8-bit
+// image of 1, 3 (BGR) or 4 (BGRA) channels. Errors name `source`.
+core::Result<bool> toGrayAndColor(const cv::Mat& img, const std::string& source, Frame& frame);
+
+// "WxH".
+std::string sizeText(int width_px, int height_px);
+
+// DatasetOptions::folder_fps: finite and in (0, 1e9] (1 ns frame period).
+core::Result<bool> validateFps(double fps);
+
 // One frame of a replayed sequence, everything but the pixels.
 struct ReplayFrame {
     int64_t t_ns = 0;
@@ -80,11 +96,14 @@ struct ReplayFrame {
     std::size_t index_line = 0;  // line of the index file that named the image
     std::optional<core::CameraPose> T_CtoW_gt;
     std::optional<std::filesystem::path> depth_path;
+    std::optional<core::Vec3> accel_C;
 };
 
 struct ReplayIndex {
     SequenceInfo info;
-    std::filesystem::path index_file;  // rgb.txt or times.txt
+    // rgb.txt or times.txt. For frames with index_line 0 (an image folder
+    // without times.txt) a missing image is reported without it.
+    std::filesystem::path index_file;
     std::vector<ReplayFrame> frames;
 };
 
@@ -94,9 +113,17 @@ struct ReplayIndex {
 core::Result<bool> trimMissingTail(ReplayIndex& index, const DatasetOptions& opt);
 
 // Chooses the intrinsics (opt.intrinsics overrides `from_dataset`), takes the
-// image size from the first existing image when it is not given, validates
-// them and fills info.intrinsics / info.has_intrinsics. `dataset_source` names
-// where `from_dataset` came from, for error messages.
+// image size from `image_size` when it is not given (its errors are returned
+// unchanged), validates them and fills info.intrinsics / info.has_intrinsics
+// (or adds the "no intrinsics" note). `dataset_source` names where
+// `from_dataset` came from, for error messages.
+core::Result<bool> chooseIntrinsics(SequenceInfo& info,
+                                    const std::optional<core::CameraIntrinsics>& from_dataset,
+                                    std::string_view dataset_source, const DatasetOptions& opt,
+                                    const std::function<core::Result<cv::Size>()>& image_size);
+
+// chooseIntrinsics() for a replayed index: the image size comes from the
+// first existing image.
 core::Result<bool> resolveIntrinsics(ReplayIndex& index,
                                      const std::optional<core::CameraIntrinsics>& from_dataset,
                                      std::string_view dataset_source, const DatasetOptions& opt);

@@ -160,6 +160,47 @@ Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file) {
     return (g / norm).cast<Scalar>().eval();
 }
 
+Result<std::vector<TumAccelSample>> readTumAccelerometer(const std::filesystem::path& accel_file) {
+    constexpr double kMaxAccel = 1e4;  // m/s^2: about 1000 g, far beyond any handheld sensor
+    auto text = detail::readTextFile(accel_file);
+    if (!text) {
+        return text.error();
+    }
+    static constexpr std::array<std::string_view, 3> kNames = {"ax", "ay", "az"};
+    std::vector<TumAccelSample> out;
+    detail::IncreasingTimestamps times;
+    for (const detail::TextLine& line : detail::dataLines(*text)) {
+        const auto fields = detail::splitFields(line.text);
+        const auto bad = [&](const std::string& what) {
+            return detail::lineError(ErrorCode::kParse, accel_file, line.number, what, line.text);
+        };
+        if (fields.size() != 4) {
+            return bad("expected 4 fields `timestamp ax ay az`, got " +
+                       std::to_string(fields.size()));
+        }
+        auto t = times.next(fields[0], line.number);
+        if (!t) {
+            return bad(t.error().message);
+        }
+        TumAccelSample sample;
+        sample.t_ns = *t;
+        sample.line = line.number;
+        for (std::size_t i = 0; i < 3; ++i) {
+            auto x = detail::parseFiniteNumber(fields[i + 1], kNames[i]);
+            if (!x) {
+                return bad(x.error().message);
+            }
+            if (!(std::abs(*x) <= kMaxAccel)) {
+                return bad(std::string(kNames[i]) + " is implausibly large (|a| > 1e4 m/s^2): '" +
+                           detail::printable(fields[i + 1]) + "'");
+            }
+            sample.accel[static_cast<Eigen::Index>(i)] = static_cast<Scalar>(*x);
+        }
+        out.push_back(sample);
+    }
+    return out;
+}
+
 Result<std::unique_ptr<FrameSource>> openTumDataset(const std::filesystem::path& dir,
                                                     const DatasetOptions& opt) {
     std::error_code ec;
@@ -274,6 +315,33 @@ Result<std::unique_ptr<FrameSource>> openTumDataset(const std::filesystem::path&
             return g.error();
         }
         index.info.gravity_down_W = *g;
+    }
+
+    const std::filesystem::path accel_file = dir / "accelerometer.txt";
+    if (detail::pathExists(accel_file)) {
+        auto samples = readTumAccelerometer(accel_file);
+        if (!samples) {
+            return samples.error();
+        }
+        std::vector<int64_t> times;
+        times.reserve(samples->size());
+        for (const TumAccelSample& a : *samples) {
+            times.push_back(a.t_ns);
+        }
+        std::size_t without = 0;
+        for (detail::ReplayFrame& f : index.frames) {
+            if (auto k = detail::nearestWithin(times, f.t_ns, *tol_ns)) {
+                f.accel_C = (*samples)[*k].accel;
+            } else {
+                ++without;
+            }
+        }
+        if (without > 0) {
+            index.info.notes.push_back(accel_file.string() + ": " + std::to_string(without) +
+                                       " of " + std::to_string(index.frames.size()) +
+                                       " frames have no sample within " +
+                                       detail::shortNumber(opt.max_assoc_dt_s) + " s");
+        }
     }
     return detail::makeReplaySource(std::move(index));
 }

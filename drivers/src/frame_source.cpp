@@ -1,8 +1,11 @@
+#include <optional>
 #include <string>
 #include <system_error>
 
+#include <scaled/drivers/dataset_folder.h>
 #include <scaled/drivers/dataset_kitti.h>
 #include <scaled/drivers/dataset_tum.h>
+#include <scaled/drivers/dataset_video.h>
 #include <scaled/drivers/frame_source.h>
 
 namespace scaled::drivers {
@@ -11,30 +14,52 @@ using core::ErrorCode;
 using core::makeError;
 using core::Result;
 
-Result<std::unique_ptr<FrameSource>> openDataset(const std::filesystem::path& dir,
+Result<std::unique_ptr<FrameSource>> openDataset(const std::filesystem::path& path,
                                                  const DatasetOptions& opt) {
     std::error_code ec;
-    if (!std::filesystem::is_directory(dir, ec) || ec) {
-        return makeError(ErrorCode::kNotFound, dir.string() + ": dataset directory not found");
+    const auto status = std::filesystem::status(path, ec);
+    if (ec || !std::filesystem::exists(status)) {
+        return makeError(ErrorCode::kNotFound,
+                         path.string() + ": dataset directory or video file not found");
     }
+    const bool is_dir = std::filesystem::is_directory(status);
     std::optional<DatasetFormat> format = opt.format;
     if (!format) {
-        if (std::filesystem::is_regular_file(dir / "rgb.txt", ec)) {
+        if (std::filesystem::is_regular_file(status)) {
+            format = DatasetFormat::kVideo;
+        } else if (!is_dir) {
+            return makeError(ErrorCode::kNotFound,
+                             path.string() + ": neither a dataset directory nor a video file");
+        } else if (std::filesystem::is_regular_file(path / "rgb.txt", ec)) {
             format = DatasetFormat::kTum;
-        } else if (std::filesystem::is_regular_file(dir / "times.txt", ec) &&
-                   std::filesystem::is_directory(dir / "image_0", ec)) {
+        } else if (std::filesystem::is_regular_file(path / "times.txt", ec) &&
+                   std::filesystem::is_directory(path / "image_0", ec)) {
             format = DatasetFormat::kKitti;
         } else {
-            return makeError(ErrorCode::kNotFound,
-                             dir.string() +
-                                 ": not a dataset directory (expected rgb.txt for TUM, or "
-                                 "times.txt and image_0/ for KITTI)");
+            auto images = listImageFiles(path);
+            if (!images) {
+                return images.error();
+            }
+            if (images->empty()) {
+                return makeError(ErrorCode::kNotFound,
+                                 path.string() +
+                                     ": not a dataset directory (expected rgb.txt for TUM, "
+                                     "times.txt and image_0/ for KITTI, or image files)");
+            }
+            format = DatasetFormat::kImageFolder;
         }
     }
-    if (*format == DatasetFormat::kKitti) {
-        return openKittiDataset(dir, opt);
+    switch (*format) {
+        case DatasetFormat::kVideo:
+            return openVideo(path, opt);
+        case DatasetFormat::kImageFolder:
+            return openImageFolder(path, opt);
+        case DatasetFormat::kKitti:
+            return openKittiDataset(path, opt);
+        case DatasetFormat::kTum:
+            break;
     }
-    return openTumDataset(dir, opt);
+    return openTumDataset(path, opt);
 }
 
 }  // namespace scaled::drivers

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <limits>
 #include <opencv2/core.hpp>
@@ -19,7 +18,6 @@
 #include <string>
 #include <string_view>
 #include <type_traits>
-#include <unistd.h>
 #include <utility>
 #include <vector>
 
@@ -33,6 +31,7 @@
 #include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/trajectory_io.h>
 
+#include "dataset_test_util.h"
 #include "shared_data.h"
 
 namespace scaled::drivers {
@@ -47,60 +46,10 @@ using core::Scalar;
 constexpr bool kFloat = std::is_same_v<Scalar, float>;
 constexpr double kReadTol = kFloat ? 1e-5 : 1e-9;
 
-std::string readFile(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
-
-void writeFile(const fs::path& path, std::string_view content) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out << content;
-    ASSERT_TRUE(out.good()) << "cannot write " << path;
-}
-
-// A fresh, uniquely named directory under the system temp dir, removed at the end.
-class TempDir {
-public:
-    explicit TempDir(std::string_view tag) {
-        static int counter = 0;
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        std::string name = "scaled_dataset_" + std::string(tag) + "_" +
-                           (info != nullptr ? std::string(info->name()) : std::string("x")) + "_" +
-                           std::to_string(::getpid()) + "_" + std::to_string(counter++);
-        std::replace(name.begin(), name.end(), '/', '_');
-        path_ = fs::temp_directory_path() / name;
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-        fs::create_directories(path_);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-    TempDir(TempDir&&) = delete;
-    TempDir& operator=(TempDir&&) = delete;
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    [[nodiscard]] const fs::path& path() const { return path_; }
-
-private:
-    fs::path path_;
-};
-
-// A small 8x6 BGR image with a pattern depending on `seed`.
-cv::Mat tinyImage(int seed) {
-    cv::Mat img(6, 8, CV_8UC3);
-    for (int r = 0; r < img.rows; ++r) {
-        for (int c = 0; c < img.cols; ++c) {
-            img.at<cv::Vec3b>(r, c) = cv::Vec3b(static_cast<uchar>((r * 31 + seed * 7) & 0xff),
-                                                static_cast<uchar>((c * 17 + seed) & 0xff),
-                                                static_cast<uchar>((r * c + seed * 3) & 0xff));
-        }
-    }
-    return img;
-}
+using test::readFile;
+using test::TempDir;
+using test::tinyImage;
+using test::writeFile;
 
 // TUM-like dataset: rgb/0.png .. rgb/{n-1}.png, rgb.txt, groundtruth.txt, camera.txt.
 constexpr std::string_view kRgbTxt =
@@ -116,6 +65,11 @@ constexpr std::string_view kGtTxt =
 constexpr std::string_view kCameraTxt =
     "# width height fx fy cx cy\n"
     "8 6 10 11 4 3\n";
+constexpr std::string_view kAccelTxt =
+    "# timestamp ax ay az\n"
+    "0.001000 0.1 -9.7 0.2\n"
+    "0.040000 0.2 -9.8 0.3\n"
+    "0.500000 0.0 -9.81 0.0\n";
 
 void makeTumDataset(const fs::path& dir, int images = 3) {
     fs::create_directories(dir / "rgb");
@@ -218,6 +172,13 @@ TEST(DatasetReal, RedkitchenOpensWithIntrinsicsGravityAndGroundTruth) {
     EXPECT_LT(rotationError(f.T_CtoW_gt->R_CtoW,
                             rotationFromTum(-0.0002124, -0.1608336, -0.1394795, 0.9770762)),
               1e-6);
+    // gravity.txt rotated into the camera: a handheld camera looks roughly
+    // level, so down is mostly +y in the camera frame.
+    ASSERT_TRUE(f.gravity_down_C.has_value());
+    const core::Vec3 expected_down = f.T_CtoW_gt->R_CtoW.transpose() * *info.gravity_down_W;
+    EXPECT_LT(static_cast<double>((*f.gravity_down_C - expected_down).norm()), 1e-6);
+    EXPECT_GT(static_cast<double>(f.gravity_down_C->y()), 0.7);
+    EXPECT_FALSE(f.accel_C.has_value());  // no accelerometer.txt
 
     r = (*src)->next(f);
     ASSERT_TRUE(r && *r);
@@ -492,6 +453,97 @@ TEST(DatasetTum, GravityFileAndIntrinsicsOverride) {
     EXPECT_FALSE((*src2)->info().gravity_down_W.has_value());
 }
 
+TEST(DatasetTum, AccelerometerIsAssociatedByNearestTimestampAndKeptRaw) {
+    TempDir tmp("accel");
+    makeTumDataset(tmp.path());
+    // Frame 0 (0 s): sample 1 ms away. Frame 1 (33.3 ms): 6.7 ms away. Frame 2
+    // (66.7 ms): the nearest sample is 26.7 ms away, beyond max_assoc_dt_s.
+    writeFile(tmp.path() / "accelerometer.txt", kAccelTxt);
+    auto src = openDataset(tmp.path());
+    ASSERT_TRUE(src) << src.error().message;
+    const auto& notes = (*src)->info().notes;
+    EXPECT_TRUE(std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
+        return n.find("accelerometer.txt: 1 of 3 frames have no sample") != std::string::npos;
+    }));
+    Frame f;
+    ASSERT_TRUE((*src)->next(f).ok());
+    ASSERT_TRUE(f.accel_C.has_value());
+    EXPECT_NEAR(static_cast<double>(f.accel_C->x()), 0.1, kReadTol);
+    EXPECT_NEAR(static_cast<double>(f.accel_C->y()), -9.7, kReadTol);  // raw: sign unchanged
+    EXPECT_NEAR(static_cast<double>(f.accel_C->z()), 0.2, kReadTol);
+    // No gravity.txt: no gravity direction, whatever the accelerometer says.
+    EXPECT_FALSE(f.gravity_down_C.has_value());
+    ASSERT_TRUE((*src)->next(f).ok());
+    ASSERT_TRUE(f.accel_C.has_value());
+    EXPECT_NEAR(static_cast<double>(f.accel_C->y()), -9.8, kReadTol);
+    ASSERT_TRUE((*src)->next(f).ok());
+    EXPECT_FALSE(f.accel_C.has_value());
+
+    DatasetOptions wide;
+    wide.max_assoc_dt_s = 0.03;
+    auto src2 = openDataset(tmp.path(), wide);
+    ASSERT_TRUE(src2) << src2.error().message;
+    ASSERT_TRUE((*src2)->seek(2).ok());
+    ASSERT_TRUE((*src2)->next(f).ok());
+    ASSERT_TRUE(f.accel_C.has_value());
+    EXPECT_NEAR(static_cast<double>(f.accel_C->z()), 0.3, kReadTol);
+}
+
+TEST(DatasetTum, GravityInTheCameraFrameComesFromGroundTruthEvenWithAnAccelerometer) {
+    TempDir tmp("gravity_c");
+    makeTumDataset(tmp.path());
+    writeFile(tmp.path() / "gravity.txt", "0 0.6 0.8\n");
+    writeFile(tmp.path() / "accelerometer.txt", kAccelTxt);
+    // Frame 1 has no ground truth (nearest pose 30 ms away).
+    writeFile(tmp.path() / "groundtruth.txt",
+              "0.000000 0 0 0 0 0 0 1\n"
+              "0.063333 0 0 0 0 0 0.7071068 0.7071068\n"
+              "0.066667 0 0 0 0 0 0.7071068 0.7071068\n");
+    auto src = openDataset(tmp.path());
+    ASSERT_TRUE(src) << src.error().message;
+    Frame f;
+    // Frame 0: identity pose, down_C = down_W; the accelerometer is there too
+    // but is not used for gravity.
+    ASSERT_TRUE((*src)->next(f).ok());
+    ASSERT_TRUE(f.accel_C.has_value());
+    ASSERT_TRUE(f.gravity_down_C.has_value());
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->x()), 0.0, 1e-6);
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->y()), 0.6, 1e-6);
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->z()), 0.8, 1e-6);
+    // Frame 1: accelerometer but no pose: no gravity direction.
+    ASSERT_TRUE((*src)->next(f).ok());
+    EXPECT_TRUE(f.accel_C.has_value());
+    EXPECT_FALSE(f.T_CtoW_gt.has_value());
+    EXPECT_FALSE(f.gravity_down_C.has_value());
+    // Frame 2: camera turned 90 degrees about z: R^T (0, 0.6, 0.8) = (0.6, 0, 0.8).
+    ASSERT_TRUE((*src)->next(f).ok());
+    ASSERT_TRUE(f.gravity_down_C.has_value());
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->x()), 0.6, 1e-6);
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->y()), 0.0, 1e-6);
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->z()), 0.8, 1e-6);
+    EXPECT_NEAR(static_cast<double>(f.gravity_down_C->norm()), 1.0, 1e-6);
+}
+
+TEST(DatasetKitti, GravityFromGroundTruthGivesGravityInEveryCameraFrame) {
+    TempDir tmp("kitti_g");
+    makeKittiDataset(tmp.path());
+    DatasetOptions opt;
+    opt.gravity_from_groundtruth = true;
+    auto src = openDataset(tmp.path(), opt);
+    ASSERT_TRUE(src) << src.error().message;
+    Frame f;
+    for (int i = 0; i < 3; ++i) {
+        ASSERT_TRUE((*src)->next(f).ok());
+        ASSERT_TRUE(f.gravity_down_C.has_value()) << i;
+        EXPECT_NEAR(static_cast<double>(f.gravity_down_C->y()), 1.0, 1e-6) << i;
+        EXPECT_FALSE(f.accel_C.has_value());
+    }
+    auto plain = openDataset(tmp.path());
+    ASSERT_TRUE(plain);
+    ASSERT_TRUE((*plain)->next(f).ok());
+    EXPECT_FALSE(f.gravity_down_C.has_value());
+}
+
 TEST(DatasetTum, MissingImageInTheMiddleIsAnErrorOfNextWithIndexLine) {
     TempDir tmp("hole");
     makeTumDataset(tmp.path());
@@ -656,6 +708,11 @@ TEST(DatasetMalformed, TumLinesNameFileAndLine) {
         {"gravity.txt", "# g\n0 1\n", 2, "expected 3 fields"},
         {"gravity.txt", "0 1 z\n", 1, "gz is not a number"},
         {"depth.txt", "0.0 depth/0.png\n-0.5 depth/1.png\n", 2, "does not increase"},
+        {"accelerometer.txt", "# t ax ay az\n0.0 0 9.8\n", 2, "expected 4 fields"},
+        {"accelerometer.txt", "0.0 0 9.8 0\n0.0 0 9.8 0\n", 2, "does not increase"},
+        {"accelerometer.txt", "0.0 0 g 0\n", 1, "ay is not a number"},
+        {"accelerometer.txt", "0.0 0 0 nan\n", 1, "az is not finite"},
+        {"accelerometer.txt", "0.0 2e4 0 0\n", 1, "implausibly large"},
     };
     for (const BadCase& c : cases) {
         SCOPED_TRACE(std::string(c.file) + ": " + c.content);
@@ -723,128 +780,28 @@ TEST(DatasetFuzz, MutatedIndexFilesNeverCrash) {
     ASSERT_TRUE(
         cv::imwrite((dir / "rgb" / "big.png").string(), cv::Mat(12, 16, CV_8UC1, cv::Scalar(0))));
     fs::create_directories(dir / "rgb" / "dir.png");
-    const std::array<std::string, 4> names = {"rgb.txt", "groundtruth.txt", "camera.txt",
-                                              "gravity.txt"};
-    const std::array<std::string, 4> base = {std::string(kRgbTxt), std::string(kGtTxt),
-                                             std::string(kCameraTxt), "0 0.6 0.8\n"};
-    const std::array<std::string_view, 14> tokens = {"1e400",
-                                                     "-0",
-                                                     "9223372036.854775808",
-                                                     "nan",
-                                                     "-inf",
-                                                     "0.5",
-                                                     "#",
-                                                     "",
-                                                     "rgb/bad.png",
-                                                     "rgb/deep.png",
-                                                     "rgb/dir.png",
-                                                     "rgb/none.png",
-                                                     "/",
-                                                     "rgb/big.png"};
-    constexpr std::string_view kGarbage = "0123456789.-+eE naif#/\t\r\nxyz";
-
-    std::mt19937 rng(20240611);
-    const auto pick = [&](std::size_t n) {
-        return n == 0 ? std::size_t{0} : std::uniform_int_distribution<std::size_t>(0, n - 1)(rng);
-    };
-    const auto splitLines = [](const std::string& s) {
-        std::vector<std::string> ls;
-        std::istringstream in(s);
-        std::string l;
-        while (std::getline(in, l)) {
-            ls.push_back(l);
-        }
-        return ls;
-    };
-    const auto joinLines = [](const std::vector<std::string>& ls) {
-        std::string s;
-        for (const auto& l : ls) {
-            s += l;
-            s += '\n';
-        }
-        return s;
-    };
+    const std::array<std::string, 5> names = {"rgb.txt", "groundtruth.txt", "camera.txt",
+                                              "gravity.txt", "accelerometer.txt"};
+    const std::array<std::string, 5> base = {std::string(kRgbTxt), std::string(kGtTxt),
+                                             std::string(kCameraTxt), "0 0.6 0.8\n",
+                                             std::string(kAccelTxt)};
+    test::TextMutator mutator(
+        20240611,
+        {"1e400", "-0", "9223372036.854775808", "nan", "-inf", "0.5", "#", "", "rgb/bad.png",
+         "rgb/deep.png", "rgb/dir.png", "rgb/none.png", "/", "rgb/big.png", "1e4", "-10001"});
+    const auto pick = [&](std::size_t n) { return mutator.pick(n); };
 
     constexpr int kIterations = 3000;
     fs::path run;
     int opened = 0;
     int frames_read = 0;
     int frame_errors = 0;
+    int with_accel = 0;
     for (int it = 0; it < kIterations; ++it) {
-        std::array<std::string, 4> text = base;
+        std::array<std::string, 5> text = base;
         const std::size_t n_mut = 1 + pick(3);
         for (std::size_t m = 0; m < n_mut; ++m) {
-            std::string& s = text[pick(text.size())];
-            switch (pick(8)) {
-                case 0:  // byte flip
-                    if (!s.empty()) {
-                        s[pick(s.size())] = static_cast<char>(pick(256));
-                    }
-                    break;
-                case 1:  // truncation
-                    s.resize(pick(s.size() + 1));
-                    break;
-                case 2: {  // duplicated line
-                    auto ls = splitLines(s);
-                    if (!ls.empty()) {
-                        const std::size_t k = pick(ls.size());
-                        ls.insert(ls.begin() + static_cast<std::ptrdiff_t>(pick(ls.size() + 1)),
-                                  ls[k]);
-                    }
-                    s = joinLines(ls);
-                    break;
-                }
-                case 3: {  // deleted line
-                    auto ls = splitLines(s);
-                    if (!ls.empty()) {
-                        ls.erase(ls.begin() + static_cast<std::ptrdiff_t>(pick(ls.size())));
-                    }
-                    s = joinLines(ls);
-                    break;
-                }
-                case 4: {  // inserted garbage
-                    std::string g;
-                    const std::size_t len = 1 + pick(12);
-                    for (std::size_t k = 0; k < len; ++k) {
-                        g += pick(8) == 0 ? static_cast<char>(pick(256))
-                                          : kGarbage[pick(kGarbage.size())];
-                    }
-                    s.insert(pick(s.size() + 1), g);
-                    break;
-                }
-                case 5: {  // swapped lines
-                    auto ls = splitLines(s);
-                    if (ls.size() > 1) {
-                        std::swap(ls[pick(ls.size())], ls[pick(ls.size())]);
-                    }
-                    s = joinLines(ls);
-                    break;
-                }
-                case 6: {  // a field replaced by an extreme or odd token
-                    auto ls = splitLines(s);
-                    if (!ls.empty()) {
-                        std::string& l = ls[pick(ls.size())];
-                        std::vector<std::string> fields;
-                        std::istringstream in(l);
-                        std::string f;
-                        while (in >> f) {
-                            fields.push_back(f);
-                        }
-                        if (!fields.empty()) {
-                            fields[pick(fields.size())] = tokens[pick(tokens.size())];
-                            l.clear();
-                            for (const auto& x : fields) {
-                                l += x + " ";
-                            }
-                        }
-                    }
-                    s = joinLines(ls);
-                    break;
-                }
-                default:  // a whole file emptied
-                    s.clear();
-                    break;
-            }
+            mutator.mutate(text[pick(text.size())]);
         }
         // A fresh directory per run (rewriting files in place is slow on ext4,
         // which flushes truncated-and-rewritten files on close).
@@ -910,15 +867,102 @@ TEST(DatasetFuzz, MutatedIndexFilesNeverCrash) {
                           1e-4);
                 ASSERT_TRUE(f.T_CtoW_gt->p_CinW.allFinite());
             }
+            if (f.gravity_down_C) {
+                ASSERT_TRUE(f.T_CtoW_gt.has_value());
+                ASSERT_NEAR(static_cast<double>(f.gravity_down_C->norm()), 1.0, 1e-5);
+            }
+            if (f.accel_C) {
+                ++with_accel;
+                ASSERT_TRUE(f.accel_C->allFinite());
+                ASSERT_LE(static_cast<double>(f.accel_C->cwiseAbs().maxCoeff()), 1e4);
+            }
         }
     }
     std::cout << "[ fuzz     ] " << kIterations << " mutated datasets: " << opened << " opened, "
-              << frames_read << " frames read, " << frame_errors << " frame errors\n";
+              << frames_read << " frames read (" << with_accel << " with accelerometer), "
+              << frame_errors << " frame errors\n";
     // The mutations must leave both outcomes common, else the test tests little.
     EXPECT_GT(opened, kIterations / 10);
     EXPECT_LT(opened, kIterations);
     EXPECT_GT(frames_read, kIterations / 10);
     EXPECT_GT(frame_errors, 0);
+    EXPECT_GT(with_accel, 0);
+}
+
+// The same for an image folder: mutated times.txt and camera.txt.
+TEST(DatasetFuzz, MutatedFolderTimesNeverCrash) {
+    cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+    TempDir tmp("fuzz_folder");
+    const fs::path& dir = tmp.path();
+    fs::create_directories(dir / "images");
+    for (int i = 0; i < 3; ++i) {
+        ASSERT_TRUE(cv::imwrite((dir / "images" / ("f" + std::to_string(i) + ".png")).string(),
+                                tinyImage(i)));
+    }
+    const std::array<std::string, 2> names = {"times.txt", "camera.txt"};
+    const std::array<std::string, 2> base = {"0.0\n0.1\n0.2\n", std::string(kCameraTxt)};
+    test::TextMutator mutator(20240612, {"1e400", "-0", "9223372036.854775808", "nan", "-inf",
+                                         "0.5", "#", "", "0", "1e-9", "100000"});
+    const auto pick = [&](std::size_t n) { return mutator.pick(n); };
+    constexpr int kIterations = 1500;
+    int opened = 0;
+    int frames_read = 0;
+    fs::path run;
+    for (int it = 0; it < kIterations; ++it) {
+        std::array<std::string, 2> text = base;
+        const std::size_t n_mut = 1 + pick(3);
+        for (std::size_t m = 0; m < n_mut; ++m) {
+            mutator.mutate(text[pick(text.size())]);
+        }
+        std::error_code ec;
+        fs::remove_all(run, ec);
+        run = dir / ("run" + std::to_string(it));
+        fs::create_directory(run);
+        for (int i = 0; i < 3; ++i) {
+            const std::string name = "f" + std::to_string(i) + ".png";
+            fs::create_symlink(dir / "images" / name, run / name);
+        }
+        for (std::size_t k = 0; k < names.size(); ++k) {
+            if (pick(8) != 0) {  // sometimes the file is absent
+                writeFile(run / names[k], text[k]);
+            }
+        }
+        DatasetOptions opt;
+        if (pick(6) == 0) {
+            opt.folder_fps = std::array<double, 4>{0.5, 1e9, 0, -3}[pick(4)];
+        }
+        auto src = openDataset(run, opt);
+        if (!src) {
+            ASSERT_FALSE(src.error().message.empty()) << "iteration " << it;
+            continue;
+        }
+        ++opened;
+        FrameSource& fsrc = **src;
+        ASSERT_EQ(fsrc.info().frame_count, 3U);
+        Frame f;
+        std::optional<int64_t> prev_t;
+        for (std::size_t guard = 0; guard <= 3; ++guard) {
+            auto r = fsrc.next(f);
+            if (!r) {
+                ASSERT_FALSE(r.error().message.empty()) << "iteration " << it;
+                continue;
+            }
+            if (!*r) {
+                break;
+            }
+            ++frames_read;
+            ASSERT_EQ(f.id, static_cast<int64_t>(guard));
+            if (prev_t) {
+                ASSERT_GT(f.t_ns, *prev_t) << "iteration " << it;
+            }
+            prev_t = f.t_ns;
+        }
+    }
+    std::cout << "[ fuzz     ] " << kIterations << " mutated folders: " << opened << " opened, "
+              << frames_read << " frames read\n";
+    EXPECT_GT(opened, kIterations / 10);
+    EXPECT_LT(opened, kIterations);
+    EXPECT_GT(frames_read, kIterations / 10);
 }
 
 // ---------------------------------------------------------------- trajectories

@@ -8,6 +8,25 @@
 //                    associated by nearest timestamp within max_assoc_dt_s
 //   camera.txt       optional, one line `width height fx fy cx cy [k1 k2]`
 //   gravity.txt      optional, one line `gx gy gz`: unit down vector, GT world frame
+//   accelerometer.txt optional, `t ax ay az` per line (m/s^2), strictly increasing
+//                    t; the sample nearest to a frame within max_assoc_dt_s
+//                    becomes Frame::accel_C
+//
+// Gravity per frame: Frame::gravity_down_C = R_CtoW^T * gravity_down_W when
+// gravity.txt and the frame's ground-truth pose are both known.
+//
+// Accelerometer convention: NOT ESTABLISHED. A TUM RGB-D accelerometer.txt
+// holds `timestamp ax ay az`, accelerations in m/s^2 from the Kinect's built-in
+// accelerometer. We could not find a source stating the orientation of those
+// axes relative to the colour camera, nor the sign (specific force, +g "up" at
+// rest, or gravity "down"): the benchmark's file-format page
+// (https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats) was not in
+// the reference text we could search, and the readers we found (e.g.
+// SLAMBench's TUM loader) copy the three values unchanged. So the readings are
+// exposed raw in Frame::accel_C and are NOT turned into a gravity direction;
+// gravity_down_C comes from ground truth only. Once the convention is
+// established (e.g. by comparing accel_C with the ground-truth gravity_down_C
+// on a TUM sequence that has both), a derivation can be added here.
 //
 // File names in rgb.txt/depth.txt are relative to the dataset directory and may
 // not contain spaces. See frame_source.h for the error format and for what
@@ -44,5 +63,16 @@ core::Result<core::CameraIntrinsics> readTumCameraFile(const std::filesystem::pa
 
 // gravity.txt: one unit vector (|norm - 1| <= 1e-3), returned normalised.
 core::Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file);
+
+struct TumAccelSample {
+    int64_t t_ns = 0;
+    core::Vec3 accel = core::Vec3::Zero();  // m/s^2, as written (see the top of this file)
+    std::size_t line = 0;                   // 1-based line in the file
+};
+
+// accelerometer.txt: `timestamp ax ay az` per line, strictly increasing
+// timestamps, finite values of at most 1e4 m/s^2.
+core::Result<std::vector<TumAccelSample>> readTumAccelerometer(
+    const std::filesystem::path& accel_file);
 
 }  // namespace scaled::drivers

@@ -1,15 +1,23 @@
 #pragma once
 
 // Frames from a camera or a recorded sequence. FrameSource is the interface the
-// tracker reads from; openDataset() replays a dataset directory from disk:
+// tracker reads from; openDataset() replays a recording from disk. It takes a
+// directory or a file and detects the format (DatasetOptions::format forces one):
 //
-//   TUM RGB-D layout  rgb.txt (`t rgb/x.png`), optional depth.txt, groundtruth.txt
-//                     (`t tx ty tz qx qy qz qw`, camera-to-world, metres), camera.txt
-//                     (`width height fx fy cx cy [k1 k2]`), gravity.txt (unit down vector
-//                     in the ground-truth world frame).
-//   KITTI odometry    image_0/NNNNNN.png, times.txt (one time in seconds per line),
-//                     optional poses.txt (3x4 row-major camera-to-world per line) and
-//                     calib.txt (`P0: 12 numbers`).
+//   TUM RGB-D layout  (directory with rgb.txt) rgb.txt (`t rgb/x.png`), optional
+//                     depth.txt, groundtruth.txt (`t tx ty tz qx qy qz qw`,
+//                     camera-to-world, metres), camera.txt (`width height fx fy cx cy
+//                     [k1 k2]`), gravity.txt (unit down vector in the ground-truth
+//                     world frame), accelerometer.txt (`t ax ay az`); dataset_tum.h.
+//   KITTI odometry    (directory with times.txt and image_0/) image_0/NNNNNN.png,
+//                     times.txt (one time in seconds per line), optional poses.txt
+//                     (3x4 row-major camera-to-world per line) and calib.txt
+//                     (`P0: 12 numbers`); dataset_kitti.h.
+//   Image folder      (any other directory holding images) the images in natural
+//                     order, times from times.txt or DatasetOptions::folder_fps,
+//                     optional camera.txt; dataset_folder.h.
+//   Video file        (a regular file) anything cv::VideoCapture decodes, optional
+//                     camera.txt next to it; dataset_video.h.
 //
 // All index files are parsed once, in openDataset(); images are read by next().
 // Every parse error is a core::Error whose message reads `FILE:LINE: what is
@@ -45,17 +53,32 @@ struct Frame {
                        // expanded to three channels
     std::optional<core::CameraPose> T_CtoW_gt;        // ground-truth pose, metres
     std::optional<std::filesystem::path> depth_path;  // associated depth image, if it exists
-    std::filesystem::path image_path;                 // where the pixels came from (logs)
+    std::filesystem::path image_path;  // where the pixels came from (logs); the video file
+    // Unit gravity direction (pointing down) in this frame's camera frame:
+    // R_CtoW^T * SequenceInfo::gravity_down_W, set when both the sequence's
+    // gravity and this frame's ground-truth pose are known. It is derived from
+    // nothing else: the accelerometer (accel_C) never sets it, because the
+    // orientation of the TUM accelerometer axes relative to the colour camera
+    // is not documented (see dataset_tum.h). So there is no conflict to
+    // resolve: ground truth + gravity.txt is the one source.
+    std::optional<core::Vec3> gravity_down_C;
+    // Raw accelerometer reading (m/s^2) nearest in time to the frame (within
+    // DatasetOptions::max_assoc_dt_s), as written in the dataset (TUM
+    // accelerometer.txt), axes and sign unchanged. Not rotated into the camera
+    // frame and not a gravity estimate: see dataset_tum.h for what is known
+    // about its frame.
+    std::optional<core::Vec3> accel_C;
 };
 
 struct SequenceInfo {
-    std::string name;                          // the dataset directory's name
-    std::filesystem::path dir;                 // dataset directory (empty for live sources)
+    std::string name;           // the dataset directory's name (a video: the file's name)
+    std::filesystem::path dir;  // dataset directory (a video: its directory; empty when live)
     core::CameraIntrinsics intrinsics{};       // valid only when has_intrinsics
     bool has_intrinsics = false;               // false: the caller must supply intrinsics
     std::optional<core::Vec3> gravity_down_W;  // unit, in the ground-truth world frame
     double depth_scale_m = 0;        // metres per depth-image unit; 0 when there is no depth
-    std::size_t frame_count = 0;     // frames next() will return from the start
+    std::size_t frame_count = 0;     // frames next() will return from the start (a video: at
+                                     // most; the container's count may be an estimate)
     std::size_t listed_count = 0;    // frames the index lists (>= frame_count)
     std::vector<std::string> notes;  // things a user should know (dropped frames, missing GT)
 };
@@ -83,13 +106,15 @@ public:
     virtual core::Result<bool> seek(std::size_t index) = 0;
 };
 
-enum class DatasetFormat { kTum, kKitti };
+enum class DatasetFormat { kTum, kKitti, kImageFolder, kVideo };
 
 struct DatasetOptions {
-    // Detected when empty: rgb.txt -> TUM; times.txt and image_0/ -> KITTI.
+    // Detected when empty. A regular file -> video. A directory: rgb.txt -> TUM;
+    // times.txt and image_0/ -> KITTI; else image files in it -> image folder.
     std::optional<DatasetFormat> format;
-    // TUM: ground truth and depth are associated to an image by nearest timestamp
-    // when they are at most this far apart (else the frame has none).
+    // TUM: ground truth, depth and accelerometer samples are associated to an
+    // image by nearest timestamp when they are at most this far apart (else the
+    // frame has none).
     double max_assoc_dt_s = 0.02;
     // Overrides the dataset's intrinsics. width_px/height_px of 0 are taken
     // from the first image.
@@ -104,9 +129,14 @@ struct DatasetOptions {
     // Drop the frames after the last image that exists (partial downloads).
     // When false, every listed frame is kept and next() reports the missing ones.
     bool drop_missing_tail = true;
+    // Frame rate (Hz) of an image folder without times.txt (frame i at i / fps),
+    // and of a video whose container gives no frame rate. Finite, in (0, 1e9].
+    double folder_fps = 30.0;
 };
 
-core::Result<std::unique_ptr<FrameSource>> openDataset(const std::filesystem::path& dir,
+// `path` is a dataset directory, an image folder or a video file (see the top
+// of this file). Errors name the path.
+core::Result<std::unique_ptr<FrameSource>> openDataset(const std::filesystem::path& path,
                                                        const DatasetOptions& opt = {});
 
 }  // namespace scaled::drivers
