@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # slam-run end to end on a synthetic sequence written by synth-render (so it
 # runs without ../shared): trajectory file, JSON summary with ground-truth
-# metrics, sysexits codes.
+# metrics, the same frames as a plain image folder (--camera, --fps), sysexits
+# codes.
 #   tests/cli/slam_run_cli.sh PATH/TO/slam-run PATH/TO/synth-render
 set -euo pipefail
 run=$1
@@ -25,6 +26,35 @@ rows = [l.split() for l in open(sys.argv[2]) if l.strip() and not l.startswith("
 assert len(rows) == 90 and all(len(r) == 8 for r in rows), len(rows)
 PY
 
+# The first 30 rendered frames as a plain image folder: no index, no intrinsics.
+mkdir "$tmp/folder"
+cp "$tmp"/seq/rgb/0000[0-2][0-9].png "$tmp/folder/"
+set +e
+err=$("$run" --dataset "$tmp/folder" 2>&1 >/dev/null); rc=$?
+set -e
+[[ $rc -eq 65 && $err == *"$tmp/folder"* && $err == *"--camera FILE"* ]] ||
+  fail "folder without intrinsics: exit $rc, message: $err"
+json=$("$run" --dataset "$tmp/folder" --camera "$tmp/seq/camera.txt" --out "$tmp/folder.txt" --json)
+python3 - "$json" "$tmp/folder.txt" <<'PY' || fail "folder run does not meet the contract: $json"
+import json, sys
+d = json.loads(sys.argv[1])
+assert d["frames"] == 30 and d["tracked_frames"] == 30 and d["reinitialisations"] == 0, d
+assert d["mean_features_measured"] > 20, d
+assert "ate_rmse_m" not in d, d  # no ground truth in a plain folder
+rows = [l.split() for l in open(sys.argv[2]) if l.strip() and not l.startswith("#")]
+assert len(rows) == 30, len(rows)
+assert abs(float(rows[1][0]) - 1 / 30) < 1e-6, rows[1]  # default 30 Hz
+PY
+# --fps times the frames; a camera.txt in the folder is found without --camera.
+cp "$tmp/seq/camera.txt" "$tmp/folder/"
+"$run" --dataset "$tmp/folder" --fps 15 --frames 0:10 --out "$tmp/folder15.txt" >/dev/null ||
+  fail "folder with camera.txt and --fps 15"
+python3 - "$tmp/folder15.txt" <<'PY' || fail "--fps 15 does not time the frames at 15 Hz"
+import sys
+rows = [l.split() for l in open(sys.argv[1]) if l.strip() and not l.startswith("#")]
+assert len(rows) == 10 and abs(float(rows[1][0]) - 1 / 15) < 1e-6, rows[:2]
+PY
+
 "$run" --help | grep -q '^usage: slam-run' || fail "--help does not print usage"
 set +e
 "$run" >/dev/null 2>&1; rc=$?
@@ -35,6 +65,15 @@ err=$("$run" --dataset "$tmp/seq" --set no_such_key=1 2>&1 >/dev/null); rc=$?
 [[ $rc -eq 64 && $err == *"no_such_key"* ]] || fail "--set unknown key: exit $rc, message: $err"
 "$run" --dataset "$tmp/missing" >/dev/null 2>&1; rc=$?
 [[ $rc -eq 66 ]] || fail "missing dataset: exit $rc, expected 66"
+err=$("$run" --dataset "$tmp/folder" --camera "$tmp/none.txt" 2>&1 >/dev/null); rc=$?
+[[ $rc -eq 66 && $err == *"none.txt"* ]] || fail "missing --camera file: exit $rc, message: $err"
+echo "640 480 525" > "$tmp/short.txt"
+err=$("$run" --dataset "$tmp/folder" --camera "$tmp/short.txt" 2>&1 >/dev/null); rc=$?
+[[ $rc -eq 65 && $err == *"short.txt:1:"* ]] || fail "bad --camera file: exit $rc, message: $err"
+err=$("$run" --dataset "$tmp/folder" --camera "$tmp/seq/camera.txt" --intrinsics 1,1,1,1 2>&1 >/dev/null); rc=$?
+[[ $rc -eq 64 ]] || fail "--camera with --intrinsics: exit $rc, message: $err"
+err=$("$run" --dataset "$tmp/folder" --fps 0 2>&1 >/dev/null); rc=$?
+[[ $rc -eq 64 && $err == *"--fps"* ]] || fail "--fps 0: exit $rc, message: $err"
 echo "bad line" >> "$tmp/seq/rgb.txt"
 err=$("$run" --dataset "$tmp/seq" 2>&1 >/dev/null); rc=$?
 [[ $rc -eq 65 && $err == *"rgb.txt:"* ]] || fail "malformed rgb.txt: exit $rc, message: $err"

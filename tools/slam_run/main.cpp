@@ -1,21 +1,26 @@
-// slam-run: the EKF MonoSLAM tracker over a dataset, with a TUM-format
-// trajectory and a JSON summary (ground-truth metrics where available).
+// slam-run: the EKF MonoSLAM tracker over a dataset, an image folder or a
+// video, with a TUM-format trajectory and a JSON summary (ground-truth metrics
+// where available).
 //
-//   slam-run --dataset DIR [--format tum|kitti] [--frames A:B] [--out traj.txt] [--json]
-//            [--intrinsics fx,fy,cx,cy] [--max-features N] [--max-measured N]
-//            [--no-warp] [--seed N] [--verbose]
+//   slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]
+//            [--out traj.txt] [--json] [--camera camera.txt | --intrinsics fx,fy,cx,cy]
+//            [--fps HZ] [--max-features N] [--max-measured N] [--no-warp] [--seed N]
+//            [--verbose]
 //
 // Exit codes (sysexits): 0 ok, 64 usage, 65 bad data, 66 dataset not found,
 // 73 cannot write the trajectory.
 
 #include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <unistd.h>
 
+#include <scaled/drivers/dataset_tum.h>
 #include <scaled/drivers/trajectory_io.h>
 
 #include "slam_run.h"
@@ -31,12 +36,17 @@ constexpr int kExCantCreat = 73;
 
 void usage(std::FILE* out) {
     std::fputs(
-        "usage: slam-run --dataset DIR [--format tum|kitti] [--frames A:B] [--out TRAJ.txt]\n"
-        "                [--json] [--intrinsics fx,fy,cx,cy] [--max-features N]\n"
-        "                [--max-measured N] [--no-warp] [--seed N] [--set KEY=VALUE]...\n"
-        "                [--verbose]\n"
-        "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, writes the\n"
-        "trajectory (TUM format, SLAM units, world = first camera) and prints a summary.\n",
+        "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
+        "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
+        "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
+        "                [--seed N] [--set KEY=VALUE]... [--verbose]\n"
+        "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, a folder of\n"
+        "images or a video file, writes the trajectory (TUM format, SLAM units, world = first\n"
+        "camera) and prints a summary.\n"
+        "  --camera FILE  intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt format);\n"
+        "                 overrides the dataset's\n"
+        "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
+        "                 container has none (default 30)\n",
         out);
 }
 
@@ -180,6 +190,7 @@ int main(int argc, char** argv) {
     scaled::drivers::DatasetOptions dopt;
     scaled::tools::SlamRunOptions ropt;
     std::optional<scaled::core::CameraIntrinsics> intrinsics;
+    std::filesystem::path camera_file;
     for (int i = 1; i < argc; ++i) {
         const std::string_view a = argv[i];
         auto value = [&]() -> std::optional<std::string_view> {
@@ -219,6 +230,10 @@ int main(int argc, char** argv) {
                 dopt.format = scaled::drivers::DatasetFormat::kTum;
             } else if (*v == "kitti") {
                 dopt.format = scaled::drivers::DatasetFormat::kKitti;
+            } else if (*v == "folder") {
+                dopt.format = scaled::drivers::DatasetFormat::kImageFolder;
+            } else if (*v == "video") {
+                dopt.format = scaled::drivers::DatasetFormat::kVideo;
             } else {
                 ok = false;
             }
@@ -228,6 +243,12 @@ int main(int argc, char** argv) {
             scaled::core::CameraIntrinsics k;
             ok = parseIntrinsics(*v, k);
             intrinsics = k;
+        } else if (a == "--camera") {
+            camera_file = std::string(*v);
+            ok = !camera_file.empty();
+        } else if (a == "--fps") {
+            ok = parseNumber(*v, dopt.folder_fps) && std::isfinite(dopt.folder_fps) &&
+                 dopt.folder_fps > 0 && dopt.folder_fps <= 1e9;
         } else if (a == "--max-features") {
             ok = parseNumber(*v, ropt.tracker.slam.max_features);
         } else if (a == "--max-measured") {
@@ -247,13 +268,27 @@ int main(int argc, char** argv) {
         }
     }
     if (dataset.empty()) {
-        std::fprintf(stderr, "slam-run: --dataset DIR is required\n");
+        std::fprintf(stderr, "slam-run: --dataset DIR|VIDEO is required\n");
         usage(stderr);
         return kExUsage;
     }
-    if (!std::filesystem::is_directory(dataset)) {
-        std::fprintf(stderr, "slam-run: %s: no such dataset directory\n", dataset.c_str());
+    if (intrinsics && !camera_file.empty()) {
+        std::fprintf(stderr, "slam-run: give --camera or --intrinsics, not both\n");
+        return kExUsage;
+    }
+    std::error_code ec;
+    if (!std::filesystem::exists(dataset, ec)) {
+        std::fprintf(stderr, "slam-run: %s: no such dataset directory or video file\n",
+                     dataset.c_str());
         return kExNoInput;
+    }
+    if (!camera_file.empty()) {
+        auto k = scaled::drivers::readTumCameraFile(camera_file);
+        if (!k) {
+            std::fprintf(stderr, "slam-run: --camera: %s\n", k.error().message.c_str());
+            return k.error().code == scaled::core::ErrorCode::kNotFound ? kExNoInput : kExDataErr;
+        }
+        dopt.intrinsics = *k;
     }
     auto source = scaled::drivers::openDataset(dataset, dopt);
     if (!source) {
@@ -271,8 +306,8 @@ int main(int argc, char** argv) {
         k.height_px = h;
     } else if (!src.info().has_intrinsics) {
         std::fprintf(stderr,
-                     "slam-run: %s has no calibration file (camera.txt or calib.txt): give "
-                     "--intrinsics fx,fy,cx,cy\n",
+                     "slam-run: %s has no camera intrinsics (no camera.txt or calib.txt): give "
+                     "--camera FILE or --intrinsics fx,fy,cx,cy\n",
                      dataset.c_str());
         return kExDataErr;
     }
@@ -320,7 +355,7 @@ int main(int argc, char** argv) {
         return kExDataErr;
     }
     for (const auto& note : src.info().notes) {
-        if (intrinsics && note.starts_with("no intrinsics")) {
+        if ((intrinsics || !camera_file.empty()) && note.starts_with("no intrinsics")) {
             continue;  // given on the command line
         }
         std::fprintf(stderr, "slam-run: note: %s\n", note.c_str());

@@ -60,8 +60,9 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
             // The vertical in the frame of the camera that starts the map.
             Vec3 down_C(0, 1, 0);
             result.gravity_source = "assumed level camera (down = +y)";
-            if (info.gravity_down_W && frame.T_CtoW_gt) {
-                down_C = frame.T_CtoW_gt->R_CtoW.transpose() * *info.gravity_down_W;
+            if (frame.gravity_down_C) {
+                // The dataset's gravity rotated by this frame's ground-truth pose.
+                down_C = *frame.gravity_down_C;
                 result.gravity_source = "dataset gravity and ground-truth pose";
             }
             tracker->setGravityDownC(down_C);
