@@ -19,7 +19,6 @@
 
 namespace scaled::drivers {
 
-using core::CameraIntrinsics;
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
@@ -220,16 +219,12 @@ Result<std::unique_ptr<FrameSource>> openImageFolder(const std::filesystem::path
     index.info.listed_count = n;
     index.info.frame_count = n;
 
-    std::optional<CameraIntrinsics> from_dataset;
     const std::filesystem::path camera_file = dir / "camera.txt";
-    if (detail::pathExists(camera_file)) {
-        auto k = readTumCameraFile(camera_file);
-        if (!k) {
-            return k.error();
-        }
-        from_dataset = *k;
+    auto from_dataset = readOptionalCameraFile(camera_file);
+    if (!from_dataset) {
+        return from_dataset.error();
     }
-    if (auto resolved = detail::resolveIntrinsics(index, from_dataset, camera_file.string(), opt);
+    if (auto resolved = detail::resolveIntrinsics(index, *from_dataset, camera_file.string(), opt);
         !resolved) {
         return resolved.error();
     }

@@ -126,6 +126,18 @@ Result<CameraIntrinsics> readTumCameraFile(const std::filesystem::path& camera_f
     return k;
 }
 
+Result<std::optional<CameraIntrinsics>> readOptionalCameraFile(
+    const std::filesystem::path& camera_file) {
+    if (!detail::pathExists(camera_file)) {
+        return std::optional<CameraIntrinsics>();
+    }
+    auto k = readTumCameraFile(camera_file);
+    if (!k) {
+        return k.error();
+    }
+    return std::optional<CameraIntrinsics>(*k);
+}
+
 Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file) {
     auto text = detail::readTextFile(gravity_file);
     if (!text) {
@@ -294,16 +306,12 @@ Result<std::unique_ptr<FrameSource>> openTumDataset(const std::filesystem::path&
             detail::commentMentions(*text, "millimet") ? kMillimetre : kTumDepthScaleM);
     }
 
-    std::optional<CameraIntrinsics> from_dataset;
     const std::filesystem::path camera_file = dir / "camera.txt";
-    if (detail::pathExists(camera_file)) {
-        auto k = readTumCameraFile(camera_file);
-        if (!k) {
-            return k.error();
-        }
-        from_dataset = *k;
+    auto from_dataset = readOptionalCameraFile(camera_file);
+    if (!from_dataset) {
+        return from_dataset.error();
     }
-    if (auto resolved = detail::resolveIntrinsics(index, from_dataset, camera_file.string(), opt);
+    if (auto resolved = detail::resolveIntrinsics(index, *from_dataset, camera_file.string(), opt);
         !resolved) {
         return resolved.error();
     }

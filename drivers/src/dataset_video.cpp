@@ -15,7 +15,6 @@
 
 namespace scaled::drivers {
 
-using core::CameraIntrinsics;
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
@@ -355,18 +354,14 @@ Result<std::unique_ptr<FrameSource>> openVideo(const std::filesystem::path& file
         return first.error();
     }
 
-    std::optional<CameraIntrinsics> from_dataset;
     const std::filesystem::path camera_file = file.parent_path() / "camera.txt";
-    if (detail::pathExists(camera_file)) {
-        auto k = readTumCameraFile(camera_file);
-        if (!k) {
-            return k.error();
-        }
-        from_dataset = *k;
+    auto from_dataset = readOptionalCameraFile(camera_file);
+    if (!from_dataset) {
+        return from_dataset.error();
     }
     if (auto resolved =
-            detail::chooseIntrinsics(source->mutableInfo(), from_dataset, camera_file.string(), opt,
-                                     [&]() -> Result<cv::Size> { return first->size(); });
+            detail::chooseIntrinsics(source->mutableInfo(), *from_dataset, camera_file.string(),
+                                     opt, [&]() -> Result<cv::Size> { return first->size(); });
         !resolved) {
         return resolved.error();
     }

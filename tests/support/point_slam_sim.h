@@ -35,6 +35,18 @@ struct PointSimOptions {
     Scalar known_depth_rel_sigma = 0;
 };
 
+// A filter configuration suited to the point simulation (smooth motion,
+// 1 px matches, a map of 60 features).
+inline core::slam::SlamConfig pointSimSlamConfig() {
+    core::slam::SlamConfig c;
+    c.motion = {Scalar(2), Scalar(2)};
+    c.pixel_sigma_px = 1;
+    c.max_features = 60;
+    c.max_measured = 40;
+    c.min_visible = 20;
+    return c;
+}
+
 // Camera-to-world pose of the simulated camera at time t (world z up, camera
 // looking roughly along +y, moving along a smooth loop).
 inline core::CameraPose pointSimPose(Scalar t) {

@@ -18,16 +18,17 @@
 #include <scaled/detector/dnn_detector.h>
 
 #include "detect_report.h"
+#include "sysexits.h"
 
 namespace {
 
+using scaled::tools::kExCantCreat;
+using scaled::tools::kExDataErr;
+using scaled::tools::kExNoInput;
+using scaled::tools::kExUsage;
+
 using scaled::core::ErrorCode;
 using scaled::detector::DetectorConfig;
-
-constexpr int kExUsage = 64;
-constexpr int kExDataErr = 65;
-constexpr int kExNoInput = 66;
-constexpr int kExCantCreat = 73;
 
 void usage(std::FILE* out) {
     std::fputs(

@@ -13,11 +13,12 @@
 #include <string_view>
 
 #include "experiments.h"
+#include "sysexits.h"
 
 namespace {
 
-constexpr int kExUsage = 64;
-constexpr int kExSoftware = 70;
+using scaled::tools::kExSoftware;
+using scaled::tools::kExUsage;
 
 void usage(std::FILE* out) {
     std::fputs(

@@ -24,15 +24,16 @@
 #include <scaled/drivers/trajectory_io.h>
 
 #include "slam_run.h"
+#include "sysexits.h"
 
 namespace {
 
-using scaled::core::Scalar;
+using scaled::tools::kExCantCreat;
+using scaled::tools::kExDataErr;
+using scaled::tools::kExNoInput;
+using scaled::tools::kExUsage;
 
-constexpr int kExUsage = 64;
-constexpr int kExDataErr = 65;
-constexpr int kExNoInput = 66;
-constexpr int kExCantCreat = 73;
+using scaled::core::Scalar;
 
 void usage(std::FILE* out) {
     std::fputs(

@@ -7,6 +7,8 @@
 
 #include <scaled/core/geometry/trajectory_alignment.h>
 
+#include "json.h"
+
 namespace scaled::tools {
 
 namespace {
@@ -133,22 +135,8 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
 }
 
 std::string toJson(const SlamRunResult& r, const std::string& dataset) {
-    auto num = [](double v) {
-        if (!std::isfinite(v)) {
-            return std::string("null");
-        }
-        char buf[64];
-        std::snprintf(buf, sizeof buf, "%.6g", v);
-        return std::string(buf);
-    };
-    std::string escaped;
-    for (const char c : dataset) {
-        if (c == '"' || c == '\\') {
-            escaped += '\\';
-        }
-        escaped += c;
-    }
-    std::string s = "{\"dataset\":\"" + escaped + "\"";
+    const auto num = [](double v) { return jsonNumber(v); };
+    std::string s = "{\"dataset\":" + jsonString(dataset);
     s += ",\"frames\":" + std::to_string(r.frames);
     s += ",\"tracked_frames\":" + std::to_string(r.tracked_frames);
     s += ",\"reinitialisations\":" + std::to_string(r.reinitialisations);
@@ -165,7 +153,7 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
         s += ",\"scale_to_gt\":" + num(r.scale_to_gt);
         s += ",\"scale_drift_thirds\":" + num(r.scale_drift_thirds);
     }
-    s += ",\"gravity_source\":\"" + r.gravity_source + "\"}";
+    s += ",\"gravity_source\":" + jsonString(r.gravity_source) + "}";
     return s;
 }
 

@@ -35,10 +35,13 @@
 #include <scaled/synth/scene.h>
 #include <scaled/synth/trajectory.h>
 
+#include "sysexits.h"
+
 namespace {
 
-constexpr int kExUsage = 64;
-constexpr int kExCantCreate = 73;
+using scaled::tools::kExCantCreat;
+using scaled::tools::kExUsage;
+
 constexpr double kTumDepthPerMetre = 5000.0;
 
 void usage(std::FILE* out) {
@@ -231,7 +234,7 @@ int run(const Options& opts) {
         if (ec) {
             std::cerr << "synth-render: cannot create " << (dir / sub).string() << ": "
                       << ec.message() << "\n";
-            return kExCantCreate;
+            return kExCantCreat;
         }
     }
     std::ofstream rgb_txt(dir / "rgb.txt");
@@ -244,7 +247,7 @@ int run(const Options& opts) {
     }
     if (!rgb_txt || !gt_txt || !camera_txt || !gravity_txt || (opts.depth && !depth_txt)) {
         std::cerr << "synth-render: cannot create the text files in " << dir.string() << "\n";
-        return kExCantCreate;
+        return kExCantCreat;
     }
     const bool distorted = opts.k1 != 0.0 || opts.k2 != 0.0;
     camera_txt.precision(12);
@@ -285,7 +288,7 @@ int run(const Options& opts) {
         const std::string name = frameName("rgb", i);
         if (!cv::imwrite((dir / name).string(), image)) {
             std::cerr << "synth-render: cannot write " << (dir / name).string() << "\n";
-            return kExCantCreate;
+            return kExCantCreat;
         }
         const std::string t = seconds(f.t_ns);
         rgb_txt << t << " " << name << "\n";
@@ -293,7 +296,7 @@ int run(const Options& opts) {
             const std::string depth_name = frameName("depth", i);
             if (!cv::imwrite((dir / depth_name).string(), tumDepth(depth))) {
                 std::cerr << "synth-render: cannot write " << (dir / depth_name).string() << "\n";
-                return kExCantCreate;
+                return kExCantCreat;
             }
             depth_txt << t << " " << depth_name << "\n";
         }
@@ -309,7 +312,7 @@ int run(const Options& opts) {
     depth_txt.flush();
     if (!rgb_txt || !gt_txt || !camera_txt || !gravity_txt || (opts.depth && !depth_txt)) {
         std::cerr << "synth-render: error writing the text files in " << dir.string() << "\n";
-        return kExCantCreate;
+        return kExCantCreat;
     }
     std::cout << "synth-render: " << frames.size() << " frames, "
               << static_cast<double>(scaled::synth::pathLength(frames)) << " m of path, in "
@@ -329,6 +332,6 @@ int main(int argc, char** argv) {
         return run(opts);
     } catch (const std::exception& e) {  // cv::imwrite and the filesystem may throw
         std::cerr << "synth-render: " << e.what() << "\n";
-        return kExCantCreate;
+        return kExCantCreat;
     }
 }

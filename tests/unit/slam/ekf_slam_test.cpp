@@ -21,16 +21,6 @@ namespace {
 using test::PointSimOptions;
 using test::PointSlamSim;
 
-SlamConfig simConfig() {
-    SlamConfig c;
-    c.motion = {Scalar(2), Scalar(2)};
-    c.pixel_sigma_px = 1;
-    c.max_features = 60;
-    c.max_measured = 40;
-    c.min_visible = 20;
-    return c;
-}
-
 struct RunResult {
     std::vector<Vec3> est;
     std::vector<Vec3> gt;
@@ -80,7 +70,7 @@ TEST(EkfSlam, ValidateNamesTheField) {
 TEST(EkfSlam, TracksTheSimulatedPathWithArbitraryScale) {
     PointSimOptions opt;
     opt.frames = 300;
-    const auto r = run(opt, simConfig());
+    const auto r = run(opt, test::pointSimSlamConfig());
     EXPECT_EQ(r.health, SlamHealth::kOk);
     EXPECT_EQ(r.bad_frames, 0);
     const auto a = alignTrajectories(r.est, r.gt);
@@ -96,7 +86,7 @@ TEST(EkfSlam, KnownDepthGivesMetricScale) {
     PointSimOptions opt;
     opt.frames = 150;
     opt.known_depth_rel_sigma = Scalar(0.02);
-    const auto r = run(opt, simConfig());
+    const auto r = run(opt, test::pointSimSlamConfig());
     const auto a = alignTrajectories(r.est, r.gt);
     ASSERT_TRUE(a.ok());
     EXPECT_NEAR(a->scale, 1, 0.05);
@@ -112,7 +102,7 @@ TEST(EkfSlam, OnePointRansacRejectsGrossOutliers) {
     opt.outlier_fraction = Scalar(0.2);
     const auto cam = test::makeCamera(0, 0, 500);
     PointSlamSim sim(cam, opt);
-    auto slam = EkfSlam::create(cam, simConfig());
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
     ASSERT_TRUE(slam.ok());
     slam->initialise(sim.timeNs(0), sim.gravityDownC0());
     int outliers = 0;
@@ -147,7 +137,7 @@ TEST(EkfSlam, MapPointsCarryConsistentCovariances) {
     opt.known_depth_rel_sigma = Scalar(0.02);
     const auto cam = test::makeCamera(0, 0, 500);
     PointSlamSim sim(cam, opt);
-    auto slam = EkfSlam::create(cam, simConfig());
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
     ASSERT_TRUE(slam.ok());
     slam->initialise(sim.timeNs(0), sim.gravityDownC0());
     for (int k = 0; k < opt.frames; ++k) {
@@ -183,7 +173,7 @@ TEST(EkfSlam, RefusesBadTimestampsAndReportsLostTrack) {
     const auto cam = test::makeCamera(0, 0, 500);
     PointSimOptions opt;
     PointSlamSim sim(cam, opt);
-    auto slam = EkfSlam::create(cam, simConfig());
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
     ASSERT_TRUE(slam.ok());
     EXPECT_EQ(slam->predict(1), SlamHealth::kUninitialised);
     slam->initialise(sim.timeNs(0), sim.gravityDownC0());
@@ -230,7 +220,7 @@ TEST(EkfSlam, NumericalHealthDetectsNanAndLossOfPositiveDefiniteness) {
 
 TEST(EkfSlam, RejectsNonFiniteInputsWithoutCorruptingTheState) {
     const auto cam = test::makeCamera(0, 0, 500);
-    auto slam = EkfSlam::create(cam, simConfig());
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
     ASSERT_TRUE(slam.ok());
     slam->initialise(0, Vec3(0, 1, 0));
     const Scalar nan = std::numeric_limits<Scalar>::quiet_NaN();
@@ -247,7 +237,7 @@ TEST(EkfSlam, RejectsNonFiniteInputsWithoutCorruptingTheState) {
 
 TEST(EkfSlam, DeletesFeaturesThatAreNeverFoundAndCapsTheMap) {
     const auto cam = test::makeCamera(0, 0, 500);
-    SlamConfig c = simConfig();
+    SlamConfig c = test::pointSimSlamConfig();
     c.max_features = 12;
     c.max_measured = 12;
     c.min_visible = 12;

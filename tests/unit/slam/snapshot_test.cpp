@@ -76,16 +76,6 @@ using test::PointSlamSim;
 constexpr std::string_view kClass = "post";
 constexpr Scalar kHeightM = 0.5;
 
-SlamConfig simConfig() {
-    SlamConfig c;
-    c.motion = {Scalar(2), Scalar(2)};
-    c.pixel_sigma_px = 1;
-    c.max_features = 60;
-    c.max_measured = 40;
-    c.min_visible = 20;
-    return c;
-}
-
 PointSimOptions simOptions() {
     PointSimOptions o;
     o.seed = 7;
@@ -101,7 +91,7 @@ struct Rig {
     PinholeRadialCamera cam = test::makeCamera(0, 0, 500);
     PointSimOptions opt = simOptions();
     PointSlamSim sim{cam, opt};
-    EkfSlam slam = EkfSlam::create(cam, simConfig()).value();
+    EkfSlam slam = EkfSlam::create(cam, test::pointSimSlamConfig()).value();
     int next_frame = 0;
 
     Rig() { slam.initialise(sim.timeNs(0), sim.gravityDownC0()); }
@@ -505,7 +495,7 @@ TEST(SlamSnapshot, TruncatesToCapacityAndReportsTheRest) {
 
 TEST(SlamSnapshot, AnUninitialisedFilterGivesAnEmptySnapshot) {
     const PinholeRadialCamera cam = test::makeCamera(0, 0, 500);
-    const EkfSlam slam = EkfSlam::create(cam, simConfig()).value();
+    const EkfSlam slam = EkfSlam::create(cam, test::pointSimSlamConfig()).value();
     SlamSnapshot snap = SlamSnapshot::create(16).value();
     const CaptureReport rep = snap.capture(slam, 5, 2);
     EXPECT_EQ(rep.status, CaptureStatus::kUninitialised);

@@ -36,6 +36,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -60,6 +61,11 @@ core::Result<std::vector<TumListEntry>> readTumImageList(const std::filesystem::
 
 // camera.txt: `width height fx fy cx cy` or `... k1 k2`; validated.
 core::Result<core::CameraIntrinsics> readTumCameraFile(const std::filesystem::path& camera_file);
+
+// readTumCameraFile() when the file exists, nullopt when it does not (the
+// intrinsics then come from the options or the caller).
+core::Result<std::optional<core::CameraIntrinsics>> readOptionalCameraFile(
+    const std::filesystem::path& camera_file);
 
 // gravity.txt: one unit vector (|norm - 1| <= 1e-3), returned normalised.
 core::Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file);
