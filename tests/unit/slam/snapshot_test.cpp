@@ -22,50 +22,9 @@
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/core/slam/slam_snapshot.h>
 
+#include "allocation_counter.h"
 #include "point_slam_sim.h"
 #include "scene.h"
-
-// Counts heap allocations of this test binary, to check that capture() does
-// not allocate once the snapshot is reserved.
-namespace {
-std::atomic<std::int64_t> g_allocations{0};
-
-void* countedAlloc(std::size_t size, std::size_t alignment) {
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-    size = std::max<std::size_t>(size, 1);
-    void* p = nullptr;
-    if (alignment <= alignof(std::max_align_t)) {
-        p = std::malloc(size);
-    } else {
-        size = (size + alignment - 1) / alignment * alignment;
-        p = std::aligned_alloc(alignment, size);
-    }
-    if (p == nullptr) {
-        std::fputs("snapshot_test: out of memory\n", stderr);
-        std::abort();
-    }
-    return p;
-}
-}  // namespace
-
-void* operator new(std::size_t size) {
-    return countedAlloc(size, 0);
-}
-void* operator new(std::size_t size, std::align_val_t al) {
-    return countedAlloc(size, static_cast<std::size_t>(al));
-}
-void operator delete(void* p) noexcept {
-    std::free(p);
-}
-void operator delete(void* p, std::size_t /*size*/) noexcept {
-    std::free(p);
-}
-void operator delete(void* p, std::align_val_t /*al*/) noexcept {
-    std::free(p);
-}
-void operator delete(void* p, std::size_t /*size*/, std::align_val_t /*al*/) noexcept {
-    std::free(p);
-}
 
 namespace scaled::core::slam {
 namespace {
@@ -442,9 +401,9 @@ TEST(SlamSnapshot, CapturesWithoutAllocatingAfterReserve) {
     int max_size = 0;
     for (int f = 6; f <= 80; ++f) {
         rig.runTo(f);
-        const std::int64_t n0 = g_allocations.load();
+        const std::int64_t n0 = test::allocationCount();
         const CaptureReport rep = snap.capture(rig.slam, f, 1);
-        allocations += g_allocations.load() - n0;
+        allocations += test::allocationCount() - n0;
         ASSERT_EQ(rep.status, CaptureStatus::kOk);
         ASSERT_EQ(snap.features().data(), features);
         ASSERT_EQ(snap.featureInfo().data(), info);
@@ -455,9 +414,9 @@ TEST(SlamSnapshot, CapturesWithoutAllocatingAfterReserve) {
     EXPECT_EQ(snap.capacity(), rig.slam.config().max_features);
     EXPECT_GT(max_size, 20);
     // The counter does count: a copy allocates.
-    const std::int64_t n0 = g_allocations.load();
+    const std::int64_t n0 = test::allocationCount();
     const SlamSnapshot copy = snap;
-    EXPECT_GT(g_allocations.load() - n0, 0);
+    EXPECT_GT(test::allocationCount() - n0, 0);
     EXPECT_EQ(copy.size(), snap.size());
 }
 
@@ -469,9 +428,9 @@ TEST(SlamSnapshot, TruncatesToCapacityAndReportsTheRest) {
     ASSERT_GT(pts.size(), 10U);
     SlamSnapshot snap = SlamSnapshot::create(8).value();
     const MapFeature* features = snap.features().data();
-    const std::int64_t n0 = g_allocations.load();
+    const std::int64_t n0 = test::allocationCount();
     const CaptureReport rep = snap.capture(rig.slam, 30, 3);
-    EXPECT_EQ(g_allocations.load() - n0, 0);
+    EXPECT_EQ(test::allocationCount() - n0, 0);
     EXPECT_EQ(rep.status, CaptureStatus::kTruncated);
     EXPECT_STREQ(toString(rep.status), "truncated");
     EXPECT_EQ(rep.captured, 8);
@@ -535,9 +494,9 @@ TEST(SlamSnapshot, SwapHandsOverWithoutCopying) {
     const MapFeature* pa = a.features().data();
     const MapFeature* pb = b.features().data();
     const int na = a.size();
-    const std::int64_t n0 = g_allocations.load();
+    const std::int64_t n0 = test::allocationCount();
     std::swap(a, b);
-    EXPECT_EQ(g_allocations.load() - n0, 0);
+    EXPECT_EQ(test::allocationCount() - n0, 0);
     EXPECT_EQ(a.frameId(), 21);
     EXPECT_EQ(b.frameId(), 20);
     EXPECT_EQ(a.features().data(), pb);
