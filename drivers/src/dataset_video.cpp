@@ -1,8 +1,10 @@
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <exception>
 #include <opencv2/videoio.hpp>
+#include <opencv2/videoio/registry.hpp>
 #include <optional>
 #include <string>
 #include <system_error>
@@ -20,6 +22,31 @@ using core::makeError;
 using core::Result;
 
 namespace {
+
+// The OpenCV backends that read video files, in order of preference. CAP_ANY
+// would also try camera backends on a file name (V4L2, and GPHOTO2, which
+// enumerates USB devices through libusb and leaks doing so) and CV_IMAGES
+// (which takes a printf pattern in the name for an image sequence).
+constexpr std::array<cv::VideoCaptureAPIs, 3> kFileBackends = {cv::CAP_FFMPEG, cv::CAP_GSTREAMER,
+                                                               cv::CAP_OPENCV_MJPEG};
+
+// Opens `file` with the first file backend that reads it. Never throws.
+bool openVideoFile(cv::VideoCapture& cap, const std::string& file) {
+    for (const cv::VideoCaptureAPIs api : kFileBackends) {
+        if (!cv::videoio_registry::hasBackend(api)) {
+            continue;
+        }
+        try {
+            if (cap.open(file, api) && cap.isOpened()) {
+                return true;
+            }
+        } catch (const cv::Exception&) {
+            // this backend cannot read it: try the next one
+        }
+        cap.release();
+    }
+    return false;
+}
 
 // Consecutive frames that fail to decode before the stream is taken as ended.
 constexpr std::size_t kMaxBadRun = 32;
@@ -202,7 +229,7 @@ private:
     Result<bool> reopen() {
         try {
             cap_.release();
-            if (!cap_.open(file_.string(), cv::CAP_ANY) || !cap_.isOpened()) {
+            if (!openVideoFile(cap_, file_.string())) {
                 return makeError(ErrorCode::kIo,
                                  name_ + ": cannot open as a video (no OpenCV backend reads it)");
             }
@@ -296,8 +323,8 @@ private:
     // Frames counted by grabbing them all, for containers that give no count.
     Result<std::size_t> countFrames() const {
         try {
-            cv::VideoCapture cap(file_.string(), cv::CAP_ANY);
-            if (!cap.isOpened()) {
+            cv::VideoCapture cap;
+            if (!openVideoFile(cap, file_.string())) {
                 return makeError(ErrorCode::kIo, name_ + ": cannot open the video");
             }
             std::size_t n = 0;
