@@ -5,6 +5,7 @@
 // fuzz tests.
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <filesystem>
 #include <fstream>
@@ -80,6 +81,18 @@ inline cv::Mat tinyImage(int seed) {
 // Random damage to the text of an index file: byte flips, truncation,
 // duplicated, deleted or swapped lines, inserted garbage, a field replaced by
 // one of `tokens`, or the whole text emptied.
+// A new empty directory dir/runN for fuzz iteration N, the previous one
+// removed (rewriting files in place is slow on ext4, which flushes
+// truncated-and-rewritten files on close).
+inline std::filesystem::path freshRunDir(const std::filesystem::path& dir, int iteration,
+                                         const std::filesystem::path& previous) {
+    std::error_code ec;
+    std::filesystem::remove_all(previous, ec);
+    std::filesystem::path run = dir / ("run" + std::to_string(iteration));
+    std::filesystem::create_directory(run);
+    return run;
+}
+
 class TextMutator {
 public:
     TextMutator(unsigned seed, std::vector<std::string> tokens)
@@ -87,6 +100,17 @@ public:
 
     std::size_t pick(std::size_t n) {
         return n == 0 ? std::size_t{0} : std::uniform_int_distribution<std::size_t>(0, n - 1)(rng_);
+    }
+
+    // A copy of `texts` with 1-3 mutations, each in a randomly chosen text.
+    template <std::size_t N>
+    std::array<std::string, N> mutated(const std::array<std::string, N>& texts) {
+        std::array<std::string, N> out = texts;
+        const std::size_t n = 1 + pick(3);
+        for (std::size_t m = 0; m < n; ++m) {
+            mutate(out[pick(N)]);
+        }
+        return out;
     }
 
     void mutate(std::string& s) {

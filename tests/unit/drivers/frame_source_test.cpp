@@ -798,17 +798,8 @@ TEST(DatasetFuzz, MutatedIndexFilesNeverCrash) {
     int frame_errors = 0;
     int with_accel = 0;
     for (int it = 0; it < kIterations; ++it) {
-        std::array<std::string, 5> text = base;
-        const std::size_t n_mut = 1 + pick(3);
-        for (std::size_t m = 0; m < n_mut; ++m) {
-            mutator.mutate(text[pick(text.size())]);
-        }
-        // A fresh directory per run (rewriting files in place is slow on ext4,
-        // which flushes truncated-and-rewritten files on close).
-        std::error_code ec;
-        fs::remove_all(run, ec);
-        run = dir / ("run" + std::to_string(it));
-        fs::create_directory(run);
+        const std::array<std::string, 5> text = mutator.mutated(base);
+        run = test::freshRunDir(dir, it, run);
         fs::create_directory_symlink(dir / "rgb", run / "rgb");
         for (std::size_t k = 0; k < names.size(); ++k) {
             writeFile(run / names[k], text[k]);
@@ -909,15 +900,8 @@ TEST(DatasetFuzz, MutatedFolderTimesNeverCrash) {
     int frames_read = 0;
     fs::path run;
     for (int it = 0; it < kIterations; ++it) {
-        std::array<std::string, 2> text = base;
-        const std::size_t n_mut = 1 + pick(3);
-        for (std::size_t m = 0; m < n_mut; ++m) {
-            mutator.mutate(text[pick(text.size())]);
-        }
-        std::error_code ec;
-        fs::remove_all(run, ec);
-        run = dir / ("run" + std::to_string(it));
-        fs::create_directory(run);
+        const std::array<std::string, 2> text = mutator.mutated(base);
+        run = test::freshRunDir(dir, it, run);
         for (int i = 0; i < 3; ++i) {
             const std::string name = "f" + std::to_string(i) + ".png";
             fs::create_symlink(dir / "images" / name, run / name);
