@@ -128,6 +128,12 @@ core::Result<bool> resolveIntrinsics(ReplayIndex& index,
                                      const std::optional<core::CameraIntrinsics>& from_dataset,
                                      std::string_view dataset_source, const DatasetOptions& opt);
 
+// resolveIntrinsics() with the intrinsics of `camera_file` (camera.txt
+// format, readOptionalCameraFile) when it exists. Defined in dataset_tum.cpp.
+core::Result<bool> resolveIntrinsicsFromCameraFile(ReplayIndex& index,
+                                                   const std::filesystem::path& camera_file,
+                                                   const DatasetOptions& opt);
+
 // Nanoseconds from seconds; fails on non-finite, negative or huge values.
 core::Result<int64_t> toleranceNs(double seconds);
 

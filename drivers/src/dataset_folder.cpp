@@ -219,12 +219,7 @@ Result<std::unique_ptr<FrameSource>> openImageFolder(const std::filesystem::path
     index.info.listed_count = n;
     index.info.frame_count = n;
 
-    const std::filesystem::path camera_file = dir / "camera.txt";
-    auto from_dataset = readOptionalCameraFile(camera_file);
-    if (!from_dataset) {
-        return from_dataset.error();
-    }
-    if (auto resolved = detail::resolveIntrinsics(index, *from_dataset, camera_file.string(), opt);
+    if (auto resolved = detail::resolveIntrinsicsFromCameraFile(index, dir / "camera.txt", opt);
         !resolved) {
         return resolved.error();
     }

@@ -138,6 +138,20 @@ Result<std::optional<CameraIntrinsics>> readOptionalCameraFile(
     return std::optional<CameraIntrinsics>(*k);
 }
 
+namespace detail {
+
+Result<bool> resolveIntrinsicsFromCameraFile(ReplayIndex& index,
+                                             const std::filesystem::path& camera_file,
+                                             const DatasetOptions& opt) {
+    auto from_dataset = readOptionalCameraFile(camera_file);
+    if (!from_dataset) {
+        return from_dataset.error();
+    }
+    return resolveIntrinsics(index, *from_dataset, camera_file.string(), opt);
+}
+
+}  // namespace detail
+
 Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file) {
     auto text = detail::readTextFile(gravity_file);
     if (!text) {
@@ -306,12 +320,7 @@ Result<std::unique_ptr<FrameSource>> openTumDataset(const std::filesystem::path&
             detail::commentMentions(*text, "millimet") ? kMillimetre : kTumDepthScaleM);
     }
 
-    const std::filesystem::path camera_file = dir / "camera.txt";
-    auto from_dataset = readOptionalCameraFile(camera_file);
-    if (!from_dataset) {
-        return from_dataset.error();
-    }
-    if (auto resolved = detail::resolveIntrinsics(index, *from_dataset, camera_file.string(), opt);
+    if (auto resolved = detail::resolveIntrinsicsFromCameraFile(index, dir / "camera.txt", opt);
         !resolved) {
         return resolved.error();
     }
