@@ -14,6 +14,7 @@
 #include <scaled/detector/dnn_detector.h>
 
 #include "shared_data.h"
+#include "temp_dir.h"
 
 namespace {
 
@@ -25,43 +26,24 @@ using scaled::detector::DetectorConfig;
 using scaled::detector::DnnDetector;
 using scaled::detector::ModelFamily;
 using scaled::detector::ObjectDetection;
+using scaled::test::TempDir;
 
-class TempDir {
-public:
-    TempDir() {
-        path_ = fs::temp_directory_path() /
-                ("scaled_detector_test_" +
-                 std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-    TempDir(TempDir&&) = delete;
-    TempDir& operator=(TempDir&&) = delete;
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    [[nodiscard]] const fs::path& path() const { return path_; }
-    [[nodiscard]] fs::path write(const std::string& name, const std::string& content) const {
-        fs::path p = path_ / name;
-        std::ofstream(p, std::ios::binary) << content;
-        return p;
-    }
-    // The first `bytes` bytes of `src` as a new file.
-    [[nodiscard]] fs::path truncated(const fs::path& src, const std::string& name,
-                                     std::size_t bytes) const {
-        std::ifstream in(src, std::ios::binary);
-        std::string data(bytes, '\0');
-        in.read(data.data(), static_cast<std::streamsize>(bytes));
-        data.resize(static_cast<std::size_t>(in.gcount()));
-        return write(name, data);
-    }
+// A file with `content` in the test's temporary directory.
+fs::path writeFile(const TempDir& dir, const std::string& name, const std::string& content) {
+    fs::path p = dir.path() / name;
+    std::ofstream(p, std::ios::binary) << content;
+    return p;
+}
 
-private:
-    fs::path path_;
-};
+// The first `bytes` bytes of `src` as a new file.
+fs::path truncatedCopy(const TempDir& dir, const fs::path& src, const std::string& name,
+                       std::size_t bytes) {
+    std::ifstream in(src, std::ios::binary);
+    std::string data(bytes, '\0');
+    in.read(data.data(), static_cast<std::streamsize>(bytes));
+    data.resize(static_cast<std::size_t>(in.gcount()));
+    return writeFile(dir, name, data);
+}
 
 std::string readAll(const fs::path& p) {
     std::string data(static_cast<std::size_t>(fs::file_size(p)), '\0');
@@ -185,24 +167,25 @@ TEST(DetectorConfig, FamilyFromTextAndPath) {
 }
 
 TEST(ClassNames, ReadsLinesAndNamesFileAndLineOfProblems) {
-    TempDir tmp;
-    auto ok = scaled::detector::readClassNames(tmp.write("ok.names", "person\r\ndining table\n\n"));
+    TempDir tmp("detector");
+    auto ok =
+        scaled::detector::readClassNames(writeFile(tmp, "ok.names", "person\r\ndining table\n\n"));
     ASSERT_TRUE(ok.ok()) << ok.error().message;
     EXPECT_EQ(*ok, (std::vector<std::string>{"person", "dining table"}));
 
-    auto gap = scaled::detector::readClassNames(tmp.write("gap.names", "a\n\nb\n"));
+    auto gap = scaled::detector::readClassNames(writeFile(tmp, "gap.names", "a\n\nb\n"));
     ASSERT_FALSE(gap.ok());
     EXPECT_NE(gap.error().message.find("gap.names:2:"), std::string::npos) << gap.error().message;
 
-    auto empty = scaled::detector::readClassNames(tmp.write("empty.names", ""));
+    auto empty = scaled::detector::readClassNames(writeFile(tmp, "empty.names", ""));
     ASSERT_FALSE(empty.ok());
     EXPECT_NE(empty.error().message.find("empty.names"), std::string::npos);
 
-    auto blank = scaled::detector::readClassNames(tmp.write("blank.names", "\n\n"));
+    auto blank = scaled::detector::readClassNames(writeFile(tmp, "blank.names", "\n\n"));
     ASSERT_FALSE(blank.ok());
     EXPECT_NE(blank.error().message.find("no class names"), std::string::npos);
 
-    auto ctrl = scaled::detector::readClassNames(tmp.write("ctrl.names", "a\nb\x01\n"));
+    auto ctrl = scaled::detector::readClassNames(writeFile(tmp, "ctrl.names", "a\nb\x01\n"));
     ASSERT_FALSE(ctrl.ok());
     EXPECT_NE(ctrl.error().message.find("ctrl.names:2:"), std::string::npos);
 
@@ -213,29 +196,29 @@ TEST(ClassNames, ReadsLinesAndNamesFileAndLineOfProblems) {
 }
 
 TEST(DnnDetectorFiles, MissingModelOrWeightsIsNotFoundNamingTheFile) {
-    TempDir tmp;
-    (void)tmp.write("coco.names", "a\nb\n");
+    TempDir tmp("detector");
+    (void)writeFile(tmp, "coco.names", "a\nb\n");
     auto r = DnnDetector::create(yoloxConfig(tmp.path() / "absent.onnx"));
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
     EXPECT_NE(r.error().message.find("absent.onnx"), std::string::npos) << r.error().message;
 
-    const fs::path cfg = tmp.write("net.cfg", "[net]\nwidth=320\nheight=320\n");
+    const fs::path cfg = writeFile(tmp, "net.cfg", "[net]\nwidth=320\nheight=320\n");
     auto d = DnnDetector::create(darknetConfig(cfg));
     ASSERT_FALSE(d.ok());
     EXPECT_EQ(d.error().code, ErrorCode::kNotFound);
     EXPECT_NE(d.error().message.find("net.weights"), std::string::npos) << d.error().message;
 
-    auto e = DnnDetector::create(yoloxConfig(tmp.write("empty.onnx", "")));
+    auto e = DnnDetector::create(yoloxConfig(writeFile(tmp, "empty.onnx", "")));
     ASSERT_FALSE(e.ok());
     EXPECT_NE(e.error().message.find("empty.onnx"), std::string::npos);
     EXPECT_NE(e.error().message.find("empty"), std::string::npos);
 }
 
 TEST(DnnDetectorFiles, NotAnOnnxFileIsAParseErrorNamingTheFile) {
-    TempDir tmp;
-    (void)tmp.write("coco.names", "a\nb\n");
-    auto r = DnnDetector::create(yoloxConfig(tmp.write("text.onnx", "this is not a model\n")));
+    TempDir tmp("detector");
+    (void)writeFile(tmp, "coco.names", "a\nb\n");
+    auto r = DnnDetector::create(yoloxConfig(writeFile(tmp, "text.onnx", "this is not a model\n")));
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::kParse);
     EXPECT_NE(r.error().message.find("text.onnx"), std::string::npos) << r.error().message;
@@ -244,10 +227,10 @@ TEST(DnnDetectorFiles, NotAnOnnxFileIsAParseErrorNamingTheFile) {
 TEST(DnnDetectorFiles, TruncatedOrWrongFormatRealModelsNameTheFile) {
     SCALED_REQUIRE_MODEL(onnx, "yolox_nano.onnx");
     SCALED_REQUIRE_MODEL(cfg, "yolo-fastest-1.1-xl.cfg");
-    TempDir tmp;
+    TempDir tmp("detector");
     fs::copy_file(onnx.parent_path() / "coco.names", tmp.path() / "coco.names");
 
-    const fs::path cut = tmp.truncated(onnx, "cut.onnx", 1000000);
+    const fs::path cut = truncatedCopy(tmp, onnx, "cut.onnx", 1000000);
     auto a = DnnDetector::create(yoloxConfig(cut));
     ASSERT_FALSE(a.ok());
     EXPECT_EQ(a.error().code, ErrorCode::kParse);
@@ -255,14 +238,14 @@ TEST(DnnDetectorFiles, TruncatedOrWrongFormatRealModelsNameTheFile) {
 
     // Darknet weights handed over as an ONNX model.
     const fs::path weights_as_onnx =
-        tmp.write("weights.onnx", readAll(fs::path(cfg).replace_extension(".weights")));
+        writeFile(tmp, "weights.onnx", readAll(fs::path(cfg).replace_extension(".weights")));
     auto b = DnnDetector::create(yoloxConfig(weights_as_onnx));
     ASSERT_FALSE(b.ok());
     EXPECT_NE(b.error().message.find("weights.onnx"), std::string::npos) << b.error().message;
 
     // Truncated Darknet weights: OpenCV would load them silently (with zeros).
     fs::copy_file(cfg, tmp.path() / "net.cfg");
-    (void)tmp.truncated(fs::path(cfg).replace_extension(".weights"), "net.weights", 2000000);
+    (void)truncatedCopy(tmp, fs::path(cfg).replace_extension(".weights"), "net.weights", 2000000);
     auto c = DnnDetector::create(darknetConfig(tmp.path() / "net.cfg"));
     ASSERT_FALSE(c.ok());
     EXPECT_EQ(c.error().code, ErrorCode::kParse);
@@ -280,7 +263,7 @@ TEST(DnnDetectorFiles, TruncatedOrWrongFormatRealModelsNameTheFile) {
 TEST(DnnDetectorFiles, ClassCountMismatchNamesModelAndNamesFile) {
     SCALED_REQUIRE_MODEL(onnx, "yolox_nano.onnx");
     SCALED_REQUIRE_MODEL(cfg, "yolo-fastest-1.1-xl.cfg");
-    TempDir tmp;
+    TempDir tmp("detector");
     auto names = scaled::detector::readClassNames(onnx.parent_path() / "coco.names");
     ASSERT_TRUE(names.ok());
     ASSERT_EQ(names->size(), 80U);
@@ -288,7 +271,7 @@ TEST(DnnDetectorFiles, ClassCountMismatchNamesModelAndNamesFile) {
     for (std::size_t i = 0; i + 1 < names->size(); ++i) {
         text += (*names)[i] + "\n";
     }
-    const fs::path n79 = tmp.write("n79.names", text);
+    const fs::path n79 = writeFile(tmp, "n79.names", text);
     for (DetectorConfig c : {yoloxConfig(onnx, 320), darknetConfig(cfg)}) {
         c.names_path = n79;
         auto r = DnnDetector::create(c);

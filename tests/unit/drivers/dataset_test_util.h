@@ -21,6 +21,8 @@
 
 #include <gtest/gtest.h>
 
+#include "temp_dir.h"
+
 namespace scaled::drivers::test {
 
 inline std::string readFile(const std::filesystem::path& path) {
@@ -36,34 +38,8 @@ inline void writeFile(const std::filesystem::path& path, std::string_view conten
     ASSERT_TRUE(out.good()) << "cannot write " << path;
 }
 
-// A fresh, uniquely named directory under the system temp dir, removed at the end.
-class TempDir {
-public:
-    explicit TempDir(std::string_view tag) {
-        static int counter = 0;
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        std::string name = "scaled_dataset_" + std::string(tag) + "_" +
-                           (info != nullptr ? std::string(info->name()) : std::string("x")) + "_" +
-                           std::to_string(::getpid()) + "_" + std::to_string(counter++);
-        std::replace(name.begin(), name.end(), '/', '_');
-        path_ = std::filesystem::temp_directory_path() / name;
-        std::error_code ec;
-        std::filesystem::remove_all(path_, ec);
-        std::filesystem::create_directories(path_);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-    TempDir(TempDir&&) = delete;
-    TempDir& operator=(TempDir&&) = delete;
-    ~TempDir() {
-        std::error_code ec;
-        std::filesystem::remove_all(path_, ec);
-    }
-    [[nodiscard]] const std::filesystem::path& path() const { return path_; }
-
-private:
-    std::filesystem::path path_;
-};
+// A fresh, uniquely named directory, removed at the end (tests/support/temp_dir.h).
+using scaled::test::TempDir;
 
 // A small 8x6 BGR image with a pattern depending on `seed`.
 inline cv::Mat tinyImage(int seed) {
