@@ -17,6 +17,8 @@
 #include <scaled/core/scale/height_prior.h>
 #include <scaled/drivers/priors_toml.h>
 
+#include "temp_dir.h"
+
 namespace scaled::drivers {
 namespace {
 
@@ -43,15 +45,6 @@ bool writeFile(const std::filesystem::path& path, std::string_view content) {
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     out << content;
     return out.good();
-}
-
-// A fresh directory under ::testing::TempDir() for one test.
-std::filesystem::path tempDir(std::string_view test_name) {
-    auto dir = std::filesystem::path(::testing::TempDir()) /
-               ("scaled_priors_toml_" + std::string(test_name));
-    std::filesystem::remove_all(dir);
-    std::filesystem::create_directories(dir);
-    return dir;
 }
 
 // One TOML line per element, so line N of the text is element N-1.
@@ -557,7 +550,8 @@ TEST(ParsePriorsErrors, ClassThatIsNotATable) {
 // ---------------------------------------------------------------------------
 
 TEST(LoadPriorsFile, MissingFileIsAnIoErrorNamingThePath) {
-    const auto path = tempDir("missing") / "does_not_exist.toml";
+    const test::TempDir dir("priors_toml");
+    const auto path = dir.path() / "does_not_exist.toml";
     const auto r = loadPriorsFile(path);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::kIo);
@@ -565,7 +559,8 @@ TEST(LoadPriorsFile, MissingFileIsAnIoErrorNamingThePath) {
 }
 
 TEST(LoadPriorsFile, ParseErrorNamesTheFile) {
-    const auto dir = tempDir("bad_content");
+    const test::TempDir tmp("priors_toml");
+    const auto& dir = tmp.path();
     const auto path = dir / "bad.toml";
     ASSERT_TRUE(writeFile(
         path, cupWith({"mean_m = 0.10", R"(std_m = "wide")", "min_m = 0.05", "max_m = 0.18"})));
@@ -589,7 +584,8 @@ TEST(LoadPriorsFile, ParseErrorNamesTheFile) {
 }
 
 TEST(LoadPriorsFile, DirectoryIsAnIoError) {
-    const auto dir = tempDir("a_directory");
+    const test::TempDir tmp("priors_toml");
+    const auto& dir = tmp.path();
     const auto r = loadPriorsFile(dir);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::kIo) << r.error().message;
