@@ -9,12 +9,12 @@
 #include <exception>
 #include <fstream>
 #include <limits>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <system_error>
 #include <utility>
 
+#include <scaled/drivers/image_file.h>
 #include <scaled/drivers/trajectory_io.h>
 
 namespace scaled::drivers::detail {
@@ -83,7 +83,7 @@ public:
             return lineError(ErrorCode::kNotFound, index_.index_file, f.index_line,
                              "image file not found: " + f.image.string(), f.listed_as);
         }
-        auto img = loadImage(f.image);
+        auto img = drivers::loadImage(f.image);
         if (!img) {
             return img.error();
         }
@@ -294,63 +294,6 @@ std::string datasetName(const std::filesystem::path& dir) {
     return name.empty() || name == "." || name == ".." ? dir.string() : name;
 }
 
-Result<cv::Mat> loadImageUnchanged(const std::filesystem::path& path) {
-    std::error_code ec;
-    const auto status = std::filesystem::status(path, ec);
-    if (ec || !std::filesystem::exists(status)) {
-        return makeError(ErrorCode::kNotFound, path.string() + ": image file not found");
-    }
-    if (!std::filesystem::is_regular_file(status)) {
-        return makeError(ErrorCode::kIo, path.string() + ": not a regular file");
-    }
-    const std::uintmax_t size = std::filesystem::file_size(path, ec);
-    if (ec) {
-        return makeError(ErrorCode::kIo, path.string() + ": cannot read image: " + ec.message());
-    }
-    if (size == 0) {
-        return makeError(ErrorCode::kParse, path.string() + ": cannot decode image: empty file");
-    }
-    if (size > kMaxImageBytes) {
-        return makeError(ErrorCode::kIo, path.string() + ": image file too large (" +
-                                             std::to_string(size) + " bytes)");
-    }
-    try {
-        std::vector<unsigned char> bytes(static_cast<std::size_t>(size));
-        std::ifstream in(path, std::ios::binary);
-        in.read(reinterpret_cast<char*>(bytes.data()),  // NOLINT(*-reinterpret-cast)
-                static_cast<std::streamsize>(bytes.size()));
-        if (!in || static_cast<std::uintmax_t>(in.gcount()) != size) {
-            return makeError(ErrorCode::kIo, path.string() + ": cannot read image file");
-        }
-        cv::Mat img = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
-        if (img.empty()) {
-            return makeError(ErrorCode::kParse,
-                             path.string() + ": cannot decode image (corrupt or unknown format)");
-        }
-        return img;
-    } catch (const std::exception& e) {
-        return makeError(ErrorCode::kParse,
-                         path.string() + ": cannot decode image: " + std::string(e.what()));
-    }
-}
-
-Result<cv::Mat> loadImage(const std::filesystem::path& path) {
-    auto img = loadImageUnchanged(path);
-    if (!img) {
-        return img;
-    }
-    if (img->depth() != CV_8U) {
-        return makeError(ErrorCode::kParse, path.string() +
-                                                ": expected an 8-bit image (got OpenCV depth " +
-                                                std::to_string(img->depth()) + ")");
-    }
-    if (img->channels() != 1 && img->channels() != 3 && img->channels() != 4) {
-        return makeError(ErrorCode::kParse, path.string() + ": unsupported image with " +
-                                                std::to_string(img->channels()) + " channels");
-    }
-    return img;
-}
-
 std::string sizeText(int width_px, int height_px) {
     return std::to_string(width_px) + "x" + std::to_string(height_px);
 }
@@ -468,7 +411,7 @@ Result<bool> resolveIntrinsics(ReplayIndex& index,
                 return makeError(ErrorCode::kNotFound,
                                  source + ": no image to take the image size from");
             }
-            auto img = loadImage(first->image);
+            auto img = drivers::loadImage(first->image);
             if (!img) {
                 return img.error();
             }

@@ -70,14 +70,6 @@ bool pathExists(const std::filesystem::path& path);
 // The directory's own name ("redkitchen" for "../shared/data/redkitchen/").
 std::string datasetName(const std::filesystem::path& dir);
 
-// Reads and decodes an 8-bit image (1, 3 or 4 channels). Never throws.
-// Errors name the file: kNotFound, kIo (unreadable), kParse (cannot decode).
-core::Result<cv::Mat> loadImage(const std::filesystem::path& path);
-
-// Reads and decodes an image of any depth and channel count, unchanged
-// (IMREAD_UNCHANGED). Never throws; errors as loadImage().
-core::Result<cv::Mat> loadImageUnchanged(const std::filesystem::path& path);
-
 // frame.gray (CV_8UC1) and frame.color (CV_8UC3 BGR) from a decoded 8-bit
 // image of 1, 3 (BGR) or 4 (BGRA) channels. Errors name `source`.
 core::Result<bool> toGrayAndColor(const cv::Mat& img, const std::string& source, Frame& frame);

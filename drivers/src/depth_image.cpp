@@ -3,6 +3,7 @@
 #include <string>
 
 #include <scaled/drivers/depth_image.h>
+#include <scaled/drivers/image_file.h>
 
 #include "dataset_common.h"
 
@@ -25,7 +26,7 @@ Result<cv::Mat> loadDepthMetres(const Frame& frame, const SequenceInfo& info) {
                          path.string() + ": the sequence has no depth scale (depth_scale_m " +
                              detail::shortNumber(info.depth_scale_m) + ")");
     }
-    auto raw = detail::loadImageUnchanged(path);
+    auto raw = loadImageUnchanged(path);
     if (!raw) {
         return raw.error();
     }

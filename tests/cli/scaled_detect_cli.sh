@@ -24,7 +24,7 @@ expect 64 "--size needs a value" -- "$det" --image x.png --size
 expect 64 "input_size_px = 100" -- "$det" --image x.png --size 100
 expect 64 "not a number: 'abc'" -- "$det" --image x.png --score abc
 expect 64 "unknown model family 'yolov8'" -- "$det" --image x.png --family yolov8
-expect 66 "$tmp/none.png: image not found" -- "$det" --image "$tmp/none.png"
+expect 66 "$tmp/none.png: image file not found" -- "$det" --image "$tmp/none.png"
 printf 'not a png' > "$tmp/bad.png"
 expect 65 "$tmp/bad.png: cannot decode" -- "$det" --image "$tmp/bad.png"
 python3 -c "

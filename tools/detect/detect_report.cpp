@@ -5,7 +5,6 @@
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <system_error>
 
 #include "json.h"
 
@@ -60,29 +59,6 @@ std::vector<std::string> splitList(std::string_view text) {
         text.remove_prefix(comma + 1);
     }
     return out;
-}
-
-Result<cv::Mat> loadImage(const std::filesystem::path& path) {
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec) || ec) {
-        return makeError(ErrorCode::kNotFound, path.string() + ": image not found");
-    }
-    cv::Mat image;
-    try {
-        image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-    } catch (const cv::Exception& e) {
-        return makeError(ErrorCode::kParse,
-                         path.string() + ": cannot decode the image (" + e.err + ")");
-    }
-    if (image.empty()) {
-        return makeError(ErrorCode::kParse, path.string() + ": cannot decode the image");
-    }
-    if (image.depth() != CV_8U) {
-        return makeError(ErrorCode::kParse, path.string() +
-                                                ": not an 8-bit image (the detector takes 8-bit "
-                                                "gray, BGR or BGRA)");
-    }
-    return image;
 }
 
 std::string detectionsText(const detector::DetectionResult& result) {

@@ -17,10 +17,6 @@ namespace scaled::tools {
 // as empty strings so that validate() can name them).
 std::vector<std::string> splitList(std::string_view text);
 
-// An 8-bit image as stored (gray, BGR or BGRA). Errors name the file:
-// kNotFound, kParse (cannot decode).
-core::Result<cv::Mat> loadImage(const std::filesystem::path& path);
-
 // One line per detection: `class_name score x_min y_min x_max y_max`.
 std::string detectionsText(const detector::DetectionResult& result);
 

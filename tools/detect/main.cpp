@@ -16,6 +16,7 @@
 #include <string_view>
 
 #include <scaled/detector/dnn_detector.h>
+#include <scaled/drivers/image_file.h>
 
 #include "detect_report.h"
 #include "sysexits.h"
@@ -159,7 +160,7 @@ int main(int argc, char** argv) {
         return kExUsage;
     }
 
-    auto image = scaled::tools::loadImage(image_path);
+    auto image = scaled::drivers::loadImage(image_path);
     if (!image) {
         std::fprintf(stderr, "scaled-detect: %s\n", image.error().message.c_str());
         return exitCodeFor(image.error().code);
