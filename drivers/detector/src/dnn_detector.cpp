@@ -273,11 +273,14 @@ struct DnnDetector::Impl {
         }
     }
 
-    Result<bool> preprocess(const cv::Mat& image);
-    Result<bool> forward();
+    // Fills `blob` from an 8-bit gray, BGR or BGRA image; returns the YOLOX
+    // letterbox ratio (network pixels per image pixel; 1 for Darknet, whose
+    // boxes are fractions of the image).
+    double preprocess(const cv::Mat& image);
+    void forward();
 };
 
-Result<bool> DnnDetector::Impl::preprocess(const cv::Mat& image) {
+double DnnDetector::Impl::preprocess(const cv::Mat& image) {
     const int s = config.input_size_px;
     const cv::Mat* src = &image;
     if (image.channels() == 1) {
@@ -290,7 +293,7 @@ Result<bool> DnnDetector::Impl::preprocess(const cv::Mat& image) {
     if (config.family == ModelFamily::kDarknet) {
         cv::dnn::blobFromImage(*src, blob, 1.0 / 255.0, cv::Size(s, s), cv::Scalar(), true, false,
                                CV_32F);
-        return true;
+        return 1;
     }
     const double ratio =
         std::min(static_cast<double>(s) / src->rows, static_cast<double>(s) / src->cols);
@@ -301,14 +304,13 @@ Result<bool> DnnDetector::Impl::preprocess(const cv::Mat& image) {
     canvas.setTo(cv::Scalar::all(kYoloxPad));
     resized.copyTo(canvas(cv::Rect(0, 0, w, h)));
     cv::dnn::blobFromImage(canvas, blob, 1.0, cv::Size(), cv::Scalar(), false, false, CV_32F);
-    return true;
+    return ratio;
 }
 
-Result<bool> DnnDetector::Impl::forward() {
+void DnnDetector::Impl::forward() {
     applyThreads();
     net.setInput(blob);
     net.forward(outs, out_names);
-    return true;
 }
 
 DnnDetector::DnnDetector(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -403,10 +405,8 @@ Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& c
         impl->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
         impl->out_names = impl->net.getUnconnectedOutLayersNames();
         const cv::Mat blank(s, s, CV_8UC3, cv::Scalar::all(kYoloxPad));
-        if (auto ok = impl->preprocess(blank); !ok) {
-            return ok.error();
-        }
-        (void)impl->forward();
+        (void)impl->preprocess(blank);
+        impl->forward();
     } catch (const cv::Exception& e) {
         return makeError(ErrorCode::kParse, what + ": the model does not run at input size " +
                                                 std::to_string(s) + " (OpenCV: " + openCvReason(e) +
@@ -416,6 +416,7 @@ Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& c
     if (impl->outs.empty()) {
         return makeError(ErrorCode::kParse, what + ": the model has no outputs");
     }
+    std::size_t rows = 0;
     for (const cv::Mat& out : impl->outs) {
         const int out_cols = out.dims >= 2 ? out.size[out.dims - 1] : 0;
         if (out_cols != cols) {
@@ -428,9 +429,6 @@ Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& c
         if (out.type() != CV_32F) {
             return makeError(ErrorCode::kParse, what + ": the model output is not float32");
         }
-    }
-    std::size_t rows = 0;
-    for (const cv::Mat& out : impl->outs) {
         rows += out.total() / static_cast<std::size_t>(cols);
     }
     if (!darknet) {
@@ -469,16 +467,14 @@ Result<bool> DnnDetector::detect(const cv::Mat& image, std::int64_t frame_id, st
     decoder.clear();
     try {
         auto t0 = Clock::now();
-        (void)m.preprocess(image);
+        const double ratio = m.preprocess(image);
         out.timing.pre_ms = msSince(t0);
         t0 = Clock::now();
-        (void)m.forward();
+        m.forward();
         out.timing.forward_ms = msSince(t0);
         t0 = Clock::now();
         const DetectorConfig& c = m.config;
         if (c.family == ModelFamily::kYolox) {
-            const double ratio = std::min(static_cast<double>(c.input_size_px) / image.rows,
-                                          static_cast<double>(c.input_size_px) / image.cols);
             decoder.addYolox(reinterpret_cast<const float*>(m.outs.front().data), m.grid, ratio,
                              c.score_threshold);
         } else {
