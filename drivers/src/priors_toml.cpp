@@ -87,7 +87,7 @@ struct ClassSpec {
     std::optional<bool> upright;
     std::optional<std::string> source;
     std::optional<int> bins;
-    Located<Scalar> mean_m, std_m, min_m, max_m, bin_width_m;
+    Located<Scalar> mean_m, std_m, min_m, max_m, bin_width_m, partial_probability;
     Located<std::vector<Scalar>> heights_m, probabilities;
 
     // The number-valued and array-valued keys by name; nullptr for others.
@@ -97,7 +97,8 @@ struct ClassSpec {
             {"std_m", &std_m},
             {"min_m", &min_m},
             {"max_m", &max_m},
-            {"bin_width_m", &bin_width_m}};
+            {"bin_width_m", &bin_width_m},
+            {"partial_probability", &partial_probability}};
         for (const auto& [name, field] : keys) {
             if (name == key) {
                 return field;
@@ -141,6 +142,10 @@ std::optional<Error> checkRanges(const Reporter& rep, const std::string& base, c
     if (s.bin_width_m && !(*s.bin_width_m >= 0 && std::isfinite(*s.bin_width_m))) {
         return rep.at(s.bin_width_m.node, base + ".bin_width_m",
                       "must be >= 0 (got " + num(*s.bin_width_m) + ")");
+    }
+    if (s.partial_probability && !(*s.partial_probability >= 0 && *s.partial_probability < 1)) {
+        return rep.at(s.partial_probability.node, base + ".partial_probability",
+                      "must be in [0, 1) (got " + num(*s.partial_probability) + ")");
     }
     if (s.heights_m) {
         const auto& h = *s.heights_m;
@@ -243,7 +248,7 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
         } else {
             return rep.at(&node, full,
                           "unknown key (allowed: upright, source, mean_m, std_m, min_m, max_m, "
-                          "bins, heights_m, probabilities, bin_width_m)");
+                          "bins, heights_m, probabilities, bin_width_m, partial_probability)");
         }
     }
     if (!spec.upright) {
@@ -285,6 +290,12 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
     }
     if (!prior) {
         return rep.at(&t, base, prior.error().message);
+    }
+    if (spec.partial_probability) {
+        if (auto set = prior->setPartialProbability(*spec.partial_probability); !set) {
+            return rep.at(spec.partial_probability.node, base + ".partial_probability",
+                          set.error().message);
+        }
     }
     return prior;
 }

@@ -128,6 +128,16 @@ Result<HeightPrior> HeightPrior::fromNormal(std::string class_name, Scalar mean_
     return fromHistogram(std::move(class_name), heights, probs, width, upright);
 }
 
+Result<bool> HeightPrior::setPartialProbability(Scalar probability) {
+    if (!(probability < 1) || !std::isfinite(probability)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "prior '" + class_name_ + "': partial_probability must be < 1 (got " +
+                             std::to_string(probability) + ")");
+    }
+    partial_probability_ = probability < 0 ? Scalar(-1) : probability;
+    return true;
+}
+
 Scalar HeightPrior::mean() const {
     Scalar m = 0;
     for (std::size_t i = 0; i < heights_m_.size(); ++i) {

@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -34,6 +35,21 @@ bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prio
                       extent.sigma_D_box * extent.sigma_D_box;
     }
     var_const += var_prior_bin;
+
+    // Partial visibility: suffix sums S_k = sum_{m >= k} p_m / H_m (heights are
+    // sorted), so the term at x is S_k for the first k with H_k > x.
+    const Scalar partial_weight =
+        prior.partialProbability() >= 0 ? prior.partialProbability() : config.partial_weight;
+    const bool partial = config.partial_visibility && partial_weight > 0;
+    std::array<Scalar, HeightPrior::kMaxBins + 1> suffix{};
+    if (partial) {
+        for (std::size_t m = M; m-- > 0;) {
+            suffix[m] = suffix[m + 1] + std::exp(log_probs[m]) / heights[m];
+        }
+    }
+    const Scalar log_full = partial ? std::log1p(-partial_weight) : 0;
+    const Scalar log_partial = partial ? std::log(partial_weight) : 0;
+    std::size_t k_partial = 0;
 
     const Scalar log_sqrt_2pi = Scalar(0.5) * std::log(2 * std::numbers::pi_v<Scalar>);
     const bool robust = config.robust && config.outlier_weight > 0;
@@ -83,15 +99,33 @@ bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prio
             sum += std::exp(log_probs[m] - r * r * inv_2var - best);
         }
         Scalar value = log_norm + best + std::log(sum);
-        if (config.variance_model == VarianceModel::kPropagated) {
-            // Density of the measurement D itself: p(D | d) = d f(d D - H; d sigma_D).
-            value += std::log(d);
+        if (partial) {
+            while (k_partial < M && heights[k_partial] <= x) {
+                ++k_partial;
+            }
+            const Scalar a = log_full + value;
+            if (suffix[k_partial] > 0) {
+                const Scalar b = log_partial + std::log(suffix[k_partial]);
+                const Scalar top = std::max(a, b);
+                value = top + std::log(std::exp(a - top) + std::exp(b - top));
+            } else {
+                value = a;
+            }
         }
-        if (robust) {
-            // log((1-w) L + w/R), computed without leaving the log domain.
+        if (robust && x <= config.outlier_height_range_m) {
+            // log((1-w) L + w/R) for d D in (0, R), computed without leaving the log domain
+            // (both terms are densities of the extent; under kPropagated both
+            // get the factor d below).
             const Scalar a = log_inlier + value;
             const Scalar top = std::max(a, log_outlier);
             value = top + std::log(std::exp(a - top) + std::exp(log_outlier - top));
+        } else if (robust) {
+            // An outlier's extent is uniform in (0, R): none is taller.
+            value += log_inlier;
+        }
+        if (config.variance_model == VarianceModel::kPropagated) {
+            // Density of the measurement D itself: p(D | d) = d f(d D - H; d sigma_D).
+            value += std::log(d);
         }
         log_l[j] = value;
     }

@@ -1,3 +1,4 @@
+#include <cmath>
 #include <string>
 
 #include <scaled/core/scale/scale_estimator.h>
@@ -20,6 +21,11 @@ Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, Pri
         return makeError(ErrorCode::kInvalidArgument,
                          "scale estimator: robust likelihood needs 0 < outlier_weight < 1 and "
                          "outlier_height_range_m > 0");
+    }
+    if (!(lc.partial_weight >= 0 && lc.partial_weight < 1)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "scale estimator: partial_weight must be in [0, 1) (got " +
+                             std::to_string(lc.partial_weight) + ")");
     }
     if (!(lc.min_sigma_m > 0)) {
         return makeError(ErrorCode::kInvalidArgument, "scale estimator: min_sigma_m must be > 0");

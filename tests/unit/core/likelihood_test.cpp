@@ -100,10 +100,56 @@ TEST(Likelihood, AlwaysFiniteAndRobustFloor) {
     e.D = 1;
     e.sigma_D_paper = 0.01;
     ASSERT_TRUE(evaluateLogLikelihood(e, single(0.3), g, cfg, l));
-    for (const Scalar v : l) {
-        EXPECT_GE(v, std::log(0.1 / 4) - 1e-12);
+    // The outlier floor w / R holds where an outlier can be, d D in (0, R];
+    // no object is taller than R, so beyond it only the inlier term is left.
+    for (std::size_t j = 0; j < g.size(); ++j) {
+        if (g.d(j) * e.D <= 4) {
+            EXPECT_GE(l[j], std::log(0.1 / 4) - 1e-12) << "d = " << g.d(j);
+        } else {
+            EXPECT_LT(l[j], std::log(0.1 / 4) - 100) << "d = " << g.d(j);
+        }
     }
     EXPECT_NEAR(l.front(), std::log(0.1 / 4), 1e-9);
+}
+
+TEST(Likelihood, PartialVisibilityBoundsTheScaleFromAbove) {
+    // A box showing 40% of a 0.9 m object (D = 0.36 at d = 1): without the
+    // partial term the likelihood peaks at d = 2.5; with it, d = 1 is as
+    // likely as any d with d D < 0.9 except near the full-height peak.
+    const auto g = grid();
+    std::vector<Scalar> off(g.size());
+    std::vector<Scalar> on(g.size());
+    LikelihoodConfig cfg;
+    cfg.variance_model = VarianceModel::kPropagated;
+    VerticalExtent e;
+    e.D = Scalar(0.36);
+    e.sigma_D_feature = Scalar(0.01);
+    const HeightPrior chair = single(0.9);
+    ASSERT_TRUE(evaluateLogLikelihood(e, chair, g, cfg, off));
+    cfg.partial_visibility = true;
+    cfg.partial_weight = Scalar(0.5);
+    ASSERT_TRUE(evaluateLogLikelihood(e, chair, g, cfg, on));
+    const auto at = [&](const std::vector<Scalar>& l, Scalar d) {
+        return l[static_cast<std::size_t>(std::lround(g.indexOf(d)))];
+    };
+    EXPECT_NEAR(gridMode(g, off), 2.5, 0.02);
+    EXPECT_LT(at(off, 1) - at(off, Scalar(2.5)), -50);  // off: d = 1 is excluded
+    // On: at d = 1 the partial term 0.5 d / H carries the likelihood ...
+    EXPECT_NEAR(at(on, 1), std::log(0.5 * 1 / 0.9), 0.02);
+    // ... beyond H / D = 2.5 the object would be taller than the class allows:
+    // only the full-visibility term's tail is left.
+    EXPECT_LT(at(on, 4), at(on, 1) - 50);
+    // The switch alone does nothing while neither the config nor the prior
+    // gives a weight.
+    cfg.partial_weight = 0;
+    ASSERT_TRUE(evaluateLogLikelihood(e, chair, g, cfg, on));
+    EXPECT_EQ(on, off);
+    // A prior's own probability takes precedence over the config's.
+    HeightPrior occluded = single(0.9);
+    ASSERT_TRUE(occluded.setPartialProbability(Scalar(0.5)).ok());
+    ASSERT_TRUE(evaluateLogLikelihood(e, occluded, g, cfg, on));
+    EXPECT_NEAR(at(on, 1), std::log(0.5 * 1 / 0.9), 0.02);
+    EXPECT_FALSE(occluded.setPartialProbability(1).ok());
 }
 
 TEST(Likelihood, RejectsInputThatCannotGiveALikelihood) {

@@ -41,12 +41,19 @@ public:
     [[nodiscard]] Scalar minHeight() const { return heights_m_.front(); }
     [[nodiscard]] Scalar maxHeight() const { return heights_m_.back(); }
 
+    // Beyond the paper (optional, see LikelihoodConfig::partial_weight): the
+    // probability that a box of this class shows only part of the object
+    // (e.g. a chair behind a table). Negative: the estimator's setting.
+    Result<bool> setPartialProbability(Scalar probability);
+    [[nodiscard]] Scalar partialProbability() const { return partial_probability_; }
+
 private:
     HeightPrior() = default;
 
     std::string class_name_;
     bool upright_ = false;
     Scalar bin_width_m_ = 0;
+    Scalar partial_probability_ = -1;
     std::vector<Scalar> heights_m_;
     std::vector<Scalar> probabilities_;
     std::vector<Scalar> log_probabilities_;

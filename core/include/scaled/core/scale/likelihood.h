@@ -31,6 +31,16 @@ struct LikelihoodConfig {
     bool robust = false;
     Scalar outlier_weight = Scalar(0.05);
     Scalar outlier_height_range_m = 5;
+    // Partial visibility (beyond the paper): with probability partial_weight the
+    // box covers only part of the object (occluded by something in front, e.g.
+    // a chair behind a table), and the measured extent d D is then uniform in
+    // (0, H). Such an observation bounds d from above instead of fixing it:
+    //   L(d) = (1 - w) L_full(d) + w sum_m p_m 1[d D < H_m] / H_m
+    // (times d under kPropagated, as L_full). Off by default (the paper); when
+    // on, w is the prior's partialProbability() where it gives one (>= 0),
+    // else partial_weight.
+    bool partial_visibility = false;
+    Scalar partial_weight = 0;
     // Lower bound on sigma in metres (keeps very confident features from
     // producing likelihoods narrower than anything they can justify).
     Scalar min_sigma_m = Scalar(0.002);
