@@ -1,0 +1,63 @@
+#pragma once
+
+// The pipeline's configuration: tracker, detector, scale estimator and the
+// detection schedule, read from TOML (config/scaled.toml documents every key).
+//
+// Every key is checked: a wrong type, a value outside its range or an unknown
+// key is an Error whose message reads `FILE:LINE: section.key: what is wrong
+// (got VALUE)`. Keys that are absent keep the defaults of PipelineConfig.
+// Relative paths in a file are resolved against the file's directory.
+//
+// Overrides (`--set section.key=value` on a command line) are TOML lines
+// applied after the file with the same checks; their paths resolve against
+// the working directory.
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <scaled/core/result.h>
+#include <scaled/core/scale/scale_estimator.h>
+#include <scaled/detector/dnn_detector.h>
+#include <scaled/vision/mono_tracker.h>
+
+namespace scaled::daemon {
+
+struct DetectionSchedule {
+    int every_frames = 10;  // run the detector on every Nth tracked frame (the paper: 10)
+};
+
+struct PipelineConfig {
+    vision::TrackerConfig tracker;
+    detector::DetectorConfig detector;
+    core::EstimatorConfig estimator;
+    std::filesystem::path priors_path;  // empty: the caller's default (config/priors.toml)
+    DetectionSchedule detection;
+};
+
+// The defaults scaled ships with (chosen in docs/accuracy.md from the
+// redkitchen ablations); they differ from the paper-literal core defaults.
+PipelineConfig defaultPipelineConfig();
+
+// Applies a TOML document to `config` (keys absent from the text keep their
+// value). source_name names the text in messages; base_dir resolves relative
+// paths.
+core::Result<bool> applyPipelineToml(std::string_view toml_text, std::string_view source_name,
+                                     const std::filesystem::path& base_dir, PipelineConfig& config);
+
+// Reads a file and applies it (relative paths against the file's directory).
+core::Result<bool> applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config);
+
+// Applies `section.key=value` overrides, each in turn (paths against the
+// working directory). A string value may be given without quotes.
+core::Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
+                                          PipelineConfig& config);
+
+// Every key as `section.key`, in file order (for --help and the tests).
+std::vector<std::string> pipelineConfigKeys();
+
+// The configuration as TOML (every key, resolved paths), for logs and reports.
+std::string toToml(const PipelineConfig& config);
+
+}  // namespace scaled::daemon

@@ -1,0 +1,483 @@
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <toml++/toml.h>
+
+#include <scaled/daemon/pipeline_config.h>
+
+namespace scaled::daemon {
+
+using core::Error;
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+using core::Scalar;
+
+namespace {
+
+std::string show(const toml::node& n) {
+    std::ostringstream os;
+    if (n.is_string()) {
+        os << '"' << n.as_string()->get() << '"';
+    } else if (n.is_array()) {
+        os << "an array";
+    } else if (n.is_table()) {
+        os << "a table";
+    } else {
+        n.visit([&](const auto& v) { os << v; });
+    }
+    return os.str();
+}
+
+std::string num(double v) {
+    std::ostringstream os;
+    os << v;
+    return os.str();
+}
+
+std::string tomlQuote(const std::string& s) {
+    std::string out = "\"";
+    for (const char c : s) {
+        if (c == '"' || c == '\\') {
+            out += '\\';
+        }
+        out += c;
+    }
+    return out + "\"";
+}
+
+// One configuration key: how to set it from a TOML node (nullopt = accepted,
+// else the reason it is not) and how to print its current value.
+struct Field {
+    std::string section;
+    std::string key;
+    std::function<std::optional<std::string>(const toml::node&, const std::filesystem::path&)> set;
+    std::function<std::string()> value;
+};
+
+std::optional<double> asNumber(const toml::node& n) {
+    if (const auto* f = n.as_floating_point()) {
+        return f->get();
+    }
+    if (const auto* i = n.as_integer()) {
+        return static_cast<double>(i->get());
+    }
+    return std::nullopt;
+}
+
+enum class Bound : std::uint8_t { kClosed, kOpen };
+
+template <typename T>
+Field real(const char* section, const char* key, T* target, double lo, double hi,
+           Bound lo_bound = Bound::kClosed) {
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const auto v = asNumber(n);
+                const bool ok = v && std::isfinite(*v) && *v <= hi &&
+                                (lo_bound == Bound::kOpen ? *v > lo : *v >= lo);
+                if (!ok) {
+                    return std::string("must be a number in ") +
+                           (lo_bound == Bound::kOpen ? "(" : "[") + num(lo) + ", " + num(hi) +
+                           "] (got " + show(n) + ")";
+                }
+                *target = static_cast<T>(*v);
+                return std::nullopt;
+            },
+            [=] { return num(static_cast<double>(*target)); }};
+}
+
+template <typename T>
+Field integer(const char* section, const char* key, T* target, std::int64_t lo, std::int64_t hi) {
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const auto* i = n.as_integer();
+                if (i == nullptr || i->get() < lo || i->get() > hi) {
+                    return "must be an integer in [" + std::to_string(lo) + ", " +
+                           std::to_string(hi) + "] (got " + show(n) + ")";
+                }
+                *target = static_cast<T>(i->get());
+                return std::nullopt;
+            },
+            [=] { return std::to_string(*target); }};
+}
+
+Field boolean(const char* section, const char* key, bool* target) {
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                if (!n.is_boolean()) {
+                    return "must be true or false (got " + show(n) + ")";
+                }
+                *target = n.as_boolean()->get();
+                return std::nullopt;
+            },
+            [=] { return std::string(*target ? "true" : "false"); }};
+}
+
+template <typename E>
+Field choice(const char* section, const char* key, E* target,
+             std::vector<std::pair<std::string, E>> names) {
+    std::string allowed;
+    for (const auto& [name, value] : names) {
+        allowed += (allowed.empty() ? "" : ", ") + tomlQuote(name);
+    }
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                if (n.is_string()) {
+                    for (const auto& [name, value] : names) {
+                        if (n.as_string()->get() == name) {
+                            *target = value;
+                            return std::nullopt;
+                        }
+                    }
+                }
+                return "must be one of " + allowed + " (got " + show(n) + ")";
+            },
+            [=] {
+                for (const auto& [name, value] : names) {
+                    if (*target == value) {
+                        return tomlQuote(name);
+                    }
+                }
+                return std::string("\"?\"");
+            }};
+}
+
+Field path(const char* section, const char* key, std::filesystem::path* target) {
+    return {
+        section, key,
+        [=](const toml::node& n, const std::filesystem::path& base) -> std::optional<std::string> {
+            if (!n.is_string()) {
+                return "must be a path string (got " + show(n) + ")";
+            }
+            const std::filesystem::path p(n.as_string()->get());
+            *target = p.empty() || p.is_absolute() ? p : (base / p).lexically_normal();
+            return std::nullopt;
+        },
+        [=] { return tomlQuote(target->string()); }};
+}
+
+Field stringList(const char* section, const char* key, std::vector<std::string>* target) {
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const auto* arr = n.as_array();
+                if (arr == nullptr) {
+                    return "must be an array of strings (got " + show(n) + ")";
+                }
+                std::vector<std::string> out;
+                for (std::size_t i = 0; i < arr->size(); ++i) {
+                    const auto* s = arr->get(i)->as_string();
+                    if (s == nullptr || s->get().empty()) {
+                        return "entry " + std::to_string(i) + " must be a non-empty string (got " +
+                               show(*arr->get(i)) + ")";
+                    }
+                    out.push_back(s->get());
+                }
+                *target = std::move(out);
+                return std::nullopt;
+            },
+            [=] {
+                std::string s = "[";
+                for (std::size_t i = 0; i < target->size(); ++i) {
+                    s += (i > 0 ? ", " : "") + tomlQuote((*target)[i]);
+                }
+                return s + "]";
+            }};
+}
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+std::vector<Field> fields(PipelineConfig& c) {
+    auto& s = c.tracker.slam;
+    auto& d = c.detector;
+    auto& e = c.estimator;
+    return {
+        // [tracker]
+        real("tracker", "sigma_a", &s.motion.sigma_a, 0, 1e4, Bound::kOpen),
+        real("tracker", "sigma_alpha", &s.motion.sigma_alpha, 0, 1e4, Bound::kOpen),
+        real("tracker", "pixel_sigma_px", &s.pixel_sigma_px, 0, 100, Bound::kOpen),
+        real("tracker", "init_sigma_v", &s.init_sigma_v, 0, 1e3, Bound::kOpen),
+        real("tracker", "init_sigma_w", &s.init_sigma_w, 0, 1e3, Bound::kOpen),
+        real("tracker", "rho0", &s.rho0, 0, 1e3, Bound::kOpen),
+        real("tracker", "sigma_rho", &s.sigma_rho, 0, 1e3, Bound::kOpen),
+        real("tracker", "linearity_threshold", &s.linearity_threshold, 0, 10),
+        integer("tracker", "max_features", &s.max_features, 1, 1000),
+        integer("tracker", "max_measured", &s.max_measured, 1, 1000),
+        integer("tracker", "min_visible", &s.min_visible, 0, 1000),
+        real("tracker", "image_margin_px", &s.image_margin_px, 0, 1000),
+        real("tracker", "chi2_gate", &s.chi2_gate, 0, 1e4, Bound::kOpen),
+        real("tracker", "ransac_threshold_px", &s.ransac_threshold_px, 0, 100, Bound::kOpen),
+        real("tracker", "ransac_confidence", &s.ransac_confidence, 0, 0.999999, Bound::kOpen),
+        integer("tracker", "ransac_min_hypotheses", &s.ransac_min_hypotheses, 1, 100000),
+        integer("tracker", "ransac_max_hypotheses", &s.ransac_max_hypotheses, 1, 100000),
+        integer("tracker", "seed", &s.seed, 0, std::numeric_limits<std::int64_t>::max()),
+        integer("tracker", "min_inliers", &s.min_inliers, 1, 1000),
+        integer("tracker", "lost_after_frames", &s.lost_after_frames, 1, 100000),
+        real("tracker", "max_dt_s", &s.max_dt_s, 0, 3600, Bound::kOpen),
+        integer("tracker", "patch_size", &c.tracker.patch_size, 3, 63),
+        boolean("tracker", "warp_patches", &c.tracker.warp_patches),
+        integer("tracker", "max_new_per_frame", &c.tracker.max_new_per_frame, 0, 1000),
+        real("tracker", "min_ncc", &c.tracker.match.min_ncc, -1, 1),
+        // [detector]
+        choice("detector", "family", &d.family,
+               {{"yolox", detector::ModelFamily::kYolox},
+                {"darknet", detector::ModelFamily::kDarknet}}),
+        path("detector", "model", &d.model_path),
+        path("detector", "weights", &d.weights_path),
+        path("detector", "names", &d.names_path),
+        integer("detector", "input_size_px", &d.input_size_px, 64, 1280),
+        real("detector", "score_threshold", &d.score_threshold, 0, 1, Bound::kOpen),
+        real("detector", "nms_iou_threshold", &d.nms_iou_threshold, 0, 1, Bound::kOpen),
+        stringList("detector", "classes", &d.classes),
+        integer("detector", "threads", &d.threads, 0, 256),
+        integer("detector", "max_detections", &d.max_detections, 1, 10000),
+        // [detection]
+        integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
+
+        // [estimator]
+        path("estimator", "priors", &c.priors_path),
+        choice("estimator", "variance", &e.likelihood.variance_model,
+               {{"paper", core::VarianceModel::kPaper},
+                {"propagated", core::VarianceModel::kPropagated}}),
+        boolean("estimator", "robust", &e.likelihood.robust),
+        real("estimator", "outlier_weight", &e.likelihood.outlier_weight, 0, 1, Bound::kOpen),
+        real("estimator", "outlier_height_range_m", &e.likelihood.outlier_height_range_m, 0, 1e3,
+             Bound::kOpen),
+        boolean("estimator", "partial_visibility", &e.likelihood.partial_visibility),
+        real("estimator", "partial_weight", &e.likelihood.partial_weight, 0, 0.99),
+        real("estimator", "min_sigma_m", &e.likelihood.min_sigma_m, 0, 10),
+        choice("estimator", "weighting", &e.weighting,
+               {{"feature", core::ObservationWeighting::kPerFeature},
+                {"box", core::ObservationWeighting::kPerBox}}),
+        boolean("estimator", "use_non_upright", &e.use_non_upright),
+        real("estimator", "min_detection_score", &e.min_detection_score, 0, 1),
+        integer("estimator", "max_features_per_box", &e.max_features_per_box, 1, 10000),
+        boolean("estimator", "compensate_roll", &e.extent.compensate_roll),
+        boolean("estimator", "propagate_variance", &e.extent.propagate_variance),
+        real("estimator", "box_edge_sigma_px", &e.extent.box_edge_sigma_px, 0, 1000),
+        real("estimator", "border_margin_px", &e.extent.border_margin_px, 0, 1000),
+        real("estimator", "min_extent_px", &e.extent.min_extent_px, 0, 10000),
+        real("estimator", "grid_d_min", &e.posterior.grid.d_min, 0, kInf, Bound::kOpen),
+        real("estimator", "grid_d_max", &e.posterior.grid.d_max, 0, kInf, Bound::kOpen),
+        integer("estimator", "grid_bins", &e.posterior.grid.bins, core::ScaleGrid::kMinBins,
+                core::ScaleGrid::kMaxBins),
+        real("estimator", "converged_rel_width", &e.posterior.converged_rel_width, 0, 10,
+             Bound::kOpen),
+        real("estimator", "drift_sigma_log", &e.posterior.drift_sigma_log, 0, 1),
+    };
+}
+
+Error errorAt(std::string_view source, const toml::node* node, const std::string& key,
+              const std::string& what) {
+    std::string where(source);
+    if (node != nullptr && node->source().begin.line > 0) {
+        where += ":" + std::to_string(node->source().begin.line);
+    }
+    return makeError(ErrorCode::kInvalidArgument, where + ": " + key + ": " + what);
+}
+
+// Cross-field checks, reported at the later key of the pair.
+Result<bool> checkConsistency(const PipelineConfig& c, std::string_view source) {
+    const auto& g = c.estimator.posterior.grid;
+    if (!(g.d_max > g.d_min)) {
+        return errorAt(source, nullptr, "estimator.grid_d_max",
+                       "must be greater than estimator.grid_d_min = " + num(g.d_min) + " (got " +
+                           num(g.d_max) + ")");
+    }
+    const auto& s = c.tracker.slam;
+    if (s.ransac_max_hypotheses < s.ransac_min_hypotheses) {
+        return errorAt(source, nullptr, "tracker.ransac_max_hypotheses",
+                       "must be >= tracker.ransac_min_hypotheses = " +
+                           std::to_string(s.ransac_min_hypotheses) + " (got " +
+                           std::to_string(s.ransac_max_hypotheses) + ")");
+    }
+    if (c.tracker.patch_size % 2 == 0) {
+        return errorAt(source, nullptr, "tracker.patch_size",
+                       "must be odd (got " + std::to_string(c.tracker.patch_size) + ")");
+    }
+    if (auto v = vision::validate(c.tracker); !v) {
+        return errorAt(source, nullptr, "tracker", v.error().message);
+    }
+    return true;
+}
+
+Result<bool> applyTable(const toml::table& root, std::string_view source,
+                        const std::filesystem::path& base_dir, PipelineConfig& config) {
+    PipelineConfig work = config;
+    const std::vector<Field> all = fields(work);
+    std::vector<std::string> sections;
+    for (const auto& f : all) {
+        if (sections.empty() || sections.back() != f.section) {
+            sections.push_back(f.section);
+        }
+    }
+    auto join = [](const std::vector<std::string>& v) {
+        std::string s;
+        for (const auto& x : v) {
+            s += (s.empty() ? "" : ", ") + x;
+        }
+        return s;
+    };
+    for (const auto& [sk, snode] : root) {
+        const std::string section(sk.str());
+        const auto* table = snode.as_table();
+        bool known = false;
+        for (const auto& name : sections) {
+            known = known || name == section;
+        }
+        if (!known) {
+            return errorAt(source, &snode, section,
+                           "unknown section (allowed: " + join(sections) + ")");
+        }
+        if (table == nullptr) {
+            return errorAt(source, &snode, section, "must be a table ([" + section + "])");
+        }
+        for (const auto& [k, node] : *table) {
+            const std::string key(k.str());
+            const Field* field = nullptr;
+            std::vector<std::string> allowed;
+            for (const auto& f : all) {
+                if (f.section == section) {
+                    allowed.push_back(f.key);
+                    if (f.key == key) {
+                        field = &f;
+                    }
+                }
+            }
+            if (field == nullptr) {
+                return errorAt(source, &node, section + "." + key,
+                               "unknown key (allowed in [" + section + "]: " + join(allowed) + ")");
+            }
+            if (auto problem = field->set(node, base_dir)) {
+                return errorAt(source, &node, section + "." + key, *problem);
+            }
+        }
+    }
+    if (auto ok = checkConsistency(work, source); !ok) {
+        return ok.error();
+    }
+    config = std::move(work);
+    return true;
+}
+
+Result<toml::table> parse(std::string_view text, std::string_view source) {
+    try {
+        return toml::parse(text, source);
+    } catch (const toml::parse_error& e) {
+        return makeError(ErrorCode::kParse, std::string(source) + ":" +
+                                                std::to_string(e.source().begin.line) + ":" +
+                                                std::to_string(e.source().begin.column) + ": " +
+                                                std::string(e.description()));
+    }
+}
+
+}  // namespace
+
+PipelineConfig defaultPipelineConfig() {
+    PipelineConfig c;
+    c.detection.every_frames = 10;
+    c.estimator.likelihood.variance_model = core::VarianceModel::kPropagated;
+    c.estimator.weighting = core::ObservationWeighting::kPerFeature;
+    c.estimator.likelihood.robust = true;
+    c.estimator.likelihood.outlier_weight = core::Scalar(0.05);
+    c.estimator.likelihood.partial_visibility = true;
+    c.estimator.extent.compensate_roll = true;
+    return c;
+}
+
+Result<bool> applyPipelineToml(std::string_view toml_text, std::string_view source_name,
+                               const std::filesystem::path& base_dir, PipelineConfig& config) {
+    auto root = parse(toml_text, source_name);
+    if (!root) {
+        return root.error();
+    }
+    return applyTable(*root, source_name, base_dir, config);
+}
+
+Result<bool> applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) {
+        return makeError(
+            ErrorCode::kIo,
+            path.string() + ": cannot read configuration: " +
+                (std::filesystem::exists(path, ec) ? "not a regular file" : "no such file"));
+    }
+    std::ifstream in(path, std::ios::binary);
+    const auto size = std::filesystem::file_size(path, ec);
+    std::string text(ec ? 0 : size, '\0');
+    if (!in || ec || !in.read(text.data(), static_cast<std::streamsize>(text.size()))) {
+        return makeError(ErrorCode::kIo, path.string() + ": cannot read configuration");
+    }
+    return applyPipelineToml(text, path.string(), path.parent_path(), config);
+}
+
+Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
+                                    PipelineConfig& config) {
+    for (const auto& a : assignments) {
+        const auto eq = a.find('=');
+        const auto dot = a.find('.');
+        const std::string source = "--set " + a;
+        if (eq == std::string::npos || dot == std::string::npos || dot > eq) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             source + ": expected section.key=value (e.g. estimator.robust=true)");
+        }
+        const std::string section = a.substr(0, dot);
+        const std::string key = a.substr(dot + 1, eq - dot - 1);
+        std::string value = a.substr(eq + 1);
+        // A bare word that is not a TOML value is taken as a string.
+        auto attempt = parse("v = " + value, source);
+        if (!attempt) {
+            value = tomlQuote(value);
+        }
+        const std::string text = "[" + section + "]\n" + key + " = " + value + "\n";
+        auto root = parse(text, source);
+        if (!root) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             source + ": not a valid assignment (" + root.error().message + ")");
+        }
+        std::error_code ec;
+        const auto cwd = std::filesystem::current_path(ec);
+        if (auto ok = applyTable(*root, source, cwd, config); !ok) {
+            // The line number of the synthetic text means nothing to the user.
+            std::string msg = ok.error().message;
+            const std::string prefix = source + ":2: ";
+            if (msg.rfind(prefix, 0) == 0) {
+                msg = source + ": " + msg.substr(prefix.size());
+            }
+            return makeError(ok.error().code, msg);
+        }
+    }
+    return true;
+}
+
+std::vector<std::string> pipelineConfigKeys() {
+    PipelineConfig c;
+    std::vector<std::string> keys;
+    for (const auto& f : fields(c)) {
+        keys.push_back(f.section + "." + f.key);
+    }
+    return keys;
+}
+
+std::string toToml(const PipelineConfig& config) {
+    PipelineConfig copy = config;
+    std::string out;
+    std::string section;
+    for (const auto& f : fields(copy)) {
+        if (f.section != section) {
+            section = f.section;
+            out += (out.empty() ? "[" : "\n[") + section + "]\n";
+        }
+        out += f.key + " = " + f.value() + "\n";
+    }
+    return out;
+}
+
+}  // namespace scaled::daemon
