@@ -1,0 +1,317 @@
+// scale-eval's outputs: the JSON summary and the CSV files for the figures.
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "json.h"
+#include "scale_eval.h"
+
+namespace scaled::tools {
+
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+
+namespace {
+
+std::string num(std::optional<double> v, int digits = 6) {
+    return v ? jsonNumber(*v, digits) : "null";
+}
+
+std::string stats(const ErrorStats& s) {
+    return "{\"count\":" + std::to_string(s.count) + ",\"median\":" + num(s.median) +
+           ",\"std\":" + num(s.std) + ",\"max\":" + num(s.max) + "}";
+}
+
+std::optional<double> relError(std::optional<double> est, std::optional<double> truth) {
+    if (!est || !truth) {
+        return std::nullopt;
+    }
+    return std::abs(*est / *truth - 1);
+}
+
+std::optional<double> estimateOf(const core::ScaleSummary& s) {
+    if (s.state == core::ScaleState::kNoData) {
+        return std::nullopt;
+    }
+    return static_cast<double>(s.map);
+}
+
+// The updates the error statistics are taken over: from convergence on, or
+// every update when the run did not converge.
+std::size_t statsFrom(const EvalResult& r) {
+    return r.converged_update.value_or(0);
+}
+
+ErrorStats baselineErrors(const EvalResult& r, bool single) {
+    std::vector<double> e;
+    for (std::size_t i = statsFrom(r); i < r.updates.size(); ++i) {
+        const FrameRow& row = r.frame_rows[r.updates[i].row];
+        if (auto v =
+                relError(single ? row.baseline_single : row.baseline_constant, row.scale_true)) {
+            e.push_back(*v);
+        }
+    }
+    return describe(std::move(e));
+}
+
+std::optional<double> lastTruth(const EvalResult& r, bool window) {
+    for (auto it = r.frame_rows.rbegin(); it != r.frame_rows.rend(); ++it) {
+        const auto& v = window ? it->scale_true_window : it->scale_true;
+        if (it->epoch != r.frame_rows.back().epoch) {
+            break;
+        }
+        if (v) {
+            return v;
+        }
+    }
+    return std::nullopt;
+}
+
+std::string field(std::optional<double> v, int digits = 7) {
+    return v ? jsonNumber(*v, digits) : std::string();
+}
+
+class CsvFile {
+public:
+    explicit CsvFile(const std::filesystem::path& path) : path_(path), out_(path) {}
+    [[nodiscard]] bool open() const { return out_.is_open(); }
+    void line(const std::string& s) { out_ << s << '\n'; }
+    Result<bool> close() {
+        out_.close();
+        if (out_.fail()) {
+            return makeError(ErrorCode::kIo,
+                             path_.string() + ": write failed: " + std::strerror(errno));
+        }
+        return true;
+    }
+
+private:
+    std::filesystem::path path_;
+    std::ofstream out_;
+};
+
+std::string curveHeader(const char* first, const char* second, const std::vector<double>& d) {
+    std::string s = std::string(first) + "," + second;
+    for (const double v : d) {
+        s += "," + jsonNumber(v, 6);
+    }
+    return s;
+}
+
+std::string curveRow(const std::vector<float>& c, std::size_t n) {
+    std::string s;
+    for (std::size_t j = 0; j < n; ++j) {
+        s += "," + (j < c.size() ? jsonNumber(static_cast<double>(c[j]), 5) : std::string());
+    }
+    return s;
+}
+
+}  // namespace
+
+std::string toJson(const EvalResult& r, const EvalOptions& options) {
+    const auto& cfg = options.config;
+    const bool converged = r.converged_update.has_value();
+    const core::ScaleSummary last =
+        r.frame_rows.empty() ? core::ScaleSummary{} : r.frame_rows.back().scale;
+    const std::optional<double> truth = lastTruth(r, false);
+    const auto interval = [](const core::Interval& i) {
+        return "[" + jsonNumber(static_cast<double>(i.lo), 7) + "," +
+               jsonNumber(static_cast<double>(i.hi), 7) + "]";
+    };
+    std::string s = "{\"dataset\":" + jsonString(r.dataset);
+    s += ",\"frames\":" + std::to_string(r.frames);
+    s += ",\"tracked_frames\":" + std::to_string(r.tracked_frames);
+    s += ",\"tracking_lost_frames\":" + std::to_string(r.tracking_lost_frames);
+    s += ",\"unreadable_frames\":" + std::to_string(r.unreadable_frames);
+    s += ",\"epochs\":" + std::to_string(r.epochs);
+    s += ",\"detect_every_frames\":" + std::to_string(cfg.detection.every_frames);
+    s += ",\"updates\":" + std::to_string(r.updates.size());
+    s += ",\"observations\":" + std::to_string(r.observations.size());
+    s += ",\"ground_truth\":" + std::string(r.has_ground_truth ? "true" : "false");
+    s += ",\"converged\":" + std::string(converged ? "true" : "false");
+    s += ",\"converged_at_frame\":" +
+         (converged ? std::to_string(r.updates[*r.converged_update].frame) : "null");
+    s += ",\"converged_at_update\":" + (converged ? std::to_string(*r.converged_update) : "null");
+    // A scale is claimed only after convergence.
+    s += ",\"scale_est\":" + (converged ? jsonNumber(static_cast<double>(last.map), 7) : "null");
+    s += ",\"scale_est_ci68\":" + (converged ? interval(last.ci68) : "null");
+    s += ",\"scale_est_ci95\":" + (converged ? interval(last.ci95) : "null");
+    s += ",\"posterior_final\":{\"state\":" + jsonString(core::toString(last.state)) +
+         ",\"map\":" + num(estimateOf(last), 7) +
+         ",\"ci95\":" + (last.state == core::ScaleState::kNoData ? "null" : interval(last.ci95)) +
+         ",\"rel_width95\":" +
+         (last.state == core::ScaleState::kNoData
+              ? "null"
+              : jsonNumber(static_cast<double>(last.rel_width95), 4)) +
+         ",\"observations\":" + std::to_string(last.observations) + "}";
+    s += ",\"scale_true\":" + num(truth, 7);
+    s += ",\"scale_true_final\":" + num(truth, 7);
+    s += ",\"scale_true_window\":" + num(lastTruth(r, true), 7);
+    s += ",\"window_frames\":" + std::to_string(options.window_frames);
+    const ErrorStats e = relativeErrors(r.updates, statsFrom(r), false);
+    const ErrorStats ew = relativeErrors(r.updates, statsFrom(r), true);
+    s += ",\"rel_error\":" + (converged ? stats(e) : "null");
+    s += ",\"rel_error_median\":" + (converged ? num(e.median) : "null");
+    s += ",\"rel_error_std\":" + (converged ? num(e.std) : "null");
+    s += ",\"rel_error_window\":" + (converged ? stats(ew) : "null");
+    s += ",\"rel_error_final\":" +
+         (converged ? num(relError(estimateOf(last), truth)) : std::string("null"));
+    s += ",\"rel_error_unconverged\":" + (converged ? "null" : stats(e));
+    s += ",\"distance_errors\":{\"delta_frames\":" + std::to_string(options.distance_delta_frames) +
+         ",\"pairs\":" + std::to_string(r.distance.pairs) +
+         ",\"median_abs_m\":" + num(r.distance.median_abs_m) +
+         ",\"median_rel\":" + num(r.distance.median_rel) +
+         ",\"p90_rel\":" + num(r.distance.p90_rel) + "}";
+    s += ",\"depth_check\":{\"features\":" + std::to_string(r.depth.features) +
+         ",\"median_rel\":" + num(r.depth.median_rel) +
+         ",\"median_abs_m\":" + num(r.depth.median_abs_m) +
+         ",\"note\":" + jsonString(r.depth.note) + "}";
+    s += ",\"baselines\":{\"constant\":{\"seconds\":" + jsonNumber(options.baseline_seconds) +
+         ",\"scale\":" + num(r.baseline_constant_scale, 7) +
+         ",\"rel_error\":" + stats(baselineErrors(r, false)) +
+         "},\"single_detection\":{\"scale\":" + num(r.baseline_single_scale, 7) +
+         ",\"rel_error\":" + stats(baselineErrors(r, true)) + "}}";
+    s += ",\"ms_per_frame\":" + jsonNumber(r.ms_per_frame, 4);
+    s += ",\"tracker_ms_per_frame\":" + jsonNumber(r.tracker_ms_per_frame, 4);
+    s += ",\"detector_ms_per_update\":" + jsonNumber(r.detector_ms_per_update, 4);
+    s += ",\"estimator_ms_per_update\":" + jsonNumber(r.estimator_ms_per_update, 4);
+    s += ",\"gravity_source\":" + jsonString(r.gravity_source) + "}";
+    return s;
+}
+
+Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
+                          const std::string& out_dir) {
+    const std::filesystem::path dir(out_dir);
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) {
+        return makeError(ErrorCode::kIo,
+                         out_dir + ": cannot create the output directory: " + ec.message());
+    }
+    std::vector<CsvFile> files;
+    auto open = [&](const char* name) -> Result<CsvFile*> {
+        files.emplace_back(dir / name);
+        if (!files.back().open()) {
+            return makeError(ErrorCode::kIo,
+                             (dir / name).string() + ": cannot create: " + std::strerror(errno));
+        }
+        return &files.back();
+    };
+    files.reserve(7);
+
+    auto frames = open("frames.csv");
+    if (!frames) {
+        return frames.error();
+    }
+    (*frames)->line(
+        "frame,t_s,tracked,epoch,features_measured,scale_est,ci95_lo,ci95_hi,state,scale_true,"
+        "scale_true_window,rel_error,rel_error_window,baseline_constant_rel_error,"
+        "baseline_single_rel_error");
+    for (const auto& f : r.frame_rows) {
+        const auto est = estimateOf(f.scale);
+        const bool has = est.has_value();
+        (*frames)->line(std::to_string(f.frame) + "," + jsonNumber(f.t_s, 9) + "," +
+                        (f.tracked ? "1" : "0") + "," + std::to_string(f.epoch) + "," +
+                        std::to_string(f.features_measured) + "," + field(est) + "," +
+                        (has ? jsonNumber(static_cast<double>(f.scale.ci95.lo), 7) : "") + "," +
+                        (has ? jsonNumber(static_cast<double>(f.scale.ci95.hi), 7) : "") + "," +
+                        core::toString(f.scale.state) + "," + field(f.scale_true) + "," +
+                        field(f.scale_true_window) + "," + field(relError(est, f.scale_true)) +
+                        "," + field(relError(est, f.scale_true_window)) + "," +
+                        field(relError(f.baseline_constant, f.scale_true)) + "," +
+                        field(relError(f.baseline_single, f.scale_true)));
+    }
+
+    auto updates = open("updates.csv");
+    if (!updates) {
+        return updates.error();
+    }
+    (*updates)->line(
+        "update,frame,t_s,epoch,detections,observations,total_observations,scale_est,mean,ci68_lo,"
+        "ci68_hi,ci95_lo,ci95_hi,rel_width95,state,converged,scale_true,scale_true_window,"
+        "rel_error,rel_error_window");
+    for (const auto& u : r.updates) {
+        const auto est = estimateOf(u.scale);
+        const auto v = [&](core::Scalar x) {
+            return est ? jsonNumber(static_cast<double>(x), 7) : std::string();
+        };
+        const bool conv =
+            r.converged_update && static_cast<std::size_t>(u.update) >= *r.converged_update;
+        (*updates)->line(std::to_string(u.update) + "," + std::to_string(u.frame) + "," +
+                         jsonNumber(u.t_s, 9) + "," + std::to_string(u.epoch) + "," +
+                         std::to_string(u.detections) + "," + std::to_string(u.observations) + "," +
+                         std::to_string(u.scale.observations) + "," + field(est) + "," +
+                         v(u.scale.mean) + "," + v(u.scale.ci68.lo) + "," + v(u.scale.ci68.hi) +
+                         "," + v(u.scale.ci95.lo) + "," + v(u.scale.ci95.hi) + "," +
+                         v(u.scale.rel_width95) + "," + core::toString(u.scale.state) + "," +
+                         (conv ? "1" : "0") + "," + field(u.scale_true) + "," +
+                         field(u.scale_true_window) + "," + field(relError(est, u.scale_true)) +
+                         "," + field(relError(est, u.scale_true_window)));
+    }
+
+    auto obs = open("observations.csv");
+    if (!obs) {
+        return obs.error();
+    }
+    (*obs)->line("update,frame,observation,class,score,D,sigma_D,local_estimate,weight");
+    for (std::size_t k = 0; k < r.observations.size(); ++k) {
+        const auto& o = r.observations[k];
+        (*obs)->line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," +
+                     std::to_string(k) + "," + o.class_name + "," + jsonNumber(o.score, 4) + "," +
+                     jsonNumber(o.D, 7) + "," + jsonNumber(o.sigma_D, 5) + "," +
+                     jsonNumber(o.local_estimate, 6) + "," + jsonNumber(o.weight, 4));
+    }
+
+    auto post = open("posterior.csv");
+    if (!post) {
+        return post.error();
+    }
+    (*post)->line(curveHeader("update", "frame", r.curve_d));
+    for (std::size_t u = 0; u < r.posterior_curves.size() && u < r.updates.size(); ++u) {
+        (*post)->line(std::to_string(u) + "," + std::to_string(r.updates[u].frame) +
+                      curveRow(r.posterior_curves[u], r.curve_d.size()));
+    }
+
+    auto lik = open("likelihoods.csv");
+    if (!lik) {
+        return lik.error();
+    }
+    (*lik)->line(curveHeader("observation", "update", r.curve_d));
+    for (std::size_t k = 0; k < r.likelihood_curves.size() && k < r.observations.size(); ++k) {
+        if (r.likelihood_curves[k].empty()) {
+            continue;
+        }
+        (*lik)->line(std::to_string(k) + "," + std::to_string(r.observations[k].update) +
+                     curveRow(r.likelihood_curves[k], r.curve_d.size()));
+    }
+
+    auto summary = open("summary.json");
+    if (!summary) {
+        return summary.error();
+    }
+    (*summary)->line(toJson(r, options));
+
+    auto config = open("config.toml");
+    if (!config) {
+        return config.error();
+    }
+    (*config)->line("# The configuration of this run (every key; see config/scaled.toml).\n\n" +
+                    daemon::toToml(options.config));
+
+    for (auto& f : files) {
+        if (auto ok = f.close(); !ok) {
+            return ok.error();
+        }
+    }
+    return true;
+}
+
+}  // namespace scaled::tools

@@ -1,0 +1,170 @@
+#pragma once
+
+// scale-eval's library: runs the tracker, the detector and the scale estimator
+// over a recorded sequence, synchronously and deterministically (the detector
+// runs on every Nth tracked frame and its boxes update the estimator against
+// the filter of that same frame), and measures the scale estimate against the
+// ground truth. The metrics (convergence rule, error statistics, distance
+// errors) are separate functions so that tests can check them on series with
+// known answers.
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <scaled/core/result.h>
+#include <scaled/core/scale/scale_estimator.h>
+#include <scaled/daemon/pipeline_config.h>
+#include <scaled/detector/object_detector.h>
+#include <scaled/drivers/frame_source.h>
+
+namespace scaled::tools {
+
+struct EvalOptions {
+    daemon::PipelineConfig config;
+    std::size_t first_frame = 0;
+    std::optional<std::size_t> end_frame;  // exclusive
+    // Ground-truth scale over a sliding window of this many tracked frames.
+    int window_frames = 150;
+    // The constant-scale baseline is fitted on this much ground truth at the
+    // start of the map (the paper's marker-initialised d).
+    double baseline_seconds = 1.0;
+    // The ground-truth scale is reported once the ground-truth camera path of
+    // the frames it is fitted on is at least this long (shorter paths give a
+    // Umeyama scale dominated by noise).
+    double min_truth_path_m = 0.10;
+    // Distance errors between camera positions k and k + distance_delta_frames
+    // whose ground-truth distance is at least min_distance_m.
+    int distance_delta_frames = 30;
+    double min_distance_m = 0.05;
+    // Keep every update's posterior and every observation's likelihood,
+    // decimated to at most curve_bins grid points (for figures).
+    bool keep_curves = false;
+    int curve_bins = 256;
+    // Called after every frame; may be empty.
+    std::function<void(std::size_t done, std::size_t total, const core::ScaleSummary& summary)>
+        progress;
+};
+
+struct FrameRow {
+    std::int64_t frame = 0;
+    double t_s = 0;
+    bool tracked = false;
+    int epoch = 0;
+    int features_measured = 0;
+    core::ScaleSummary scale;                 // the estimate after this frame
+    std::optional<double> scale_true;         // cumulative Sim(3) scale of this epoch so far
+    std::optional<double> scale_true_window;  // the same over the last window_frames
+    std::optional<double> baseline_constant;  // this epoch's constant-scale baseline
+    std::optional<double> baseline_single;    // this epoch's single-early-detection scale
+};
+
+struct UpdateRow {
+    int update = 0;
+    std::size_t row = 0;  // index of the frame's FrameRow
+    std::int64_t frame = 0;
+    double t_s = 0;
+    int epoch = 0;
+    int detections = 0;
+    int observations = 0;
+    core::ScaleSummary scale;
+    std::optional<double> scale_true;
+    std::optional<double> scale_true_window;
+};
+
+struct ObservationRow {
+    int update = 0;
+    std::int64_t frame = 0;
+    std::string class_name;
+    double score = 0;
+    double D = 0;
+    double sigma_D = 0;  // the likelihood's sigma in SLAM units (the variance model in use)
+    double local_estimate = 0;
+    double weight = 1;
+};
+
+// How an estimate compares with the truth over a run.
+struct ErrorStats {
+    int count = 0;
+    std::optional<double> median;
+    std::optional<double> std;
+    std::optional<double> max;
+};
+
+struct DistanceErrors {
+    int pairs = 0;
+    std::optional<double> median_abs_m;
+    std::optional<double> median_rel;
+    std::optional<double> p90_rel;
+};
+
+struct DepthCheck {
+    int features = 0;
+    std::optional<double> median_rel;
+    std::optional<double> median_abs_m;
+    std::string note;
+};
+
+struct EvalResult {
+    std::string dataset;
+    std::size_t frames = 0;
+    std::size_t tracked_frames = 0;
+    std::size_t tracking_lost_frames = 0;
+    int epochs = 1;
+    std::size_t unreadable_frames = 0;
+    bool has_ground_truth = false;
+    std::string gravity_source;
+
+    std::vector<FrameRow> frame_rows;
+    std::vector<UpdateRow> updates;
+    std::vector<ObservationRow> observations;
+
+    // Curves for the figures (keep_curves): grid values of d, one normalised
+    // log posterior per update, one normalised log likelihood per observation.
+    std::vector<double> curve_d;
+    std::vector<std::vector<float>> posterior_curves;
+    std::vector<std::vector<float>> likelihood_curves;
+
+    std::optional<std::size_t> converged_update;  // index into updates
+    std::optional<double> baseline_constant_scale;
+    std::optional<double> baseline_single_scale;
+    DistanceErrors distance;
+    DepthCheck depth;
+
+    double ms_per_frame = 0;  // tracker + detector + estimator, image decoding excluded
+    double tracker_ms_per_frame = 0;
+    double detector_ms_per_update = 0;
+    double estimator_ms_per_update = 0;
+};
+
+core::Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetector& detector,
+                                  const core::PriorTable& priors, const EvalOptions& options);
+
+// ---- metrics -------------------------------------------------------------
+
+// The convergence rule: the first update after which every later update of the
+// run (itself included) has a 95% interval narrower than rel_width of its MAP.
+// nullopt when the last update is not that narrow (or there are none).
+std::optional<std::size_t> convergedAt(std::span<const UpdateRow> updates, double rel_width);
+
+// |estimate / truth - 1| of every update from `first` on that has a truth.
+ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window);
+
+// Median and standard deviation (population) of a sample; empty: nullopt.
+ErrorStats describe(std::vector<double> values);
+
+// The scale of the Sim(3) alignment of est to gt, when the ground-truth path
+// is at least min_path_m long (and the alignment is defined).
+std::optional<double> truthScale(std::span<const core::Vec3> est, std::span<const core::Vec3> gt,
+                                 double min_path_m);
+
+// JSON summary (one object, one line) and the CSV files scale_eval_plot.py
+// reads (frames, updates, observations, posterior, likelihoods, summary.json).
+std::string toJson(const EvalResult& r, const EvalOptions& options);
+core::Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
+                                const std::string& out_dir);
+
+}  // namespace scaled::tools
