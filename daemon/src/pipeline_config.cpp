@@ -351,12 +351,15 @@ Result<bool> applyTable(const toml::table& root, std::string_view source,
                     }
                 }
             }
+            std::string full = section;
+            full += '.';
+            full += key;
             if (field == nullptr) {
-                return errorAt(source, &node, section + "." + key,
+                return errorAt(source, &node, full,
                                "unknown key (allowed in [" + section + "]: " + join(allowed) + ")");
             }
             if (auto problem = field->set(node, base_dir)) {
-                return errorAt(source, &node, section + "." + key, *problem);
+                return errorAt(source, &node, full, *problem);
             }
         }
     }
@@ -436,7 +439,12 @@ Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
         if (!attempt) {
             value = tomlQuote(value);
         }
-        const std::string text = "[" + section + "]\n" + key + " = " + value + "\n";
+        std::string text = "[" + section;
+        text += "]\n";
+        text += key;
+        text += " = ";
+        text += value;
+        text += '\n';
         auto root = parse(text, source);
         if (!root) {
             return makeError(ErrorCode::kInvalidArgument,
@@ -449,7 +457,10 @@ Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
             std::string msg = ok.error().message;
             const std::string prefix = source + ":2: ";
             if (msg.rfind(prefix, 0) == 0) {
-                msg = source + ": " + msg.substr(prefix.size());
+                std::string shorter = source;
+                shorter += ": ";
+                shorter += msg.substr(prefix.size());
+                msg = std::move(shorter);
             }
             return makeError(ok.error().code, msg);
         }

@@ -113,8 +113,8 @@ std::vector<Plane> findPlanes(std::vector<float> heights, double min_fraction) {
     const auto total = static_cast<double>(heights.size());
     for (int b = 1; b + 1 < n; ++b) {
         const double c = smooth[static_cast<std::size_t>(b)];
-        if (c < smooth[static_cast<std::size_t>(b - 1)] ||
-            c <= smooth[static_cast<std::size_t>(b + 1)]) {
+        if (c < smooth[static_cast<std::size_t>(b) - 1] ||
+            c <= smooth[static_cast<std::size_t>(b) + 1]) {
             continue;
         }
         const double centre = lo + (b + 0.5) * kBin;

@@ -29,8 +29,6 @@
 #include "scale_eval.h"
 #include "sysexits.h"
 
-extern char** environ;
-
 namespace {
 
 using namespace scaled::tools;  // NOLINT(google-build-using-namespace): a tool's main
@@ -125,6 +123,7 @@ int drawFigures(const std::string& out_dir) {
     }
     std::vector<std::string> args = {python, script, out_dir};
     std::vector<char*> argv;
+    argv.reserve(args.size() + 1);
     for (auto& a : args) {
         argv.push_back(a.data());
     }
