@@ -18,6 +18,7 @@
 #include <scaled/detector/dnn_detector.h>
 #include <scaled/drivers/image_file.h>
 
+#include "args.h"
 #include "detect_report.h"
 #include "sysexits.h"
 
@@ -47,13 +48,6 @@ void usage(std::FILE* out) {
 
 int exitCodeFor(ErrorCode code) {
     return code == ErrorCode::kNotFound ? kExNoInput : kExDataErr;
-}
-
-std::filesystem::path defaultModel() {
-    const char* shared = std::getenv("SCALED_SHARED_DIR");  // NOLINT(concurrency-mt-unsafe)
-    const std::filesystem::path dir =
-        (shared != nullptr && *shared != '\0') ? std::filesystem::path(shared) : "../shared";
-    return dir / "models" / "yolox_nano.onnx";
 }
 
 bool parseInt(std::string_view s, int& out) {
@@ -144,7 +138,7 @@ int main(int argc, char** argv) {
         return kExUsage;
     }
     if (config.model_path.empty()) {
-        config.model_path = defaultModel();
+        config.model_path = scaled::tools::defaultModelPath();
     }
     config.family = scaled::detector::familyFromPath(config.model_path);
     if (family_text) {

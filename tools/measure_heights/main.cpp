@@ -39,6 +39,7 @@
 #include <scaled/drivers/depth_image.h>
 #include <scaled/drivers/frame_source.h>
 
+#include "args.h"
 #include "json.h"
 #include "measure.h"
 #include "sysexits.h"
@@ -79,13 +80,6 @@ void usage(std::FILE* out) {
         "Defaults: --model $SCALED_SHARED_DIR/models/yolox_nano.onnx (SCALED_SHARED_DIR\n"
         "defaults to ../shared); detector input 416, score 0.3.\n",
         out);
-}
-
-std::filesystem::path defaultModel() {
-    const char* shared = std::getenv("SCALED_SHARED_DIR");  // NOLINT(concurrency-mt-unsafe)
-    const std::filesystem::path dir =
-        (shared != nullptr && *shared != '\0') ? std::filesystem::path(shared) : "../shared";
-    return dir / "models" / "yolox_nano.onnx";
 }
 
 bool parsePositive(std::string_view s, int& out) {
@@ -260,7 +254,7 @@ int main(int argc, char** argv) {
         return kExUsage;
     }
     if (model.empty()) {
-        model = defaultModel();
+        model = scaled::tools::defaultModelPath();
     }
     std::error_code ec;
     if (!std::filesystem::exists(dataset, ec)) {

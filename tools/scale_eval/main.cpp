@@ -9,7 +9,6 @@
 // priors not found, 69 figures not drawn (python3-matplotlib missing; the CSV
 // files are written), 73 cannot write --out, 78 bad configuration.
 
-#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -26,6 +25,7 @@
 #include <scaled/detector/dnn_detector.h>
 #include <scaled/drivers/priors_toml.h>
 
+#include "args.h"
 #include "scale_eval.h"
 #include "sysexits.h"
 
@@ -57,58 +57,6 @@ void usage(std::FILE* out) {
         "The model defaults to $SCALED_SHARED_DIR/models/yolox_nano.onnx (../shared), the\n"
         "priors to config/priors.toml of the source tree.\n",
         out);
-}
-
-template <typename T>
-bool parseNumber(std::string_view s, T& out) {
-    const auto* end = s.data() + s.size();
-    const auto r = std::from_chars(s.data(), end, out);
-    return r.ec == std::errc() && r.ptr == end;
-}
-
-bool parseRange(std::string_view s, std::size_t& a, std::optional<std::size_t>& b) {
-    const auto colon = s.find(':');
-    if (colon == std::string_view::npos) {
-        return false;
-    }
-    a = 0;
-    if (colon > 0 && !parseNumber(s.substr(0, colon), a)) {
-        return false;
-    }
-    if (colon + 1 < s.size()) {
-        std::size_t e = 0;
-        if (!parseNumber(s.substr(colon + 1), e) || e <= a) {
-            return false;
-        }
-        b = e;
-    }
-    return true;
-}
-
-bool parseIntrinsics(std::string_view s, scaled::core::CameraIntrinsics& k) {
-    double v[4];
-    for (double& x : v) {
-        const auto comma = s.find(',');
-        const std::string part(s.substr(0, comma));
-        char* end = nullptr;
-        x = std::strtod(part.c_str(), &end);
-        if (part.empty() || end != part.c_str() + part.size()) {
-            return false;
-        }
-        s = comma == std::string_view::npos ? std::string_view() : s.substr(comma + 1);
-    }
-    k.fx = scaled::core::Scalar(v[0]);
-    k.fy = scaled::core::Scalar(v[1]);
-    k.cx = scaled::core::Scalar(v[2]);
-    k.cy = scaled::core::Scalar(v[3]);
-    return s.empty();
-}
-
-std::filesystem::path sharedDir() {
-    if (const char* env = std::getenv("SCALED_SHARED_DIR"); env != nullptr && *env != '\0') {
-        return env;
-    }
-    return std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared";
 }
 
 // Runs the plotting script; its exit code (or 69 when it cannot start).
@@ -213,7 +161,7 @@ int main(int argc, char** argv) {
                 ok = false;
             }
         } else if (a == "--frames") {
-            ok = parseRange(v, opt.first_frame, opt.end_frame);
+            ok = parseFrameRange(v, opt.first_frame, opt.end_frame);
         } else if (a == "--intrinsics") {
             scaled::core::CameraIntrinsics k;
             ok = parseIntrinsics(v, k);
@@ -254,7 +202,8 @@ int main(int argc, char** argv) {
         cfg.priors_path = std::filesystem::path(SCALED_SOURCE_DIR) / "config" / "priors.toml";
     }
     if (cfg.detector.model_path.empty()) {
-        cfg.detector.model_path = sharedDir() / "models" / "yolox_nano.onnx";
+        cfg.detector.model_path =
+            defaultModelPath(std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared");
     }
 
     auto priors = scaled::drivers::loadPriorsFile(cfg.priors_path);

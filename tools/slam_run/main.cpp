@@ -10,7 +10,6 @@
 // Exit codes (sysexits): 0 ok, 64 usage, 65 bad data, 66 dataset not found,
 // 73 cannot write the trajectory.
 
-#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -23,6 +22,7 @@
 #include <scaled/drivers/dataset_tum.h>
 #include <scaled/drivers/trajectory_io.h>
 
+#include "args.h"
 #include "slam_run.h"
 #include "sysexits.h"
 
@@ -32,6 +32,8 @@ using scaled::tools::kExCantCreat;
 using scaled::tools::kExDataErr;
 using scaled::tools::kExNoInput;
 using scaled::tools::kExUsage;
+using scaled::tools::parseIntrinsics;
+using scaled::tools::parseNumber;
 
 using scaled::core::Scalar;
 
@@ -49,57 +51,6 @@ void usage(std::FILE* out) {
         "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
         "                 container has none (default 30)\n",
         out);
-}
-
-template <typename T>
-bool parseNumber(std::string_view s, T& out) {
-    const auto* end = s.data() + s.size();
-    const auto r = std::from_chars(s.data(), end, out);
-    return r.ec == std::errc() && r.ptr == end;
-}
-
-bool parseRange(std::string_view s, std::size_t& a, std::optional<std::size_t>& b) {
-    const auto colon = s.find(':');
-    if (colon == std::string_view::npos) {
-        return false;
-    }
-    const auto first = s.substr(0, colon);
-    const auto last = s.substr(colon + 1);
-    a = 0;
-    if (!first.empty() && !parseNumber(first, a)) {
-        return false;
-    }
-    if (!last.empty()) {
-        std::size_t e = 0;
-        if (!parseNumber(last, e) || e <= a) {
-            return false;
-        }
-        b = e;
-    }
-    return true;
-}
-
-bool parseIntrinsics(std::string_view s, scaled::core::CameraIntrinsics& k) {
-    double v[4];
-    for (int i = 0; i < 4; ++i) {
-        const auto comma = s.find(',');
-        const auto part = s.substr(0, comma);
-        char* end = nullptr;
-        const std::string str(part);
-        v[i] = std::strtod(str.c_str(), &end);
-        if (str.empty() || end != str.c_str() + str.size()) {
-            return false;
-        }
-        if (i < 3 && comma == std::string_view::npos) {
-            return false;
-        }
-        s = comma == std::string_view::npos ? std::string_view() : s.substr(comma + 1);
-    }
-    k.fx = Scalar(v[0]);
-    k.fy = Scalar(v[1]);
-    k.cx = Scalar(v[2]);
-    k.cy = Scalar(v[3]);
-    return s.empty();
 }
 
 // --set KEY=VALUE: the tracker's tuning knobs, for experiments.
@@ -239,7 +190,7 @@ int main(int argc, char** argv) {
                 ok = false;
             }
         } else if (a == "--frames") {
-            ok = parseRange(*v, ropt.first_frame, ropt.end_frame);
+            ok = scaled::tools::parseFrameRange(*v, ropt.first_frame, ropt.end_frame);
         } else if (a == "--intrinsics") {
             scaled::core::CameraIntrinsics k;
             ok = parseIntrinsics(*v, k);
