@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -196,7 +197,9 @@ Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
         return makeError(ErrorCode::kIo,
                          out_dir + ": cannot create the output directory: " + ec.message());
     }
-    std::vector<CsvFile> files;
+    // A deque keeps the files where they are as more are opened (open() hands
+    // out pointers).
+    std::deque<CsvFile> files;
     auto open = [&](const char* name) -> Result<CsvFile*> {
         files.emplace_back(dir / name);
         if (!files.back().open()) {
@@ -205,7 +208,6 @@ Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
         }
         return &files.back();
     };
-    files.reserve(7);
 
     auto frames = open("frames.csv");
     if (!frames) {
