@@ -1,4 +1,4 @@
-// The tracker on rendered images of a textured room (tools/synth): real
+// The tracker on rendered images of a textured room (drivers/synth): real
 // pixels, exact ground truth. Trajectory accuracy, and the consistency (NEES)
 // of the camera pose over Monte-Carlo runs with the scale fixed by known
 // depths of the first map's features. Figures: docs/accuracy.md.
