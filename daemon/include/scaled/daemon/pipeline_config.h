@@ -26,6 +26,9 @@ namespace scaled::daemon {
 
 struct DetectionSchedule {
     int every_frames = 10;  // run the detector on every Nth tracked frame (the paper: 10)
+    // When > 0, run the detector at most this often instead (seconds of frame
+    // time between the frames handed to it); every_frames is then ignored.
+    double period_s = 0;
 };
 
 struct PipelineConfig {

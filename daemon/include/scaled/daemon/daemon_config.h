@@ -1,0 +1,136 @@
+#pragma once
+
+// The daemon's whole configuration: the pipeline (pipeline_config.h: tracker,
+// detector, detection schedule, estimator) plus the source, the socket, the
+// field log and the queues. One TOML file (config/scaled.toml documents every
+// key, installed as /etc/scaled/scaled.toml); the command line overrides it.
+//
+// Every key is checked like the pipeline's: a wrong type, a value outside its
+// range or an unknown key/section is an Error reading
+// `FILE:LINE: section.key: what is wrong (allowed range) (got VALUE)`.
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <scaled/core/result.h>
+#include <scaled/daemon/pipeline_config.h>
+#include <scaled/drivers/paced_source.h>
+
+namespace scaled::daemon {
+
+enum class SourceKind : std::uint8_t { kSim, kReplay, kV4l2, kLibcamera };
+const char* toString(SourceKind kind);
+
+// What a replay does at the end of its sequence.
+enum class AtEnd : std::uint8_t {
+    kStay,  // keep serving the last scale (source_finished in STATUS)
+    kExit,  // stop the daemon cleanly (exit code 0): tests, batch runs
+    kLoop,  // start over (a new map, a new epoch)
+};
+
+// [source]
+struct SourceConfig {
+    SourceKind kind = SourceKind::kSim;
+    std::filesystem::path replay_path;  // kReplay: dataset directory or video file
+    std::string device;                 // kV4l2: /dev/videoN or card name; kLibcamera: id/index
+    drivers::PacingMode pacing = drivers::PacingMode::kRealTime;  // replay and sim
+    double speed = 1.0;                                           // real time: playback speed
+    AtEnd at_end = AtEnd::kStay;
+    std::int64_t max_frames = 0;  // stop the source after this many frames (0: no limit)
+    // kSim: the synthetic room (drivers/sim).
+    std::uint64_t sim_seed = 1;
+    double sim_fps = 30.0;
+    int sim_width_px = 320;
+    int sim_height_px = 240;
+};
+
+// [socket]
+struct SocketConfig {
+    std::filesystem::path path = "/run/scaled/scaled.sock";
+    unsigned mode = 0660;                 // file mode of the socket
+    std::string group;                    // owning group; empty: the process's group
+    int max_clients = 16;                 // the next one gets an ERROR and is closed
+    std::size_t max_request_bytes = 4096;   // a longer line is an ERROR (and discarded)
+    std::size_t client_buffer_bytes = 262144;  // unsent output per client before it is detached
+};
+
+// [log]
+struct LogConfig {
+    bool enabled = true;
+    std::filesystem::path dir = "/var/log/scaled";
+    int frame_every = 30;                    // per-frame summary every N tracked frames (0: none)
+    std::uint64_t max_file_bytes = 8u << 20;    // rotate after this size
+    std::uint64_t max_total_bytes = 64u << 20;  // delete the oldest files above this total
+    int fsync_interval_ms = 1000;            // flush + fsync at most this often
+    std::size_t queue_bytes = 1u << 20;      // in-memory queue; full: lines dropped and counted
+};
+
+// [pipeline]
+struct QueueConfig {
+    int capture_queue_frames = 4;  // frames between capture and tracking
+    int status_interval_ms = 1000;  // STATUS= to systemd, live status line refresh
+};
+
+struct DaemonConfig {
+    PipelineConfig pipeline = defaultPipelineConfig();
+    SourceConfig source;
+    SocketConfig socket;
+    LogConfig log;
+    QueueConfig queues;
+    // The file the configuration came from (empty: built-in defaults); SIGHUP re-reads it.
+    std::filesystem::path file;
+};
+
+DaemonConfig defaultDaemonConfig();
+
+// Applies TOML text / a file (relative paths against the file's directory).
+// On error `config` is unchanged.
+core::Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source_name,
+                                   const std::filesystem::path& base_dir, DaemonConfig& config);
+core::Result<bool> applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config);
+// `section.key=value` overrides (the pipeline's and the daemon's sections).
+core::Result<bool> applyDaemonOverrides(const std::vector<std::string>& assignments,
+                                        DaemonConfig& config);
+// Every key as `section.key`, in file order.
+std::vector<std::string> daemonConfigKeys();
+// The configuration as TOML (every key).
+std::string toToml(const DaemonConfig& config);
+
+// `--source` values: sim | replay:DIR | v4l2:DEVICE | libcamera:ID.
+core::Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source);
+
+// The command line (CLI11). Everything optional overrides the file.
+struct CommandLine {
+    std::optional<std::filesystem::path> config;  // --config FILE
+    std::optional<std::string> source;            // --source SPEC
+    std::optional<std::filesystem::path> socket;  // --socket PATH
+    std::optional<std::filesystem::path> log_dir; // --log-dir DIR
+    std::optional<std::string> pacing;            // --pacing realtime|fast
+    std::vector<std::string> sets;                // --set section.key=value (repeatable)
+    bool no_tty = false;                          // --no-tty: no live status line
+    bool check_config = false;                    // --check-config [FILE]: validate and exit
+    bool version = false;                         // --version
+};
+
+// Outcome of parsing argv: run, or exit at once with `exit_code` after
+// printing `output` (help, version) to stdout or `error` to stderr.
+struct ParsedCommandLine {
+    CommandLine cli;
+    bool exit_now = false;
+    int exit_code = 0;
+    std::string output;
+    std::string error;
+};
+ParsedCommandLine parseCommandLine(int argc, const char* const* argv);
+
+// Builds the configuration: defaults, then the file (--config, else
+// default_config_file when it exists), then --set, then the dedicated options.
+// Errors name file, line, key and value; the caller exits 78 (EX_CONFIG).
+core::Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
+                                            const std::filesystem::path& default_config_file);
+
+}  // namespace scaled::daemon

@@ -1,0 +1,156 @@
+#pragma once
+
+// What the daemon tells the outside world: the scale report, the pipeline's
+// health and the posterior grid, and ReportHub, the one place the pipeline
+// publishes them and every reader (socket, field log, status line, sd_notify)
+// takes them from.
+//
+// Threads: the pipeline's threads publish; the socket thread, the main thread
+// and the log read. Every call is thread-safe and short (a mutex around a copy
+// into storage reserved at construction); a reader never blocks a writer for
+// longer than one copy.
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <scaled/core/types.h>
+
+namespace scaled::daemon {
+
+// The state of the scale, as clients and LEDs see it.
+enum class DaemonState : std::uint8_t {
+    kInitialising,  // no map yet (start-up, or a new map being made after a loss)
+    kTracking,      // map tracked, no scale evidence yet in this epoch
+    kConverging,    // evidence, 95% interval still wider than estimator.converged_rel_width
+    kConverged,     // 95% interval narrower than that
+    kLost,          // SLAM lost the map; a new one (new epoch) follows
+    kFault,         // the pipeline cannot produce scales (source or detector failed)
+};
+const char* toString(DaemonState state);
+
+// One scale report (protocol class SCALE).
+struct ScaleReport {
+    bool has_scale = false;  // false until the first observation of the epoch
+    double scale = 0;        // metres per SLAM unit: the posterior mode (MAP)
+    double mean = 0;         // posterior mean
+    double ci68_lo = 0;
+    double ci68_hi = 0;
+    double ci95_lo = 0;
+    double ci95_hi = 0;
+    DaemonState state = DaemonState::kInitialising;
+    std::uint64_t epoch = 0;  // bumped whenever SLAM starts a new map (its scale is new)
+    int observations = 0;     // in this epoch
+    std::int64_t frame_id = -1;  // frame the latest scale update was computed on (-1: none)
+    std::int64_t t_ns = 0;       // that frame's timestamp (source clock)
+    // CLOCK_MONOTONIC time of the latest scale update (0: none): age = now - this.
+    std::int64_t updated_mono_ns = 0;
+    // Set when something is wrong that does not stop the scale (e.g. the field
+    // log stopped: "log: No space left on device"). Empty when all is well.
+    std::string fault;
+};
+
+// Pipeline health (protocol class STATUS).
+struct PipelineStatus {
+    std::string source;              // "sim", "replay:/path/to/dir", ...
+    std::int64_t frame_id = -1;      // last tracked frame
+    std::int64_t frames_total = 0;   // frames the source has (replay), 0 when unbounded
+    bool source_finished = false;    // replay reached its end (the daemon keeps serving)
+    double fps = 0;                  // tracked frames per second, recent window
+    std::uint64_t frames_captured = 0;
+    std::uint64_t frames_tracked = 0;
+    std::uint64_t frames_dropped = 0;      // capture queue full (live/paced sources)
+    std::uint64_t detections_run = 0;      // detector runs
+    std::uint64_t detections_skipped = 0;  // frames replaced in the detection slot before it ran
+    std::uint64_t scale_updates = 0;
+    double detector_latency_ms_last = 0;
+    double detector_latency_ms_mean = 0;
+    double detector_latency_ms_max = 0;
+    double tracking_ms_mean = 0;
+    int features_in_map = 0;
+    int features_tracked = 0;  // measured (inliers) in the last frame
+    std::uint64_t epoch = 0;
+    double uptime_s = 0;
+};
+
+// Field-log health, published by the log service.
+struct LogStatus {
+    enum class State : std::uint8_t { kOff, kOk, kFault };
+    State state = State::kOff;
+    std::uint64_t lines_written = 0;
+    std::uint64_t lines_dropped = 0;  // queue full or log faulted
+    std::uint64_t bytes_written = 0;
+    std::string error;  // why it is in kFault
+};
+const char* toString(LogStatus::State state);
+
+// The posterior on the grid (protocol class POSTERIOR).
+struct PosteriorSnapshot {
+    std::uint64_t epoch = 0;
+    std::int64_t frame_id = -1;
+    int observations = 0;
+    std::vector<double> d;      // grid values of d (metres per SLAM unit), increasing
+    std::vector<double> log_p;  // normalised log density (max 0), same size
+};
+
+class ReportHub {
+public:
+    // grid_bins: size of the posterior grid (buffers are reserved for it).
+    explicit ReportHub(std::size_t grid_bins);
+    ~ReportHub();
+    ReportHub(const ReportHub&) = delete;
+    ReportHub& operator=(const ReportHub&) = delete;
+    ReportHub(ReportHub&&) = delete;
+    ReportHub& operator=(ReportHub&&) = delete;
+
+    // --- writers ------------------------------------------------------------
+    // A new scale report (an update or a state change); the posterior is
+    // copied when given (sizes must match the grid, else it is ignored). Bumps
+    // scaleSequence() and makes wakeFd() readable.
+    void publishScale(const ScaleReport& report, std::span<const double> grid_d = {},
+                      std::span<const double> log_p = {});
+    void publishStatus(const PipelineStatus& status);
+    void publishLogStatus(const LogStatus& status);
+
+    // --- readers ------------------------------------------------------------
+    [[nodiscard]] ScaleReport scale() const;
+    [[nodiscard]] PipelineStatus status() const;
+    [[nodiscard]] LogStatus logStatus() const;
+    // false when no posterior was published yet.
+    bool posterior(PosteriorSnapshot& out) const;
+    // Increases with every publishScale().
+    [[nodiscard]] std::uint64_t scaleSequence() const { return scale_seq_.load(); }
+
+    // An eventfd that becomes readable after publishScale(); a poll() loop
+    // waits on it and calls consumeWake() before reading. -1 if eventfd failed
+    // (then readers must poll scaleSequence()).
+    [[nodiscard]] int wakeFd() const { return wake_fd_; }
+    void consumeWake() const;
+
+    // --- commands from clients to the pipeline ------------------------------
+    // set_gravity: unit gravity ("down") in the current camera frame.
+    void requestGravity(const core::Vec3& down_C);
+    std::optional<core::Vec3> takeGravityRequest();
+
+private:
+    mutable std::mutex mutex_;
+    ScaleReport scale_;
+    PipelineStatus status_;
+    LogStatus log_status_;
+    PosteriorSnapshot posterior_;
+    bool has_posterior_ = false;
+    std::optional<core::Vec3> gravity_request_;
+    std::atomic<std::uint64_t> scale_seq_{0};
+    int wake_fd_ = -1;
+};
+
+// CLOCK_MONOTONIC now, nanoseconds.
+std::int64_t monotonicNowNs();
+
+}  // namespace scaled::daemon

@@ -1,0 +1,2 @@
+// placeholder: the lead writes main.cpp
+int main() { return 0; }

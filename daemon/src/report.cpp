@@ -1,0 +1,136 @@
+#include <scaled/daemon/report.h>
+
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <ctime>
+
+namespace scaled::daemon {
+
+const char* toString(DaemonState state) {
+    switch (state) {
+        case DaemonState::kInitialising:
+            return "initialising";
+        case DaemonState::kTracking:
+            return "tracking";
+        case DaemonState::kConverging:
+            return "converging";
+        case DaemonState::kConverged:
+            return "converged";
+        case DaemonState::kLost:
+            return "lost";
+        case DaemonState::kFault:
+            return "fault";
+    }
+    return "fault";
+}
+
+const char* toString(LogStatus::State state) {
+    switch (state) {
+        case LogStatus::State::kOff:
+            return "off";
+        case LogStatus::State::kOk:
+            return "ok";
+        case LogStatus::State::kFault:
+            return "fault";
+    }
+    return "fault";
+}
+
+std::int64_t monotonicNowNs() {
+    timespec ts{};
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+ReportHub::ReportHub(std::size_t grid_bins) : wake_fd_(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
+    posterior_.d.reserve(grid_bins);
+    posterior_.log_p.reserve(grid_bins);
+    scale_.fault.reserve(256);
+}
+
+ReportHub::~ReportHub() {
+    if (wake_fd_ >= 0) {
+        close(wake_fd_);
+    }
+}
+
+void ReportHub::publishScale(const ScaleReport& report, std::span<const double> grid_d,
+                             std::span<const double> log_p) {
+    {
+        const std::lock_guard lock(mutex_);
+        scale_ = report;
+        if (!grid_d.empty() && grid_d.size() == log_p.size() &&
+            grid_d.size() <= posterior_.d.capacity()) {
+            posterior_.d.assign(grid_d.begin(), grid_d.end());
+            posterior_.log_p.assign(log_p.begin(), log_p.end());
+            posterior_.epoch = report.epoch;
+            posterior_.frame_id = report.frame_id;
+            posterior_.observations = report.observations;
+            has_posterior_ = true;
+        }
+    }
+    scale_seq_.fetch_add(1);
+    if (wake_fd_ >= 0) {
+        const std::uint64_t one = 1;
+        // Non-blocking: a full counter (never in practice) only means "already awake".
+        [[maybe_unused]] const ssize_t n = write(wake_fd_, &one, sizeof one);
+    }
+}
+
+void ReportHub::publishStatus(const PipelineStatus& status) {
+    const std::lock_guard lock(mutex_);
+    status_ = status;
+}
+
+void ReportHub::publishLogStatus(const LogStatus& status) {
+    const std::lock_guard lock(mutex_);
+    log_status_ = status;
+}
+
+ScaleReport ReportHub::scale() const {
+    const std::lock_guard lock(mutex_);
+    return scale_;
+}
+
+PipelineStatus ReportHub::status() const {
+    const std::lock_guard lock(mutex_);
+    return status_;
+}
+
+LogStatus ReportHub::logStatus() const {
+    const std::lock_guard lock(mutex_);
+    return log_status_;
+}
+
+bool ReportHub::posterior(PosteriorSnapshot& out) const {
+    const std::lock_guard lock(mutex_);
+    if (!has_posterior_) {
+        return false;
+    }
+    out = posterior_;
+    return true;
+}
+
+void ReportHub::consumeWake() const {
+    if (wake_fd_ >= 0) {
+        std::uint64_t v = 0;
+        [[maybe_unused]] const ssize_t n = read(wake_fd_, &v, sizeof v);
+    }
+}
+
+void ReportHub::requestGravity(const core::Vec3& down_C) {
+    const std::lock_guard lock(mutex_);
+    gravity_request_ = down_C;
+}
+
+std::optional<core::Vec3> ReportHub::takeGravityRequest() {
+    const std::lock_guard lock(mutex_);
+    auto r = gravity_request_;
+    gravity_request_.reset();
+    return r;
+}
+
+}  // namespace scaled::daemon
