@@ -1,0 +1,1 @@
+# config tests (placeholder, owned by the config work)

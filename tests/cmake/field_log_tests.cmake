@@ -1,0 +1,1 @@
+# field_log tests (placeholder, owned by the field_log work)

@@ -1,0 +1,1 @@
+# scalectl tests (placeholder, owned by the scalectl work)

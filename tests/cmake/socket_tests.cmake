@@ -1,0 +1,1 @@
+# socket tests (placeholder, owned by the socket work)
