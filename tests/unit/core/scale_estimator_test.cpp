@@ -75,6 +75,39 @@ TEST(ScaleEstimator, RecoversTheScaleOfOneObject) {
     EXPECT_GT(s.ci95.hi, 0.5);
 }
 
+// SIGHUP reload: new priors apply to later updates, the evidence stays.
+TEST(ScaleEstimator, SetPriorsKeepsThePosterior) {
+    const Scene sc;
+    auto est = ScaleEstimator::create(EstimatorConfig{}, priors(), sc.cam);
+    ASSERT_TRUE(est.ok()) << est.error().message;
+    std::array<Detection, 1> dets{Detection{sc.box, "bottle", 0.9}};
+    est->update(sc.snapshot(), dets);
+    const ScaleSummary before = est->summary();
+    ASSERT_EQ(before.observations, 4);
+
+    // The same bottle believed twice as tall: the next update pulls d up, on
+    // top of the kept evidence (8 observations; both sets of four are sharp,
+    // so the MAP lands near one of them, not necessarily in between).
+    PriorTable taller;
+    taller.add(HeightPrior::fromHistogram("bottle", std::vector<Scalar>{0.60},
+                                          std::vector<Scalar>{1}, 0, true)
+                   .value());
+    est->setPriors(std::move(taller));
+    ASSERT_NE(est->priors().find("bottle"), nullptr);
+    EXPECT_EQ(est->priors().find("dining table"), nullptr);
+    EXPECT_EQ(est->summary().observations, 4);
+    est->update(sc.snapshot(), dets);
+    const ScaleSummary after = est->summary();
+    EXPECT_EQ(after.observations, 8);
+    EXPECT_GT(after.map, 0.5 * 1.05);
+    // Without the new priors the same update keeps d at 0.5.
+    auto twin = ScaleEstimator::create(EstimatorConfig{}, priors(), sc.cam);
+    ASSERT_TRUE(twin.ok());
+    twin->update(sc.snapshot(), dets);
+    twin->update(sc.snapshot(), dets);
+    EXPECT_NEAR(twin->summary().map, 0.5, 0.5 * 1e-3);
+}
+
 TEST(ScaleEstimator, SkipsUnknownNonUprightAndWeakDetections) {
     const Scene sc;
     EstimatorConfig cfg;

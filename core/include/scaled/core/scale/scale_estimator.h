@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <span>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <scaled/core/camera/pinhole_radial.h>
@@ -82,6 +83,11 @@ public:
 
     // Forget all evidence (e.g. after SLAM re-initialised with a new scale).
     void reset() { posterior_.reset(); }
+
+    // Replaces the height priors and keeps the posterior (the daemon's SIGHUP
+    // reload): later updates use the new priors, earlier evidence stays.
+    // Allocates (the table is moved in); not for the per-frame path.
+    void setPriors(PriorTable priors) { priors_ = std::move(priors); }
 
     [[nodiscard]] ScaleSummary summary() const { return posterior_.summary(); }
     [[nodiscard]] const ScalePosterior& posterior() const { return posterior_; }
