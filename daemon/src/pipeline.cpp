@@ -1,1 +1,657 @@
-// placeholder
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <utility>
+
+#include <scaled/daemon/pipeline.h>
+
+namespace scaled::daemon {
+
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+
+namespace {
+
+// How long an idle loop waits before it looks at the stop flag again and
+// bumps the heartbeat.
+constexpr auto kIdleTick = std::chrono::milliseconds(200);
+constexpr std::int64_t kStatusPeriodNs = 200'000'000;
+constexpr std::size_t kMaxRecords = 512;
+
+double msBetween(std::int64_t a_ns, std::int64_t b_ns) {
+    return static_cast<double>(b_ns - a_ns) * 1e-6;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, PipelineParts parts,
+                                                   ReportHub& hub, PipelineEvents* events) {
+    if (!parts.source) {
+        return makeError(ErrorCode::kInvalidArgument, "pipeline: no frame source");
+    }
+    if (!parts.detector) {
+        return makeError(ErrorCode::kInvalidArgument, "pipeline: no detector");
+    }
+    const auto& info = parts.source->info();
+    if (!info.has_intrinsics) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         parts.source_name + ": the source gives no camera intrinsics");
+    }
+    auto camera = core::PinholeRadialCamera::create(info.intrinsics);
+    if (!camera) {
+        return camera.error();
+    }
+    if (config.queues.capture_queue_frames < 1) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "pipeline.capture_queue_frames: must be at least 1");
+    }
+    core::PriorTable priors = std::move(parts.priors);
+    std::unique_ptr<Pipeline> p(new Pipeline(config, std::move(parts), hub, events, *camera));
+    auto tracker = vision::MonoTracker::create(*camera, config.pipeline.tracker);
+    if (!tracker) {
+        return tracker.error();
+    }
+    p->tracker_.emplace(std::move(*tracker));
+    auto estimator =
+        core::ScaleEstimator::create(config.pipeline.estimator, std::move(priors), *camera);
+    if (!estimator) {
+        return estimator.error();
+    }
+    p->estimator_.emplace(std::move(*estimator));
+
+    // Every buffer of the per-frame path, sized once.
+    const int max_features = config.pipeline.tracker.slam.max_features;
+    if (auto r = p->pending_.snapshot.reserve(max_features); !r) {
+        return r.error();
+    }
+    p->ring_.resize(static_cast<std::size_t>(config.queues.capture_queue_frames));
+    const auto& grid = p->estimator_->posterior().grid();
+    p->grid_d_.resize(grid.size());
+    for (std::size_t j = 0; j < grid.size(); ++j) {
+        p->grid_d_[j] = static_cast<double>(grid.d(j));
+    }
+    p->log_p_.resize(grid.size());
+    return p;
+}
+
+Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& hub,
+                   PipelineEvents* events, const core::PinholeRadialCamera& /*camera*/)
+    : config_(config),
+      hub_(hub),
+      events_(events),
+      source_(std::move(parts.source)),
+      source_name_(std::move(parts.source_name)),
+      detector_(std::move(parts.detector)),
+      schedule_(config.pipeline.detection),
+      lossless_(parts.lossless) {
+    status_.source = source_name_;
+    status_.frames_total = static_cast<std::int64_t>(source_->info().frame_count);
+    report_.fault.reserve(256);
+}
+
+Pipeline::~Pipeline() {
+    stop();
+}
+
+Result<bool> Pipeline::start() {
+    if (started_.exchange(true)) {
+        return makeError(ErrorCode::kInvalidArgument, "pipeline: already started");
+    }
+    start_mono_ns_ = monotonicNowNs();
+    fps_window_start_ns_ = start_mono_ns_;
+    {
+        const std::lock_guard lock(report_mutex_);
+        publishLocked({}, {});
+    }
+    publishStatus(true);
+    detection_thread_ = std::thread([this] { detectionLoop(); });
+    tracking_thread_ = std::thread([this] { trackingLoop(); });
+    capture_thread_ = std::thread([this] { captureLoop(); });
+    return true;
+}
+
+void Pipeline::stop() {
+    stop_.store(true);
+    ring_not_empty_.notify_all();
+    ring_not_full_.notify_all();
+    job_ready_.notify_all();
+    job_taken_.notify_all();
+    for (std::thread* t : {&capture_thread_, &tracking_thread_, &detection_thread_}) {
+        if (t->joinable()) {
+            t->join();
+        }
+    }
+}
+
+std::optional<core::Error> Pipeline::failure() const {
+    const std::lock_guard lock(report_mutex_);
+    return failure_;
+}
+
+void Pipeline::reload(core::PriorTable priors, std::unique_ptr<detector::ObjectDetector> detector,
+                      const DetectionSchedule& schedule) {
+    const std::lock_guard lock(job_mutex_);
+    reload_priors_ = std::move(priors);
+    reload_detector_ = std::move(detector);
+    schedule_ = schedule;
+}
+
+void Pipeline::setFault(const std::string& fault) {
+    const std::lock_guard lock(report_mutex_);
+    if (external_fault_ == fault) {
+        return;
+    }
+    external_fault_ = fault;
+    publishLocked({}, {});
+}
+
+void Pipeline::fail(const core::Error& error) {
+    {
+        const std::lock_guard lock(report_mutex_);
+        if (!failure_) {
+            failure_ = error;
+        }
+        const DaemonState before = published_state_;
+        publishLocked({}, {});
+        if (events_ != nullptr && before != published_state_) {
+            events_->onState(before, published_state_, report_.epoch, report_.frame_id,
+                             "source failed");
+        }
+    }
+    if (events_ != nullptr) {
+        events_->onError("source", error.message);
+    }
+    finished_.store(true);
+}
+
+// --- capture ----------------------------------------------------------------
+
+bool Pipeline::pushFrame(QueuedFrame& item) {
+    std::unique_lock lock(ring_mutex_);
+    const std::size_t cap = ring_.size();
+    if (ring_count_ == cap) {
+        if (lossless_) {
+            ring_not_full_.wait(lock, [&] { return stop_.load() || ring_count_ < cap; });
+            if (stop_.load()) {
+                return false;
+            }
+        } else {
+            // A live camera keeps the freshest frames: the oldest queued one goes.
+            ring_head_ = (ring_head_ + 1) % cap;
+            --ring_count_;
+            dropped_.fetch_add(1);
+        }
+    }
+    std::swap(ring_[(ring_head_ + ring_count_) % cap], item);
+    ++ring_count_;
+    lock.unlock();
+    ring_not_empty_.notify_one();
+    return true;
+}
+
+bool Pipeline::popFrame(QueuedFrame& item) {
+    std::unique_lock lock(ring_mutex_);
+    if (!ring_not_empty_.wait_for(lock, kIdleTick,
+                                  [&] { return stop_.load() || ring_count_ > 0; }) ||
+        ring_count_ == 0) {
+        return false;
+    }
+    std::swap(item, ring_[ring_head_]);
+    ring_head_ = (ring_head_ + 1) % ring_.size();
+    --ring_count_;
+    lock.unlock();
+    ring_not_full_.notify_one();
+    return true;
+}
+
+void Pipeline::captureLoop() {
+    QueuedFrame item;
+    const std::int64_t max_frames = config_.source.max_frames;
+    std::int64_t read = 0;
+    // Loop replay: ids and timestamps continue across passes so clients see
+    // them increase; the first frame of a pass is marked as a discontinuity.
+    std::int64_t id_offset = 0;
+    std::int64_t t_offset_ns = 0;
+    std::int64_t last_id = -1;
+    std::int64_t last_t_ns = 0;
+    std::int64_t last_gap_ns = 33'333'333;
+    bool restart = false;
+    std::uint64_t consecutive_errors = 0;
+    while (!stop_.load()) {
+        if (max_frames > 0 && read >= max_frames) {
+            break;
+        }
+        auto got = source_->next(item.frame);
+        if (!got) {
+            // An unreadable frame: logged, skipped (the reader moved past it).
+            if (events_ != nullptr) {
+                events_->onError("capture", got.error().message);
+            }
+            if (++consecutive_errors >= 100) {
+                fail(makeError(got.error().code,
+                               "100 unreadable frames in a row, last: " + got.error().message));
+                break;
+            }
+            continue;
+        }
+        consecutive_errors = 0;
+        if (!*got) {
+            if (config_.source.at_end == AtEnd::kLoop && last_id >= 0) {
+                if (auto s = source_->seek(0); !s) {
+                    fail(s.error());
+                    break;
+                }
+                id_offset = last_id + 1;
+                t_offset_ns = last_t_ns + last_gap_ns;
+                restart = true;
+                continue;
+            }
+            break;
+        }
+        if (restart) {
+            // The first frame of a new pass defines the offsets.
+            t_offset_ns -= item.frame.t_ns;
+            id_offset -= item.frame.id;
+        }
+        item.frame.id += id_offset;
+        item.frame.t_ns += t_offset_ns;
+        if (last_id >= 0 && item.frame.t_ns > last_t_ns) {
+            last_gap_ns = item.frame.t_ns - last_t_ns;
+        }
+        last_id = item.frame.id;
+        last_t_ns = item.frame.t_ns;
+        item.restart = restart;
+        restart = false;
+        ++read;
+        captured_.fetch_add(1);
+        if (!pushFrame(item)) {
+            break;
+        }
+    }
+    source_finished_.store(true);
+    {
+        const std::lock_guard lock(ring_mutex_);
+        capture_done_ = true;
+    }
+    ring_not_empty_.notify_all();
+}
+
+// --- tracking ---------------------------------------------------------------
+
+void Pipeline::setSlamState(DaemonState state, std::int64_t frame_id, std::int64_t t_ns,
+                            const char* reason, bool new_epoch) {
+    const std::lock_guard lock(report_mutex_);
+    if (!new_epoch && state == slam_state_) {
+        return;
+    }
+    slam_state_ = state;
+    if (new_epoch) {
+        report_.epoch += 1;
+        report_.has_scale = false;
+        report_.scale = report_.mean = 0;
+        report_.ci68_lo = report_.ci68_hi = report_.ci95_lo = report_.ci95_hi = 0;
+        report_.observations = 0;
+        report_.frame_id = frame_id;
+        report_.t_ns = t_ns;
+        report_.updated_mono_ns = 0;
+        scale_state_ = core::ScaleState::kNoData;
+    }
+    const DaemonState before = published_state_;
+    publishLocked({}, {});
+    if (events_ != nullptr && (before != published_state_ || new_epoch)) {
+        events_->onState(before, published_state_, report_.epoch, frame_id, reason);
+    }
+}
+
+void Pipeline::trackingLoop() {
+    QueuedFrame item;
+    core::slam::SlamSnapshot staging;
+    if (!staging.reserve(config_.pipeline.tracker.slam.max_features)) {
+        fail(makeError(ErrorCode::kInvalidArgument, "cannot reserve the SLAM snapshot"));
+        return;
+    }
+    cv::Mat staging_image;
+    bool need_gravity = true;
+    std::optional<core::Vec3> gravity_override;
+    std::int64_t frames_in_map = 0;
+    std::int64_t last_t_ns = 0;
+    bool have_last = false;
+    std::int64_t last_detection_t_ns = 0;
+    std::uint64_t tracked = 0;
+    double tracking_ms_mean = 0;
+    auto& tracker = *tracker_;
+
+    while (!stop_.load()) {
+        heartbeat_.fetch_add(1);
+        if (auto g = hub_.takeGravityRequest()) {
+            gravity_override = *g;
+        }
+        if (!popFrame(item)) {
+            // At the end of a replay with at_end = exit the loop ends; else it
+            // idles (and keeps the watchdog fed) until stop().
+            bool done = false;
+            {
+                const std::lock_guard lock(ring_mutex_);
+                done = capture_done_ && ring_count_ == 0;
+            }
+            if (done && (config_.source.at_end == AtEnd::kExit || finished_.load())) {
+                break;
+            }
+            publishStatus(false);
+            continue;
+        }
+        drivers::Frame& frame = item.frame;
+        if (item.restart || (have_last && frame.t_ns <= last_t_ns)) {
+            // A discontinuity (replay loop): the map cannot continue.
+            tracker.reset();
+            need_gravity = true;
+            frames_in_map = 0;
+            setSlamState(DaemonState::kInitialising, frame.id, frame.t_ns, "replay restarted",
+                         false);
+        }
+        have_last = true;
+        last_t_ns = frame.t_ns;
+        if (need_gravity) {
+            core::Vec3 down_C(0, 1, 0);  // a level camera
+            if (gravity_override) {
+                down_C = *gravity_override;
+            } else if (frame.gravity_down_C) {
+                down_C = *frame.gravity_down_C;
+            }
+            tracker.setGravityDownC(down_C);
+            need_gravity = false;
+        }
+        const std::int64_t t0 = monotonicNowNs();
+        const vision::TrackStats stats = tracker.processFrame(frame.t_ns, frame.gray);
+        const double ms = msBetween(t0, monotonicNowNs());
+        ++tracked;
+        tracking_ms_mean +=
+            (ms - tracking_ms_mean) / static_cast<double>(std::min<std::uint64_t>(tracked, 100));
+        const bool ok = stats.health == core::slam::SlamHealth::kOk;
+        if (ok && stats.new_map) {
+            frames_in_map = 0;
+            setSlamState(DaemonState::kTracking, frame.id, frame.t_ns, "new map", true);
+        } else if (ok) {
+            setSlamState(DaemonState::kTracking, frame.id, frame.t_ns, "tracking", false);
+        }
+        if (ok) {
+            ++frames_in_map;
+        }
+        std::uint64_t epoch = 0;
+        {
+            const std::lock_guard lock(report_mutex_);
+            epoch = report_.epoch;
+            status_.frame_id = frame.id;
+            status_.frames_tracked = tracked;
+            status_.features_in_map = stats.features;
+            status_.features_tracked = stats.inliers + stats.rescued;
+            status_.tracking_ms_mean = tracking_ms_mean;
+            status_.epoch = epoch;
+        }
+        ++fps_window_frames_;
+
+        // Hand a frame to the detector: every Nth frame of a map, or by period.
+        if (ok && frames_in_map > 1) {
+            DetectionSchedule schedule;
+            {
+                const std::lock_guard lock(job_mutex_);
+                schedule = schedule_;
+            }
+            const bool due = schedule.period_s > 0
+                                 ? static_cast<double>(frame.t_ns - last_detection_t_ns) * 1e-9 >=
+                                       schedule.period_s
+                                 : (frames_in_map - 1) % schedule.every_frames == 0;
+            if (due) {
+                last_detection_t_ns = frame.t_ns;
+                staging.capture(tracker.filter(), frame.id, epoch);
+                frame.color.copyTo(staging_image);
+                std::unique_lock lock(job_mutex_);
+                if (lossless_) {
+                    job_taken_.wait(lock, [&] { return stop_.load() || !pending_full_; });
+                }
+                if (pending_full_) {
+                    const std::lock_guard slock(report_mutex_);
+                    ++status_.detections_skipped;
+                }
+                std::swap(pending_.snapshot, staging);
+                std::swap(pending_.image, staging_image);
+                pending_.t_ns = frame.t_ns;
+                pending_full_ = true;
+                lock.unlock();
+                job_ready_.notify_one();
+            }
+        }
+
+        if (events_ != nullptr && config_.log.frame_every > 0 &&
+            tracked % static_cast<std::uint64_t>(config_.log.frame_every) == 0) {
+            PipelineEvents::Frame e;
+            e.frame_id = frame.id;
+            e.t_ns = frame.t_ns;
+            e.epoch = epoch;
+            e.health = core::slam::toString(stats.health);
+            e.features = stats.features;
+            e.tracked = stats.inliers + stats.rescued;
+            e.ms = ms;
+            e.dropped = dropped_.load();
+            events_->onFrame(e);
+        }
+
+        if (!ok) {
+            // Lost or diverged: the next frame starts a new map with a new,
+            // unrelated scale; the epoch moves when it does.
+            setSlamState(DaemonState::kLost, frame.id, frame.t_ns,
+                         core::slam::toString(stats.health), false);
+            tracker.reset();
+            need_gravity = true;
+            frames_in_map = 0;
+        }
+        publishStatus(false);
+    }
+    {
+        const std::lock_guard lock(job_mutex_);
+        tracking_done_ = true;
+    }
+    job_ready_.notify_all();
+    publishStatus(true);
+}
+
+// --- detection and scale ----------------------------------------------------
+
+DaemonState Pipeline::deriveState() const {
+    if (failure_) {
+        return DaemonState::kFault;
+    }
+    if (slam_state_ != DaemonState::kTracking) {
+        return slam_state_;
+    }
+    switch (scale_state_) {
+        case core::ScaleState::kNoData:
+            return DaemonState::kTracking;
+        case core::ScaleState::kConverging:
+            return DaemonState::kConverging;
+        case core::ScaleState::kConverged:
+            return DaemonState::kConverged;
+    }
+    return DaemonState::kTracking;
+}
+
+void Pipeline::publishLocked(std::span<const double> d, std::span<const double> log_p) {
+    report_.state = deriveState();
+    published_state_ = report_.state;
+    // Faults in order of importance; assign() keeps the reserved capacity.
+    if (failure_) {
+        report_.fault.assign("source: ");
+        report_.fault.append(failure_->message);
+    } else if (!detector_fault_.empty()) {
+        report_.fault.assign(detector_fault_);
+    } else {
+        report_.fault.assign(external_fault_);
+    }
+    hub_.publishScale(report_, d, log_p);
+}
+
+bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t epoch,
+                             std::int64_t frame_id, std::int64_t t_ns, int new_observations,
+                             int detections, std::span<const core::ObservationRecord> records,
+                             std::span<const core::Detection> dets) {
+    const std::lock_guard lock(report_mutex_);
+    if (epoch != report_.epoch) {
+        return false;
+    }
+    const DaemonState before = published_state_;
+    report_.has_scale = summary.state != core::ScaleState::kNoData;
+    report_.scale = static_cast<double>(summary.map);
+    report_.mean = static_cast<double>(summary.mean);
+    report_.ci68_lo = static_cast<double>(summary.ci68.lo);
+    report_.ci68_hi = static_cast<double>(summary.ci68.hi);
+    report_.ci95_lo = static_cast<double>(summary.ci95.lo);
+    report_.ci95_hi = static_cast<double>(summary.ci95.hi);
+    report_.observations = summary.observations;
+    report_.frame_id = frame_id;
+    report_.t_ns = t_ns;
+    report_.updated_mono_ns = monotonicNowNs();
+    scale_state_ = summary.state;
+    ++status_.scale_updates;
+    publishLocked(grid_d_, log_p_);
+    if (events_ != nullptr) {
+        PipelineEvents::Scale e;
+        e.report = &report_;
+        e.new_observations = new_observations;
+        e.detections = detections;
+        e.records = records;
+        e.detections_used = dets;
+        e.paper_variance =
+            config_.pipeline.estimator.likelihood.variance_model == core::VarianceModel::kPaper;
+        events_->onScale(e);
+        if (before != published_state_) {
+            events_->onState(before, published_state_, epoch, frame_id, "scale update");
+        }
+    }
+    return true;
+}
+
+void Pipeline::detectionLoop() {
+    DetectionJob job;
+    if (!job.snapshot.reserve(config_.pipeline.tracker.slam.max_features)) {
+        return;
+    }
+    detector::DetectionResult boxes;
+    std::vector<core::Detection> dets(
+        static_cast<std::size_t>(std::max(1, config_.pipeline.detector.max_detections)));
+    std::vector<core::ObservationRecord> records(kMaxRecords);
+    std::uint64_t estimator_epoch = 0;
+    std::uint64_t runs = 0;
+    double latency_sum_ms = 0;
+    double latency_max_ms = 0;
+    auto& estimator = *estimator_;
+
+    while (true) {
+        {
+            std::unique_lock lock(job_mutex_);
+            job_ready_.wait(lock, [&] { return stop_.load() || pending_full_ || tracking_done_; });
+            if (stop_.load() || (!pending_full_ && tracking_done_)) {
+                break;
+            }
+            std::swap(job.snapshot, pending_.snapshot);
+            std::swap(job.image, pending_.image);
+            job.t_ns = pending_.t_ns;
+            pending_full_ = false;
+            if (reload_priors_) {
+                estimator.setPriors(std::move(*reload_priors_));
+                reload_priors_.reset();
+            }
+            if (reload_detector_) {
+                detector_ = std::move(reload_detector_);
+                dets.resize(static_cast<std::size_t>(
+                    std::max(1, config_.pipeline.detector.max_detections)));
+            }
+        }
+        job_taken_.notify_one();
+
+        const std::int64_t t0 = monotonicNowNs();
+        auto det = detector_->detect(job.image, job.snapshot.frameId(), job.t_ns, boxes);
+        const double latency_ms = msBetween(t0, monotonicNowNs());
+        ++runs;
+        latency_sum_ms += latency_ms;
+        latency_max_ms = std::max(latency_max_ms, latency_ms);
+        {
+            const std::lock_guard lock(report_mutex_);
+            status_.detections_run = runs;
+            status_.detector_latency_ms_last = latency_ms;
+            status_.detector_latency_ms_mean = latency_sum_ms / static_cast<double>(runs);
+            status_.detector_latency_ms_max = latency_max_ms;
+            const bool had_fault = !detector_fault_.empty();
+            if (!det) {
+                detector_fault_ = "detector: " + det.error().message;
+            } else {
+                detector_fault_.clear();
+            }
+            if (had_fault != !detector_fault_.empty()) {
+                publishLocked({}, {});
+            }
+        }
+        if (!det) {
+            if (events_ != nullptr) {
+                events_->onError("detector", det.error().message);
+            }
+            continue;
+        }
+        if (events_ != nullptr) {
+            events_->onDetection(boxes, job.snapshot.epoch(), latency_ms);
+        }
+        if (!job.snapshot.valid()) {
+            continue;
+        }
+        {
+            const std::lock_guard lock(report_mutex_);
+            if (job.snapshot.epoch() != report_.epoch) {
+                continue;  // the map this frame belongs to is gone
+            }
+        }
+        if (job.snapshot.epoch() != estimator_epoch) {
+            estimator.reset();
+            estimator_epoch = job.snapshot.epoch();
+        }
+        const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+        const core::UpdateStats u =
+            estimator.update(job.snapshot.view(), std::span(dets.data(), n), records);
+        const auto log_p = estimator.posterior().logDensity();
+        for (std::size_t j = 0; j < log_p.size() && j < log_p_.size(); ++j) {
+            log_p_[j] = static_cast<double>(log_p[j]);
+        }
+        publishUpdate(estimator.summary(), job.snapshot.epoch(), job.snapshot.frameId(),
+                      job.snapshot.timestampNs(), u.observations, static_cast<int>(n),
+                      std::span(records.data(), static_cast<std::size_t>(u.records_written)),
+                      std::span(dets.data(), n));
+    }
+    if (!stop_.load() && config_.source.at_end == AtEnd::kExit) {
+        // Everything the source gave was tracked and detected: done.
+        publishStatus(true);
+        finished_.store(true);
+    }
+}
+
+void Pipeline::publishStatus(bool force) {
+    const std::int64_t now = monotonicNowNs();
+    if (!force && now - last_status_publish_ns_ < kStatusPeriodNs) {
+        return;
+    }
+    const double window_s = static_cast<double>(now - fps_window_start_ns_) * 1e-9;
+    const std::lock_guard lock(report_mutex_);
+    if (window_s >= 1.0 || force) {
+        if (window_s > 0) {
+            status_.fps = static_cast<double>(fps_window_frames_) / window_s;
+        }
+        fps_window_frames_ = 0;
+        fps_window_start_ns_ = now;
+    }
+    last_status_publish_ns_ = now;
+    status_.frames_captured = captured_.load();
+    status_.frames_dropped = dropped_.load();
+    status_.source_finished = source_finished_.load();
+    status_.uptime_s = static_cast<double>(now - start_mono_ns_) * 1e-9;
+    hub_.publishStatus(status_);
+}
+
+}  // namespace scaled::daemon

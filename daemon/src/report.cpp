@@ -1,11 +1,10 @@
-#include <scaled/daemon/report.h>
-
-#include <sys/eventfd.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <ctime>
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include <scaled/daemon/report.h>
 
 namespace scaled::daemon {
 

@@ -45,8 +45,8 @@ struct ScaleReport {
     double ci95_lo = 0;
     double ci95_hi = 0;
     DaemonState state = DaemonState::kInitialising;
-    std::uint64_t epoch = 0;  // bumped whenever SLAM starts a new map (its scale is new)
-    int observations = 0;     // in this epoch
+    std::uint64_t epoch = 0;     // bumped whenever SLAM starts a new map (its scale is new)
+    int observations = 0;        // in this epoch
     std::int64_t frame_id = -1;  // frame the latest scale update was computed on (-1: none)
     std::int64_t t_ns = 0;       // that frame's timestamp (source clock)
     // CLOCK_MONOTONIC time of the latest scale update (0: none): age = now - this.
@@ -58,11 +58,11 @@ struct ScaleReport {
 
 // Pipeline health (protocol class STATUS).
 struct PipelineStatus {
-    std::string source;              // "sim", "replay:/path/to/dir", ...
-    std::int64_t frame_id = -1;      // last tracked frame
-    std::int64_t frames_total = 0;   // frames the source has (replay), 0 when unbounded
-    bool source_finished = false;    // replay reached its end (the daemon keeps serving)
-    double fps = 0;                  // tracked frames per second, recent window
+    std::string source;             // "sim", "replay:/path/to/dir", ...
+    std::int64_t frame_id = -1;     // last tracked frame
+    std::int64_t frames_total = 0;  // frames the source has (replay), 0 when unbounded
+    bool source_finished = false;   // replay reached its end (the daemon keeps serving)
+    double fps = 0;                 // tracked frames per second, recent window
     std::uint64_t frames_captured = 0;
     std::uint64_t frames_tracked = 0;
     std::uint64_t frames_dropped = 0;      // capture queue full (live/paced sources)
