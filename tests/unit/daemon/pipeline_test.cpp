@@ -1,1 +1,344 @@
+// The daemon's pipeline threads on the sim source (real rendered frames, the
+// simulated detector, the real tracker and estimator): lossless runs, epochs
+// across a replay loop, latest-wins detection that never blocks tracking, and
+// the SIGHUP reload keeping the posterior. Waiting is on the hub's eventfd
+// with a bounded timeout, never a sleep.
+
+#include <chrono>
+#include <condition_variable>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <poll.h>
+#include <string>
+#include <utility>
+#include <vector>
+
 #include <gtest/gtest.h>
+
+#include <scaled/daemon/pipeline.h>
+#include <scaled/drivers/priors_toml.h>
+#include <scaled/sim/sim_source.h>
+
+namespace scaled::daemon {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Every published SCALE report, in order (ReportHub keeps only the latest).
+class Recorder final : public PipelineEvents {
+public:
+    void onFrame(const Frame& /*frame*/) override {}
+    void onDetection(const detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
+                     double /*latency_ms*/) override {}
+    void onScale(const Scale& s) override {
+        const std::lock_guard lock(mutex_);
+        scales_.push_back(*s.report);
+    }
+    void onState(DaemonState from, DaemonState to, std::uint64_t epoch, std::int64_t frame_id,
+                 const char* /*reason*/) override {
+        const std::lock_guard lock(mutex_);
+        states_.push_back({from, to, epoch, frame_id});
+    }
+    void onError(const char* where, const std::string& message) override {
+        const std::lock_guard lock(mutex_);
+        errors_.push_back(std::string(where) + ": " + message);
+    }
+
+    struct StateChange {
+        DaemonState from;
+        DaemonState to;
+        std::uint64_t epoch;
+        std::int64_t frame_id;
+    };
+    std::vector<ScaleReport> scales() const {
+        const std::lock_guard lock(mutex_);
+        return scales_;
+    }
+    std::vector<StateChange> states() const {
+        const std::lock_guard lock(mutex_);
+        return states_;
+    }
+    std::vector<std::string> errors() const {
+        const std::lock_guard lock(mutex_);
+        return errors_;
+    }
+
+private:
+    mutable std::mutex mutex_;
+    std::vector<ScaleReport> scales_;
+    std::vector<StateChange> states_;
+    std::vector<std::string> errors_;
+};
+
+// A detector that runs the sim detector only when the test lets it: it
+// stands for a slow network, to show that tracking goes on meanwhile.
+class GatedDetector final : public detector::ObjectDetector {
+public:
+    explicit GatedDetector(std::unique_ptr<detector::ObjectDetector> inner)
+        : inner_(std::move(inner)) {}
+    core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                              detector::DetectionResult& out) override {
+        std::unique_lock lock(mutex_);
+        ++entered_;
+        changed_.notify_all();
+        changed_.wait(lock, [&] { return open_; });
+        return inner_->detect(image, frame_id, t_ns, out);
+    }
+    [[nodiscard]] std::span<const std::string> classNames() const override {
+        return inner_->classNames();
+    }
+    void open() {
+        const std::lock_guard lock(mutex_);
+        open_ = true;
+        changed_.notify_all();
+    }
+    // Waits (bounded) until detect() was entered at least once.
+    bool waitEntered(std::chrono::seconds timeout) {
+        std::unique_lock lock(mutex_);
+        return changed_.wait_for(lock, timeout, [&] { return entered_ > 0; });
+    }
+
+private:
+    std::unique_ptr<detector::ObjectDetector> inner_;
+    std::mutex mutex_;
+    std::condition_variable changed_;
+    bool open_ = false;
+    int entered_ = 0;
+};
+
+sim::SimConfig simConfig(double duration_s) {
+    sim::SimConfig c;
+    c.duration_s = duration_s;
+    return c;
+}
+
+DaemonConfig config(AtEnd at_end) {
+    DaemonConfig c = defaultDaemonConfig();
+    c.source.kind = SourceKind::kSim;
+    c.source.pacing = drivers::PacingMode::kAsFastAsPossible;
+    c.source.at_end = at_end;
+    c.log.frame_every = 0;
+    return c;
+}
+
+PipelineParts parts(double duration_s, bool lossless) {
+    PipelineParts p;
+    auto src = sim::openSimSource(simConfig(duration_s));
+    EXPECT_TRUE(src.ok()) << src.error().message;
+    p.source = std::move(*src);
+    auto det = sim::createSimDetector(simConfig(duration_s));
+    EXPECT_TRUE(det.ok()) << det.error().message;
+    p.detector = std::move(*det);
+    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    EXPECT_TRUE(priors.ok()) << priors.error().message;
+    p.priors = std::move(*priors);
+    p.source_name = "sim";
+    p.lossless = lossless;
+    return p;
+}
+
+// Waits on the hub's eventfd until pred() holds or the timeout passes.
+bool waitUntil(const ReportHub& hub, const std::function<bool()>& pred,
+               std::chrono::seconds timeout) {
+    const auto deadline = Clock::now() + timeout;
+    while (!pred()) {
+        if (Clock::now() >= deadline) {
+            return false;
+        }
+        pollfd p{hub.wakeFd(), POLLIN, 0};
+        if (poll(&p, 1, 100) > 0) {
+            hub.consumeWake();
+        }
+    }
+    return true;
+}
+
+TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
+    DaemonConfig c = config(AtEnd::kExit);
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    Recorder rec;
+    auto p = Pipeline::create(c, parts(10.0, true), hub, &rec);  // 300 frames
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    (*p)->stop();
+    EXPECT_FALSE((*p)->failure().has_value());
+
+    const PipelineStatus st = hub.status();
+    EXPECT_EQ(st.frames_captured, 300U);
+    EXPECT_EQ(st.frames_tracked, 300U);
+    EXPECT_EQ(st.frames_dropped, 0U);
+    EXPECT_EQ(st.detections_skipped, 0U);
+    EXPECT_EQ(st.frame_id, 299);
+    EXPECT_TRUE(st.source_finished);
+    // One map: detection on frames 10, 20, ..., 290 of the map (29 runs).
+    EXPECT_EQ(st.epoch, 1U);
+    EXPECT_EQ(st.detections_run, 29U);
+    EXPECT_EQ(st.scale_updates, 29U);
+
+    const auto scales = rec.scales();
+    ASSERT_EQ(scales.size(), 29U);
+    for (std::size_t i = 1; i < scales.size(); ++i) {
+        EXPECT_GT(scales[i].frame_id, scales[i - 1].frame_id);
+        EXPECT_GE(scales[i].observations, scales[i - 1].observations);
+    }
+    const ScaleReport last = hub.scale();
+    EXPECT_TRUE(last.has_scale);
+    EXPECT_GT(last.observations, 0);
+    EXPECT_LE(last.ci95_lo, last.scale);
+    EXPECT_GE(last.ci95_hi, last.scale);
+    EXPECT_GT(last.updated_mono_ns, 0);
+    EXPECT_TRUE(last.fault.empty()) << last.fault;
+    PosteriorSnapshot post;
+    ASSERT_TRUE(hub.posterior(post));
+    EXPECT_EQ(post.d.size(), post.log_p.size());
+    EXPECT_EQ(post.frame_id, last.frame_id);
+
+    // initialising -> tracking (epoch 1) -> converging (-> converged maybe).
+    const auto states = rec.states();
+    ASSERT_GE(states.size(), 2U);
+    EXPECT_EQ(states[0].from, DaemonState::kInitialising);
+    EXPECT_EQ(states[0].to, DaemonState::kTracking);
+    EXPECT_EQ(states[0].epoch, 1U);
+    EXPECT_EQ(states[1].to, DaemonState::kConverging);
+    EXPECT_TRUE(rec.errors().empty());
+}
+
+// A replay that loops: the map cannot continue across the jump, so a new map
+// starts with a new epoch, the scale is cleared at once, and frame ids keep
+// increasing for the clients.
+TEST(Pipeline, LoopStartsANewEpochAndClearsTheScale) {
+    DaemonConfig c = config(AtEnd::kLoop);
+    c.source.max_frames = 200;  // 120 frames, then 80 of the second pass
+    c.source.at_end = AtEnd::kLoop;
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    Recorder rec;
+    auto p = Pipeline::create(c, parts(4.0, true), hub, &rec);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return hub.status().source_finished && hub.status().frames_tracked == 200; },
+        std::chrono::seconds(300)));
+    // Let the detector drain: the last frame handed to it is 190.
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return hub.scale().frame_id >= 190; }, std::chrono::seconds(60)));
+    (*p)->stop();
+
+    EXPECT_EQ(hub.status().epoch, 2U);
+    const auto scales = rec.scales();
+    ASSERT_FALSE(scales.empty());
+    bool saw_epoch2 = false;
+    for (std::size_t i = 1; i < scales.size(); ++i) {
+        EXPECT_GT(scales[i].frame_id, scales[i - 1].frame_id);
+        if (scales[i].epoch == 2 && scales[i - 1].epoch == 1) {
+            saw_epoch2 = true;
+            // The first update of the new map counts only its own evidence.
+            EXPECT_LT(scales[i].observations, scales[i - 1].observations);
+            EXPECT_GT(scales[i].frame_id, 120);
+        }
+    }
+    EXPECT_TRUE(saw_epoch2);
+    const auto states = rec.states();
+    bool reinit = false;
+    for (const auto& s : states) {
+        reinit |= s.epoch == 2 && s.to == DaemonState::kTracking;
+    }
+    EXPECT_TRUE(reinit);
+}
+
+// The detector stalls: tracking goes on, the mailbox keeps only the latest
+// frame (the others are counted as skipped), nothing is dropped at capture.
+TEST(Pipeline, ASlowDetectorNeverBlocksTracking) {
+    DaemonConfig c = config(AtEnd::kExit);
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    PipelineParts pp = parts(5.0, false);  // 150 frames, not lossless
+    auto gated = std::make_unique<GatedDetector>(std::move(pp.detector));
+    GatedDetector* gate = gated.get();
+    pp.detector = std::move(gated);
+    // Not lossless: the unpaced source fills the ring faster than tracking
+    // and drops its oldest frames, so count tracked + dropped.
+    auto p = Pipeline::create(c, std::move(pp), hub, nullptr);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(gate->waitEntered(std::chrono::seconds(60)));
+    // With the detector held, tracking reaches the end of the source.
+    ASSERT_TRUE(waitUntil(
+        hub,
+        [&] {
+            const auto st = hub.status();
+            return st.source_finished && st.frames_tracked + st.frames_dropped == 150;
+        },
+        std::chrono::seconds(300)));
+    const PipelineStatus held = hub.status();
+    EXPECT_EQ(held.detections_run, 0U);
+    EXPECT_GT(held.detections_skipped, 0U);
+    EXPECT_FALSE(hub.scale().has_scale);
+    gate->open();
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(60)));
+    (*p)->stop();
+    const PipelineStatus st = hub.status();
+    // The one held run plus the latest frame left in the mailbox.
+    EXPECT_EQ(st.detections_run, 2U);
+    EXPECT_EQ(st.scale_updates, 2U);  // both against their own frame's snapshot
+}
+
+// SIGHUP: new priors, the evidence so far is kept (observations go on from
+// where they were, same epoch).
+TEST(Pipeline, ReloadKeepsThePosterior) {
+    DaemonConfig c = config(AtEnd::kExit);
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    Recorder rec;
+    PipelineParts pp = parts(8.0, true);  // 240 frames
+    auto gated = std::make_unique<GatedDetector>(std::move(pp.detector));
+    GatedDetector* gate = gated.get();
+    pp.detector = std::move(gated);
+    auto p = Pipeline::create(c, std::move(pp), hub, &rec);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    gate->open();
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return hub.scale().observations > 0; }, std::chrono::seconds(120)));
+    const ScaleReport before = hub.scale();
+
+    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors-redkitchen.toml");
+    ASSERT_TRUE(priors.ok()) << priors.error().message;
+    auto det = sim::createSimDetector(simConfig(8.0));
+    ASSERT_TRUE(det.ok());
+    DetectionSchedule every5;
+    every5.every_frames = 5;
+    (*p)->reload(std::move(*priors), std::move(*det), every5);
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    (*p)->stop();
+
+    const ScaleReport after = hub.scale();
+    EXPECT_EQ(after.epoch, before.epoch);
+    EXPECT_GT(after.observations, before.observations);
+    const auto scales = rec.scales();
+    for (std::size_t i = 1; i < scales.size(); ++i) {
+        EXPECT_GE(scales[i].observations, scales[i - 1].observations) << "reset at update " << i;
+    }
+    // The new schedule was applied: more than the 23 updates every 10 frames gives.
+    EXPECT_GT(hub.status().scale_updates, 23U);
+}
+
+TEST(Pipeline, RejectsMissingParts) {
+    DaemonConfig c = config(AtEnd::kExit);
+    ReportHub hub(64);
+    PipelineParts pp = parts(1.0, true);
+    pp.detector.reset();
+    auto p = Pipeline::create(c, std::move(pp), hub, nullptr);
+    ASSERT_FALSE(p.ok());
+    EXPECT_NE(p.error().message.find("detector"), std::string::npos);
+    PipelineParts no_source = parts(1.0, true);
+    no_source.source.reset();
+    auto q = Pipeline::create(c, std::move(no_source), hub, nullptr);
+    ASSERT_FALSE(q.ok());
+    EXPECT_NE(q.error().message.find("source"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace scaled::daemon
