@@ -1,0 +1,760 @@
+#include "scalectl.h"
+
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <nlohmann/json.hpp>
+#include <poll.h>
+#include <sstream>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <thread>
+#include <unistd.h>
+#include <utility>
+
+#include "sysexits.h"
+
+namespace scaled::tools::scalectl {
+
+namespace {
+
+using core::ErrorCode;
+using core::makeError;
+using nlohmann::json;
+
+core::Error parseError(std::string message) {
+    return makeError(ErrorCode::kParse, std::move(message));
+}
+
+// `value` with `decimals` digits after the point.
+std::string fixed(double value, int decimals) {
+    std::array<char, 64> buf{};
+    std::snprintf(buf.data(), buf.size(), "%.*f", decimals, value);
+    return buf.data();
+}
+
+// The line as a JSON object with a string "class".
+core::Result<json> parseObject(std::string_view line) {
+    json doc = json::parse(line, nullptr, false);
+    if (doc.is_discarded()) {
+        return parseError("malformed reply (not JSON): " + std::string(line.substr(0, 200)));
+    }
+    if (!doc.is_object()) {
+        return parseError("malformed reply (not a JSON object): " +
+                          std::string(line.substr(0, 200)));
+    }
+    const auto it = doc.find("class");
+    if (it == doc.end() || !it->is_string()) {
+        return parseError("malformed reply (no \"class\"): " + std::string(line.substr(0, 200)));
+    }
+    return doc;
+}
+
+// The object of class `expected`; an ERROR reply or another class is an error.
+core::Result<json> expectClass(std::string_view line, const char* expected) {
+    auto doc = parseObject(line);
+    if (!doc) {
+        return doc.error();
+    }
+    const auto& cls = (*doc)["class"].get_ref<const std::string&>();
+    if (cls == "ERROR") {
+        const auto it = doc->find("message");
+        const std::string message =
+            it != doc->end() && it->is_string() ? it->get<std::string>() : "(no message)";
+        return parseError("the daemon replied ERROR: " + message);
+    }
+    if (cls != expected) {
+        return parseError("expected a " + std::string(expected) + " reply, got " + cls);
+    }
+    return doc;
+}
+
+// Field readers: false when present with the wrong type. `out` is left alone
+// when the field is absent (or null, for the optional ones).
+bool readOptionalNumber(const json& doc, const char* key, std::optional<double>& out) {
+    const auto it = doc.find(key);
+    if (it == doc.end() || it->is_null()) {
+        out.reset();
+        return true;
+    }
+    if (!it->is_number()) {
+        return false;
+    }
+    out = it->get<double>();
+    return true;
+}
+
+bool readInteger(const json& doc, const char* key, bool required, std::int64_t& out) {
+    const auto it = doc.find(key);
+    if (it == doc.end()) {
+        return !required;
+    }
+    if (it->is_number_integer()) {
+        out = it->get<std::int64_t>();
+        return true;
+    }
+    return false;
+}
+
+bool readInterval(const json& doc, const char* key, std::optional<Interval>& out) {
+    const auto it = doc.find(key);
+    if (it == doc.end() || it->is_null()) {
+        out.reset();
+        return true;
+    }
+    if (!it->is_array() || it->size() != 2 || !(*it)[0].is_number() || !(*it)[1].is_number()) {
+        return false;
+    }
+    out = Interval{(*it)[0].get<double>(), (*it)[1].get<double>()};
+    return true;
+}
+
+// The value at a path of keys, or nullptr.
+const json* at(const json& doc, std::initializer_list<const char*> keys) {
+    const json* node = &doc;
+    for (const char* key : keys) {
+        if (!node->is_object()) {
+            return nullptr;
+        }
+        const auto it = node->find(key);
+        if (it == node->end()) {
+            return nullptr;
+        }
+        node = &*it;
+    }
+    return node;
+}
+
+// A value for the STATUS summary: numbers with `decimals` digits after the
+// point (integers as integers), strings as they are, booleans as yes/no, `-`
+// when absent or null.
+std::string show(const json& doc, std::initializer_list<const char*> keys, int decimals = 1) {
+    const json* v = at(doc, keys);
+    if (v == nullptr || v->is_null()) {
+        return "-";
+    }
+    if (v->is_number_integer()) {
+        return std::to_string(v->get<std::int64_t>());
+    }
+    if (v->is_number_unsigned()) {
+        return std::to_string(v->get<std::uint64_t>());
+    }
+    if (v->is_number()) {
+        std::array<char, 64> buf{};
+        std::snprintf(buf.data(), buf.size(), "%.*f", decimals, v->get<double>());
+        return buf.data();
+    }
+    if (v->is_boolean()) {
+        return v->get<bool>() ? "yes" : "no";
+    }
+    if (v->is_string()) {
+        return v->get<std::string>();
+    }
+    return v->dump();
+}
+
+core::Result<bool> waitUntil(int fd, short events, int interrupt_fd,
+                             std::optional<Clock::time_point> deadline) {
+    for (;;) {
+        int timeout_ms = -1;
+        if (deadline) {
+            const auto left =
+                std::chrono::ceil<std::chrono::milliseconds>(*deadline - Clock::now());
+            timeout_ms = static_cast<int>(std::max<std::int64_t>(0, left.count()));
+        }
+        std::array<pollfd, 2> fds{};
+        fds[0] = pollfd{fd, events, 0};
+        fds[1] = pollfd{interrupt_fd, POLLIN, 0};
+        const nfds_t n = interrupt_fd >= 0 ? 2 : 1;
+        const int rc = ::poll(fds.data(), n, timeout_ms);
+        if (rc < 0) {
+            if (errno == EINTR) {
+                continue;  // a signal handler wrote to the interrupt fd, or an unrelated one
+            }
+            return makeError(ErrorCode::kIo, std::string("poll: ") + std::strerror(errno));
+        }
+        if (n == 2 && (fds[1].revents & (POLLIN | POLLHUP)) != 0) {
+            return makeError(ErrorCode::kDegenerate, "interrupted");
+        }
+        if (fds[0].revents != 0) {
+            return true;  // ready, or an error/hangup the next recv/send reports
+        }
+        if (rc == 0) {
+            return makeError(ErrorCode::kIo, "timed out waiting for the daemon");
+        }
+    }
+}
+
+}  // namespace
+
+std::string defaultSocketPath() {
+    const char* env = std::getenv("SCALED_SOCKET");  // NOLINT(concurrency-mt-unsafe)
+    if (env != nullptr && *env != '\0') {
+        return env;
+    }
+    return kDefaultSocket;
+}
+
+// ---- reply lines ----------------------------------------------------------
+
+core::Result<std::string> replyClass(std::string_view line) {
+    auto doc = parseObject(line);
+    if (!doc) {
+        return doc.error();
+    }
+    return (*doc)["class"].get<std::string>();
+}
+
+core::Result<VersionReply> parseVersion(std::string_view line) {
+    auto doc = expectClass(line, "VERSION");
+    if (!doc) {
+        return doc.error();
+    }
+    VersionReply v;
+    std::int64_t major = -1;
+    std::int64_t minor = 0;
+    if (!readInteger(*doc, "proto_major", true, major) ||
+        !readInteger(*doc, "proto_minor", false, minor)) {
+        return parseError("malformed VERSION (proto_major/proto_minor): " +
+                          std::string(line.substr(0, 200)));
+    }
+    if (const auto it = doc->find("release"); it != doc->end() && it->is_string()) {
+        v.release = it->get<std::string>();
+    }
+    v.proto_major = static_cast<int>(major);
+    v.proto_minor = static_cast<int>(minor);
+    if (v.proto_major != kProtoMajor) {
+        return parseError("the daemon speaks protocol " + std::to_string(v.proto_major) + "." +
+                          std::to_string(v.proto_minor) + ", scalectl speaks " +
+                          std::to_string(kProtoMajor) + ".x");
+    }
+    return v;
+}
+
+core::Result<ScaleReply> parseScale(std::string_view line) {
+    auto doc = expectClass(line, "SCALE");
+    if (!doc) {
+        return doc.error();
+    }
+    ScaleReply s;
+    const auto state = doc->find("state");
+    if (state == doc->end() || !state->is_string()) {
+        return parseError("malformed SCALE (no \"state\"): " + std::string(line.substr(0, 200)));
+    }
+    s.state = state->get<std::string>();
+    if (!readOptionalNumber(*doc, "scale", s.scale) || !readOptionalNumber(*doc, "mean", s.mean) ||
+        !readInterval(*doc, "ci68", s.ci68) || !readInterval(*doc, "ci95", s.ci95) ||
+        !readOptionalNumber(*doc, "age_s", s.age_s) || !readInteger(*doc, "epoch", true, s.epoch) ||
+        !readInteger(*doc, "observations", true, s.observations) ||
+        !readInteger(*doc, "frame_id", false, s.frame_id)) {
+        return parseError("malformed SCALE (a field has the wrong type or is missing): " +
+                          std::string(line.substr(0, 200)));
+    }
+    if (const auto it = doc->find("fault"); it != doc->end() && it->is_string()) {
+        s.fault = it->get<std::string>();
+    }
+    return s;
+}
+
+core::Result<PosteriorReply> parsePosterior(std::string_view line) {
+    auto doc = expectClass(line, "POSTERIOR");
+    if (!doc) {
+        return doc.error();
+    }
+    PosteriorReply p;
+    const auto d = doc->find("d");
+    const auto log_p = doc->find("log_p");
+    const bool ok = readInteger(*doc, "epoch", false, p.epoch) &&
+                    readInteger(*doc, "frame_id", false, p.frame_id) &&
+                    readInteger(*doc, "observations", false, p.observations) && d != doc->end() &&
+                    d->is_array() && log_p != doc->end() && log_p->is_array() &&
+                    d->size() == log_p->size();
+    if (!ok) {
+        return parseError("malformed POSTERIOR (d and log_p must be arrays of one length): " +
+                          std::string(line.substr(0, 200)));
+    }
+    p.d.reserve(d->size());
+    p.log_p.reserve(d->size());
+    for (std::size_t i = 0; i < d->size(); ++i) {
+        const json& di = (*d)[i];
+        const json& li = (*log_p)[i];
+        // log p of an impossible value is -inf, which JSON spells null.
+        if (!di.is_number() || !(li.is_number() || li.is_null())) {
+            return parseError("malformed POSTERIOR (entry " + std::to_string(i) +
+                              " is not a number)");
+        }
+        p.d.push_back(di.get<double>());
+        p.log_p.push_back(li.is_null() ? -HUGE_VAL : li.get<double>());
+    }
+    return p;
+}
+
+// ---- formatting -----------------------------------------------------------
+
+std::string formatScale(const ScaleReply& s) {
+    std::string out = "scale ";
+    if (s.scale) {
+        out += fixed(*s.scale, 4) + " m/unit";
+        if (s.ci95) {
+            out += "  95% [" + fixed(s.ci95->lo, 4) + ", " + fixed(s.ci95->hi, 4) + "]";
+        }
+    } else {
+        out += "-";
+    }
+    out += "  " + s.state;
+    out += "  epoch " + std::to_string(s.epoch);
+    out += "  obs " + std::to_string(s.observations);
+    if (s.age_s) {
+        out += "  age " + fixed(*s.age_s, 1) + " s";
+    }
+    if (!s.fault.empty()) {
+        out += "  fault: " + s.fault;
+    }
+    return out;
+}
+
+core::Result<std::string> formatStatus(std::string_view line) {
+    auto parsed = expectClass(line, "STATUS");
+    if (!parsed) {
+        return parsed.error();
+    }
+    const json& j = *parsed;
+    std::ostringstream o;
+    const json* finished = at(j, {"source_finished"});
+    const bool done = finished != nullptr && finished->is_boolean() && finished->get<bool>();
+    o << "source         " << show(j, {"source"}) << (done ? " (finished)" : "") << '\n';
+    o << "uptime         " << show(j, {"uptime_s"}) << " s\n";
+    o << "frames         captured " << show(j, {"frames", "captured"}) << "  tracked "
+      << show(j, {"frames", "tracked"}) << "  dropped " << show(j, {"frames", "dropped"})
+      << "  (frame " << show(j, {"frame_id"}) << " of " << show(j, {"frames_total"}) << ", "
+      << show(j, {"fps"}) << " fps)\n";
+    o << "tracking       " << show(j, {"tracking_ms_mean"}) << " ms per frame  features in map "
+      << show(j, {"features", "in_map"}) << "  tracked " << show(j, {"features", "tracked"})
+      << '\n';
+    o << "detector       runs " << show(j, {"detector", "runs"}) << "  skipped "
+      << show(j, {"detector", "skipped"}) << "  latency last "
+      << show(j, {"detector", "latency_ms", "last"}) << " ms  mean "
+      << show(j, {"detector", "latency_ms", "mean"}) << " ms  max "
+      << show(j, {"detector", "latency_ms", "max"}) << " ms\n";
+    o << "scale          updates " << show(j, {"scale_updates"}) << "  epoch " << show(j, {"epoch"})
+      << '\n';
+    o << "clients        connected " << show(j, {"clients", "connected"}) << "/"
+      << show(j, {"clients", "max"}) << "  accepted " << show(j, {"clients", "accepted"})
+      << "  rejected " << show(j, {"clients", "rejected"}) << "  detached "
+      << show(j, {"clients", "detached"}) << '\n';
+    o << "log            " << show(j, {"log", "state"}) << "  lines " << show(j, {"log", "lines"})
+      << "  dropped " << show(j, {"log", "dropped"}) << "  bytes " << show(j, {"log", "bytes"});
+    const json* log_error = at(j, {"log", "error"});
+    if (log_error != nullptr && log_error->is_string() && !log_error->get<std::string>().empty()) {
+        o << "  error: " << log_error->get<std::string>();
+    }
+    o << '\n';
+    return o.str();
+}
+
+std::string formatPosterior(const PosteriorReply& p) {
+    std::string out;
+    out.reserve(p.d.size() * 24);
+    std::array<char, 80> buf{};
+    for (std::size_t i = 0; i < p.d.size(); ++i) {
+        std::snprintf(buf.data(), buf.size(), "%.6g\t%.6g\n", p.d[i], p.log_p[i]);
+        out += buf.data();
+    }
+    return out;
+}
+
+// ---- exit codes -----------------------------------------------------------
+
+int exitCodeFor(const core::Error& error) {
+    switch (error.code) {
+        case ErrorCode::kParse:
+            return kExProtocol;
+        case ErrorCode::kInvalidArgument:
+            return kExUsage;
+        default:
+            return kExUnavailable;
+    }
+}
+
+int getExitCode(const ScaleReply& scale, bool require_converged) {
+    if (require_converged && scale.state != "converged") {
+        return kExTempFail;
+    }
+    return 0;
+}
+
+// ---- the connection -------------------------------------------------------
+
+Client::Client(Client&& other) noexcept
+    : fd_(std::exchange(other.fd_, -1)),
+      interrupt_fd_(other.interrupt_fd_),
+      eof_(other.eof_),
+      buffer_(std::move(other.buffer_)) {}
+
+Client& Client::operator=(Client&& other) noexcept {
+    if (this != &other) {
+        close();
+        fd_ = std::exchange(other.fd_, -1);
+        interrupt_fd_ = other.interrupt_fd_;
+        eof_ = other.eof_;
+        buffer_ = std::move(other.buffer_);
+    }
+    return *this;
+}
+
+Client::~Client() {
+    close();
+}
+
+void Client::close() {
+    if (fd_ >= 0) {
+        ::close(fd_);
+        fd_ = -1;
+    }
+}
+
+core::Result<Client> Client::connect(const std::string& path,
+                                     std::optional<Clock::time_point> deadline) {
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    if (path.empty() || path.size() >= sizeof(addr.sun_path)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "socket path '" + path + "' is empty or longer than " +
+                             std::to_string(sizeof(addr.sun_path) - 1) + " bytes");
+    }
+    std::memcpy(static_cast<void*>(addr.sun_path), path.data(), path.size());
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+    if (fd < 0) {
+        return makeError(ErrorCode::kIo, std::string("socket: ") + std::strerror(errno));
+    }
+    Client client(fd);
+    for (;;) {
+        // NOLINTNEXTLINE(cppcoreguidelines-pro-type-reinterpret-cast): the sockets API
+        if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) == 0) {
+            return client;
+        }
+        const int err = errno;
+        if (err == EINTR) {
+            continue;
+        }
+        if (err == EAGAIN) {
+            // The listen backlog is full: the daemon is alive but busy. Retry.
+            if (deadline && Clock::now() >= *deadline) {
+                return makeError(ErrorCode::kIo, "timed out connecting to " + path +
+                                                     " (the daemon's backlog is full)");
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(10));
+            continue;
+        }
+        if (err == EINPROGRESS) {
+            auto ready = client.waitFor(POLLOUT, deadline);
+            if (!ready) {
+                return ready.error();
+            }
+            int so_error = 0;
+            socklen_t len = sizeof(so_error);
+            ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &so_error, &len);
+            if (so_error == 0) {
+                return client;
+            }
+            errno = so_error;
+            return makeError(ErrorCode::kIo,
+                             "cannot connect to " + path + ": " + std::strerror(so_error));
+        }
+        if (err == ENOENT) {
+            return makeError(
+                ErrorCode::kNotFound,
+                "no socket at " + path + " (is scaled running? --socket, SCALED_SOCKET)");
+        }
+        if (err == ECONNREFUSED) {
+            return makeError(ErrorCode::kIo,
+                             "connection refused at " + path + " (is scaled running?)");
+        }
+        if (err == EACCES) {
+            return makeError(ErrorCode::kIo, "permission denied on " + path +
+                                                 " (is this user in the group scaled?)");
+        }
+        return makeError(ErrorCode::kIo, "cannot connect to " + path + ": " + std::strerror(err));
+    }
+}
+
+core::Result<bool> Client::waitFor(short events, std::optional<Clock::time_point> deadline) {
+    return waitUntil(fd_, events, interrupt_fd_, deadline);
+}
+
+core::Result<bool> Client::sendLine(std::string_view line,
+                                    std::optional<Clock::time_point> deadline) {
+    std::string data(line);
+    data += '\n';
+    std::size_t sent = 0;
+    while (sent < data.size()) {
+        const ssize_t n = ::send(fd_, data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
+        if (n >= 0) {
+            sent += static_cast<std::size_t>(n);
+            continue;
+        }
+        if (errno == EINTR) {
+            continue;
+        }
+        if (errno == EAGAIN || errno == EWOULDBLOCK) {
+            auto ready = waitFor(POLLOUT, deadline);
+            if (!ready) {
+                return ready.error();
+            }
+            continue;
+        }
+        if (errno == EPIPE || errno == ECONNRESET) {
+            return makeError(ErrorCode::kIo, "the daemon closed the connection");
+        }
+        return makeError(ErrorCode::kIo, std::string("send: ") + std::strerror(errno));
+    }
+    return true;
+}
+
+core::Result<std::string> Client::readLine(std::optional<Clock::time_point> deadline) {
+    for (;;) {
+        if (const auto nl = buffer_.find('\n'); nl != std::string::npos) {
+            std::string line = buffer_.substr(0, nl);
+            buffer_.erase(0, nl + 1);
+            if (!line.empty() && line.back() == '\r') {
+                line.pop_back();
+            }
+            return line;
+        }
+        if (buffer_.size() > kMaxLineBytes) {
+            return parseError("a reply line is longer than " + std::to_string(kMaxLineBytes) +
+                              " bytes");
+        }
+        if (eof_) {
+            return makeError(ErrorCode::kIo, buffer_.empty()
+                                                 ? "the daemon closed the connection"
+                                                 : "the daemon closed the connection mid-line");
+        }
+        auto ready = waitFor(POLLIN, deadline);
+        if (!ready) {
+            return ready.error();
+        }
+        std::array<char, 65536> chunk{};
+        const ssize_t n = ::recv(fd_, chunk.data(), chunk.size(), 0);
+        if (n > 0) {
+            buffer_.append(chunk.data(), static_cast<std::size_t>(n));
+        } else if (n == 0 || errno == ECONNRESET) {
+            eof_ = true;  // closed (a reset, too, ends the stream)
+        } else if (errno != EINTR && errno != EAGAIN && errno != EWOULDBLOCK) {
+            return makeError(ErrorCode::kIo, std::string("recv: ") + std::strerror(errno));
+        }
+    }
+}
+
+// ---- the commands ---------------------------------------------------------
+
+namespace {
+
+class Session {
+public:
+    Session(const Options& options, std::ostream& out, std::ostream& err)
+        : options_(options), out_(out), err_(err) {}
+
+    int run() {
+        auto connected = Client::connect(options_.socket_path, replyDeadline());
+        if (!connected) {
+            return fail(connected.error());
+        }
+        client_ = std::move(*connected);
+        client_.setInterruptFd(options_.interrupt_fd);
+
+        auto greeting = client_.readLine(replyDeadline());
+        if (!greeting) {
+            return fail(greeting.error(), "before its VERSION greeting");
+        }
+        auto version = parseVersion(*greeting);
+        if (!version) {
+            return fail(version.error());
+        }
+        switch (options_.command) {
+            case Command::kGet:
+                return get();
+            case Command::kWatch:
+                return watch();
+            case Command::kStatus:
+                return status();
+            case Command::kPosterior:
+                return posterior();
+        }
+        return kExSoftware;
+    }
+
+private:
+    [[nodiscard]] Clock::time_point deadlineIn(double seconds) const {
+        return Clock::now() +
+               std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+    }
+    // Connecting, the greeting and one reply: --timeout, 5 s by default.
+    [[nodiscard]] Clock::time_point replyDeadline() const {
+        return deadlineIn(options_.timeout_s.value_or(kDefaultTimeoutS));
+    }
+
+    int fail(const core::Error& error, const char* context = nullptr) {
+        err_ << "scalectl: " << error.message;
+        if (context != nullptr && client_.eof()) {
+            err_ << " " << context;
+        }
+        err_ << '\n';
+        return exitCodeFor(error);
+    }
+
+    // Sends `request` and returns the first reply of class `cls` (other
+    // classes are skipped: the schema is additive; ERROR is an error).
+    core::Result<std::string> request(const char* cmd_line, const char* cls) {
+        const auto deadline = replyDeadline();
+        auto sent = client_.sendLine(cmd_line, deadline);
+        if (!sent) {
+            return sent.error();
+        }
+        for (;;) {
+            auto line = client_.readLine(deadline);
+            if (!line) {
+                return line.error();
+            }
+            auto got = replyClass(*line);
+            if (!got) {
+                return got.error();
+            }
+            if (*got == cls || *got == "ERROR") {
+                return line;
+            }
+        }
+    }
+
+    void print(const std::string& text) {
+        out_ << text;
+        if (text.empty() || text.back() != '\n') {
+            out_ << '\n';
+        }
+        out_.flush();
+    }
+
+    int get() {
+        auto line = request(R"({"cmd":"poll"})", "SCALE");
+        if (!line) {
+            return fail(line.error(), "before replying");
+        }
+        auto scale = parseScale(*line);
+        if (!scale) {
+            return fail(scale.error());
+        }
+        print(options_.json ? *line : formatScale(*scale));
+        const int code = getExitCode(*scale, options_.require_converged);
+        if (code != 0) {
+            err_ << "scalectl: not converged (state " << scale->state << ")\n";
+        }
+        return code;
+    }
+
+    int status() {
+        auto line = request(R"({"cmd":"status"})", "STATUS");
+        if (!line) {
+            return fail(line.error(), "before replying");
+        }
+        auto text = formatStatus(*line);
+        if (!text) {
+            return fail(text.error());
+        }
+        print(options_.json ? *line : *text);
+        return 0;
+    }
+
+    int posterior() {
+        auto line = request(R"({"cmd":"posterior"})", "POSTERIOR");
+        if (!line) {
+            return fail(line.error(), "before replying");
+        }
+        auto p = parsePosterior(*line);
+        if (!p) {
+            return fail(p.error());
+        }
+        if (options_.json) {
+            print(*line);
+        } else {
+            out_ << formatPosterior(*p);
+            out_.flush();
+        }
+        return 0;
+    }
+
+    int watch() {
+        if (options_.count && *options_.count <= 0) {
+            return 0;
+        }
+        auto sent = client_.sendLine(R"({"cmd":"watch","enable":true})", replyDeadline());
+        if (!sent) {
+            return fail(sent.error());
+        }
+        bool acknowledged = false;
+        std::int64_t printed = 0;
+        // Until the WATCH acknowledgement: the reply timeout; then --timeout
+        // between lines when it was given, else no bound.
+        auto deadline = std::optional<Clock::time_point>(replyDeadline());
+        for (;;) {
+            auto line = client_.readLine(deadline);
+            if (!line) {
+                const core::Error& e = line.error();
+                if (e.code == ErrorCode::kDegenerate) {
+                    return 0;  // SIGINT/SIGTERM: the user stopped watching
+                }
+                if (client_.eof() && acknowledged && !options_.count) {
+                    return 0;  // the stream ended (the daemon stopped)
+                }
+                if (client_.eof() && options_.count) {
+                    err_ << "scalectl: the daemon closed the connection after " << printed << " of "
+                         << *options_.count << " lines\n";
+                    return kExUnavailable;
+                }
+                return fail(e, acknowledged ? nullptr : "before acknowledging watch");
+            }
+            auto cls = replyClass(*line);
+            if (!cls) {
+                return fail(cls.error());
+            }
+            if (*cls == "ERROR") {
+                return fail(expectClass(*line, "SCALE").error());
+            }
+            if (*cls == "WATCH") {
+                acknowledged = true;
+            } else if (*cls == "SCALE") {
+                auto scale = parseScale(*line);
+                if (!scale) {
+                    return fail(scale.error());
+                }
+                print(options_.json ? *line : formatScale(*scale));
+                ++printed;
+                if (options_.count && printed >= *options_.count) {
+                    return 0;
+                }
+            }
+            if (acknowledged || printed > 0) {
+                deadline.reset();
+                if (options_.timeout_s) {
+                    deadline = deadlineIn(*options_.timeout_s);
+                }
+            }
+        }
+    }
+
+    const Options& options_;
+    std::ostream& out_;
+    std::ostream& err_;
+    Client client_;
+};
+
+}  // namespace
+
+int run(const Options& options, std::ostream& out, std::ostream& err) {
+    Session session(options, out, err);
+    return session.run();
+}
+
+}  // namespace scaled::tools::scalectl
