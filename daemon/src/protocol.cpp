@@ -1,1 +1,410 @@
-// placeholder
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstddef>
+#include <nlohmann/json.hpp>
+#include <span>
+
+#include <scaled/daemon/protocol.h>
+
+namespace scaled::daemon {
+namespace {
+
+template <typename Int>
+void appendInt(std::string& out, Int value) {
+    std::array<char, 24> buf{};
+    const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
+    out.append(buf.data(), res.ptr);
+}
+
+void appendBool(std::string& out, bool value) {
+    out += value ? "true" : "false";
+}
+
+// `,"name":` (or `{"name":` style is written by the caller).
+void key(std::string& out, std::string_view name) {
+    out += ",\"";
+    out += name;
+    out += "\":";
+}
+
+void appendInterval(std::string& out, bool present, double lo, double hi) {
+    if (!present) {
+        out += "null";
+        return;
+    }
+    out += '[';
+    appendJsonNumber(out, lo);
+    out += ',';
+    appendJsonNumber(out, hi);
+    out += ']';
+}
+
+void appendArray(std::string& out, std::span<const double> values) {
+    out += '[';
+    for (std::size_t i = 0; i < values.size(); ++i) {
+        if (i > 0) {
+            out += ',';
+        }
+        appendJsonNumber(out, values[i]);
+    }
+    out += ']';
+}
+
+// Length of the valid UTF-8 sequence at s[i] (0 when invalid).
+std::size_t utf8Length(std::string_view s, std::size_t i) {
+    const auto b0 = static_cast<unsigned char>(s[i]);
+    std::size_t n = 0;
+    unsigned min = 0;
+    unsigned cp = 0;
+    if (b0 < 0x80U) {
+        return 1;
+    }
+    if ((b0 & 0xE0U) == 0xC0U) {
+        n = 2;
+        min = 0x80U;
+        cp = b0 & 0x1FU;
+    } else if ((b0 & 0xF0U) == 0xE0U) {
+        n = 3;
+        min = 0x800U;
+        cp = b0 & 0x0FU;
+    } else if ((b0 & 0xF8U) == 0xF0U) {
+        n = 4;
+        min = 0x10000U;
+        cp = b0 & 0x07U;
+    } else {
+        return 0;
+    }
+    if (i + n > s.size()) {
+        return 0;
+    }
+    for (std::size_t k = 1; k < n; ++k) {
+        const auto b = static_cast<unsigned char>(s[i + k]);
+        if ((b & 0xC0U) != 0x80U) {
+            return 0;
+        }
+        cp = (cp << 6U) | (b & 0x3FU);
+    }
+    if (cp < min || cp > 0x10FFFFU || (cp >= 0xD800U && cp <= 0xDFFFU)) {
+        return 0;
+    }
+    return n;
+}
+
+// Euclidean norm without overflow for huge components.
+double safeNorm(const std::array<double, 3>& v) {
+    const double m = std::max({std::fabs(v[0]), std::fabs(v[1]), std::fabs(v[2])});
+    if (m == 0 || !std::isfinite(m)) {
+        return m;
+    }
+    const double a = v[0] / m;
+    const double b = v[1] / m;
+    const double c = v[2] / m;
+    return m * std::sqrt(a * a + b * b + c * c);
+}
+
+Request invalid(std::string cmd, std::string message) {
+    Request r;
+    r.cmd = std::move(cmd);
+    r.error = std::move(message);
+    return r;
+}
+
+}  // namespace
+
+const char* toString(Command command) {
+    switch (command) {
+        case Command::kInvalid:
+            return "";
+        case Command::kPoll:
+            return "poll";
+        case Command::kWatch:
+            return "watch";
+        case Command::kStatus:
+            return "status";
+        case Command::kPosterior:
+            return "posterior";
+        case Command::kSetGravity:
+            return "set_gravity";
+    }
+    return "";
+}
+
+void appendJsonNumber(std::string& out, double value) {
+    if (!std::isfinite(value)) {
+        out += "null";
+        return;
+    }
+    std::array<char, 32> buf{};
+    const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
+    out.append(buf.data(), res.ptr);
+}
+
+void appendJsonString(std::string& out, std::string_view text) {
+    static constexpr std::string_view kHex = "0123456789abcdef";
+    out += '"';
+    std::size_t i = 0;
+    while (i < text.size()) {
+        const auto c = static_cast<unsigned char>(text[i]);
+        if (c >= 0x80U) {
+            const std::size_t n = utf8Length(text, i);
+            if (n == 0) {
+                out += "\xEF\xBF\xBD";  // U+FFFD
+                ++i;
+            } else {
+                out.append(text.substr(i, n));
+                i += n;
+            }
+            continue;
+        }
+        switch (c) {
+            case '"':
+                out += "\\\"";
+                break;
+            case '\\':
+                out += "\\\\";
+                break;
+            case '\n':
+                out += "\\n";
+                break;
+            case '\r':
+                out += "\\r";
+                break;
+            case '\t':
+                out += "\\t";
+                break;
+            default:
+                if (c < 0x20U || c == 0x7FU) {
+                    out += "\\u00";
+                    out += kHex[c >> 4U];
+                    out += kHex[c & 0xFU];
+                } else {
+                    out += static_cast<char>(c);
+                }
+        }
+        ++i;
+    }
+    out += '"';
+}
+
+void appendVersion(std::string& out, std::string_view release) {
+    out += R"({"class":"VERSION","release":)";
+    appendJsonString(out, release);
+    key(out, "proto_major");
+    appendInt(out, kProtoMajor);
+    key(out, "proto_minor");
+    appendInt(out, kProtoMinor);
+    out += "}\n";
+}
+
+void appendScale(std::string& out, const ScaleReport& r, std::int64_t now_mono_ns) {
+    out += R"({"class":"SCALE","scale":)";
+    if (r.has_scale) {
+        appendJsonNumber(out, r.scale);
+    } else {
+        out += "null";
+    }
+    key(out, "mean");
+    if (r.has_scale) {
+        appendJsonNumber(out, r.mean);
+    } else {
+        out += "null";
+    }
+    key(out, "ci68");
+    appendInterval(out, r.has_scale, r.ci68_lo, r.ci68_hi);
+    key(out, "ci95");
+    appendInterval(out, r.has_scale, r.ci95_lo, r.ci95_hi);
+    key(out, "state");
+    appendJsonString(out, toString(r.state));
+    key(out, "epoch");
+    appendInt(out, r.epoch);
+    key(out, "observations");
+    appendInt(out, r.observations);
+    key(out, "frame_id");
+    appendInt(out, r.frame_id);
+    key(out, "t_ns");
+    appendInt(out, r.t_ns);
+    key(out, "time");
+    appendJsonNumber(out, static_cast<double>(r.t_ns) * 1e-9);
+    key(out, "age_s");
+    if (r.updated_mono_ns == 0) {
+        out += "null";
+    } else {
+        appendJsonNumber(out, static_cast<double>(now_mono_ns - r.updated_mono_ns) * 1e-9);
+    }
+    if (!r.fault.empty()) {
+        key(out, "fault");
+        appendJsonString(out, r.fault);
+    }
+    out += "}\n";
+}
+
+void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& log,
+                  const ClientCounts& clients) {
+    out += R"({"class":"STATUS","source":)";
+    appendJsonString(out, s.source);
+    key(out, "uptime_s");
+    appendJsonNumber(out, s.uptime_s);
+    key(out, "fps");
+    appendJsonNumber(out, s.fps);
+    key(out, "frame_id");
+    appendInt(out, s.frame_id);
+    key(out, "frames_total");
+    appendInt(out, s.frames_total);
+    key(out, "source_finished");
+    appendBool(out, s.source_finished);
+    out += R"(,"frames":{"captured":)";
+    appendInt(out, s.frames_captured);
+    key(out, "tracked");
+    appendInt(out, s.frames_tracked);
+    key(out, "dropped");
+    appendInt(out, s.frames_dropped);
+    out += R"(},"detector":{"runs":)";
+    appendInt(out, s.detections_run);
+    key(out, "skipped");
+    appendInt(out, s.detections_skipped);
+    out += R"(,"latency_ms":{"last":)";
+    appendJsonNumber(out, s.detector_latency_ms_last);
+    key(out, "mean");
+    appendJsonNumber(out, s.detector_latency_ms_mean);
+    key(out, "max");
+    appendJsonNumber(out, s.detector_latency_ms_max);
+    out += "}}";
+    key(out, "tracking_ms_mean");
+    appendJsonNumber(out, s.tracking_ms_mean);
+    out += R"(,"features":{"in_map":)";
+    appendInt(out, s.features_in_map);
+    key(out, "tracked");
+    appendInt(out, s.features_tracked);
+    out += '}';
+    key(out, "scale_updates");
+    appendInt(out, s.scale_updates);
+    key(out, "epoch");
+    appendInt(out, s.epoch);
+    out += R"(,"clients":{"connected":)";
+    appendInt(out, clients.connected);
+    key(out, "max");
+    appendInt(out, clients.max);
+    key(out, "accepted");
+    appendInt(out, clients.accepted);
+    key(out, "rejected");
+    appendInt(out, clients.rejected);
+    key(out, "detached");
+    appendInt(out, clients.detached);
+    out += R"(},"log":{"state":)";
+    appendJsonString(out, toString(log.state));
+    key(out, "lines");
+    appendInt(out, log.lines_written);
+    key(out, "dropped");
+    appendInt(out, log.lines_dropped);
+    key(out, "bytes");
+    appendInt(out, log.bytes_written);
+    if (!log.error.empty()) {
+        key(out, "error");
+        appendJsonString(out, log.error);
+    }
+    out += "}}\n";
+}
+
+void appendPosterior(std::string& out, const PosteriorSnapshot& p) {
+    out += R"({"class":"POSTERIOR","epoch":)";
+    appendInt(out, p.epoch);
+    key(out, "frame_id");
+    appendInt(out, p.frame_id);
+    key(out, "observations");
+    appendInt(out, p.observations);
+    const std::size_t n = std::min(p.d.size(), p.log_p.size());
+    key(out, "d");
+    appendArray(out, std::span<const double>(p.d.data(), n));
+    key(out, "log_p");
+    appendArray(out, std::span<const double>(p.log_p.data(), n));
+    out += "}\n";
+}
+
+void appendWatch(std::string& out, bool enable) {
+    out += R"({"class":"WATCH","enable":)";
+    appendBool(out, enable);
+    out += "}\n";
+}
+
+void appendAck(std::string& out, std::string_view cmd) {
+    out += R"({"class":"ACK","cmd":)";
+    appendJsonString(out, cmd);
+    out += "}\n";
+}
+
+void appendError(std::string& out, std::string_view message, std::string_view cmd) {
+    out += R"({"class":"ERROR","message":)";
+    appendJsonString(out, message);
+    if (!cmd.empty()) {
+        key(out, "cmd");
+        appendJsonString(out, cmd);
+    }
+    out += "}\n";
+}
+
+Request parseRequest(std::string_view line) {
+    using nlohmann::json;
+    const json doc = json::parse(line.begin(), line.end(), nullptr, false);
+    if (doc.is_discarded()) {
+        return invalid({}, "request is not valid JSON");
+    }
+    if (!doc.is_object()) {
+        return invalid({}, "request must be a JSON object");
+    }
+    const auto cmd_it = doc.find("cmd");
+    if (cmd_it == doc.end()) {
+        return invalid({}, "request has no \"cmd\"");
+    }
+    if (!cmd_it->is_string()) {
+        return invalid({}, "\"cmd\" must be a string");
+    }
+    Request r;
+    r.cmd = cmd_it->get_ref<const std::string&>();
+    if (r.cmd == "poll") {
+        r.command = Command::kPoll;
+    } else if (r.cmd == "status") {
+        r.command = Command::kStatus;
+    } else if (r.cmd == "posterior") {
+        r.command = Command::kPosterior;
+    } else if (r.cmd == "watch") {
+        const auto it = doc.find("enable");
+        if (it != doc.end()) {
+            if (!it->is_boolean()) {
+                return invalid(r.cmd, "\"enable\" must be true or false");
+            }
+            r.enable = it->get<bool>();
+        }
+        r.command = Command::kWatch;
+    } else if (r.cmd == "set_gravity") {
+        const auto it = doc.find("down");
+        const char* bad = "\"down\" must be an array of 3 finite numbers, not all zero";
+        if (it == doc.end() || !it->is_array() || it->size() != 3) {
+            return invalid(r.cmd, bad);
+        }
+        for (std::size_t i = 0; i < 3; ++i) {
+            const json& v = (*it)[i];
+            if (!v.is_number()) {
+                return invalid(r.cmd, bad);
+            }
+            r.down[i] = v.get<double>();
+            if (!std::isfinite(r.down[i])) {
+                return invalid(r.cmd, bad);
+            }
+        }
+        const double norm = safeNorm(r.down);
+        if (!(norm > 0) || !std::isfinite(norm)) {
+            return invalid(r.cmd, bad);
+        }
+        for (double& v : r.down) {
+            v /= norm;
+        }
+        r.command = Command::kSetGravity;
+    } else {
+        return invalid(r.cmd, "unknown command \"" + r.cmd +
+                                  "\" (known: poll, watch, status, posterior, set_gravity)");
+    }
+    return r;
+}
+
+}  // namespace scaled::daemon

@@ -1,1 +1,304 @@
+// The socket protocol's encoders and request parser (docs/protocol.md): every
+// object is one line of valid JSON with the documented members, and every bad
+// request becomes an error message instead of a crash.
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+
 #include <gtest/gtest.h>
+
+#include <scaled/daemon/protocol.h>
+
+namespace scaled::daemon {
+namespace {
+
+using nlohmann::json;
+
+// Parses one encoded line: it must end in exactly one newline.
+json parseLine(const std::string& line) {
+    EXPECT_FALSE(line.empty());
+    EXPECT_EQ(line.back(), '\n') << line;
+    EXPECT_EQ(line.find('\n'), line.size() - 1) << line;
+    json j = json::parse(line, nullptr, false);
+    EXPECT_FALSE(j.is_discarded()) << line;
+    return j;
+}
+
+ScaleReport sampleReport() {
+    ScaleReport r;
+    r.has_scale = true;
+    r.scale = 0.9763412345678;
+    r.mean = 0.981;
+    r.ci68_lo = 0.95;
+    r.ci68_hi = 1.01;
+    r.ci95_lo = 0.9;
+    r.ci95_hi = 1.05;
+    r.state = DaemonState::kConverging;
+    r.epoch = 2;
+    r.observations = 137;
+    r.frame_id = 510;
+    r.t_ns = 1'700'000'000'123'456'789;
+    r.updated_mono_ns = 5'000'000'000;
+    return r;
+}
+
+TEST(Protocol, Version) {
+    std::string out;
+    appendVersion(out, "0.1.0");
+    EXPECT_EQ(out,
+              "{\"class\":\"VERSION\",\"release\":\"0.1.0\",\"proto_major\":1,"
+              "\"proto_minor\":0}\n");
+}
+
+TEST(Protocol, ScaleWithAScale) {
+    std::string out;
+    appendScale(out, sampleReport(), 5'410'000'000);
+    const json j = parseLine(out);
+    EXPECT_EQ(j["class"], "SCALE");
+    EXPECT_EQ(j["scale"].get<double>(), 0.9763412345678);  // shortest exact form
+    EXPECT_EQ(j["mean"].get<double>(), 0.981);
+    EXPECT_EQ(j["ci68"], json::array({0.95, 1.01}));
+    EXPECT_EQ(j["ci95"], json::array({0.9, 1.05}));
+    EXPECT_EQ(j["state"], "converging");
+    EXPECT_EQ(j["epoch"], 2);
+    EXPECT_EQ(j["observations"], 137);
+    EXPECT_EQ(j["frame_id"], 510);
+    EXPECT_EQ(j["t_ns"].get<std::int64_t>(), 1'700'000'000'123'456'789);
+    EXPECT_NEAR(j["time"].get<double>(), 1'700'000'000.123456789, 1e-6);
+    EXPECT_NEAR(j["age_s"].get<double>(), 0.41, 1e-12);
+    EXPECT_FALSE(j.contains("fault"));
+}
+
+TEST(Protocol, ScaleWithoutAScaleHasNulls) {
+    ScaleReport r;
+    r.fault = "log: No space left on device";
+    std::string out;
+    appendScale(out, r, 123);
+    const json j = parseLine(out);
+    EXPECT_TRUE(j["scale"].is_null());
+    EXPECT_TRUE(j["mean"].is_null());
+    EXPECT_TRUE(j["ci68"].is_null());
+    EXPECT_TRUE(j["ci95"].is_null());
+    EXPECT_TRUE(j["age_s"].is_null());
+    EXPECT_EQ(j["state"], "initialising");
+    EXPECT_EQ(j["frame_id"], -1);
+    EXPECT_EQ(j["fault"], "log: No space left on device");
+}
+
+TEST(Protocol, StatusHasEveryMember) {
+    PipelineStatus s;
+    s.source = "replay:/data/rk";
+    s.frame_id = 99;
+    s.frames_total = 1000;
+    s.fps = 29.5;
+    s.frames_captured = 101;
+    s.frames_tracked = 100;
+    s.frames_dropped = 1;
+    s.detections_run = 10;
+    s.detections_skipped = 2;
+    s.detector_latency_ms_last = 40.5;
+    s.detector_latency_ms_mean = 41;
+    s.detector_latency_ms_max = 80;
+    s.tracking_ms_mean = 12.5;
+    s.features_in_map = 40;
+    s.features_tracked = 25;
+    s.scale_updates = 7;
+    s.epoch = 1;
+    s.uptime_s = 3.5;
+    LogStatus log;
+    log.state = LogStatus::State::kFault;
+    log.lines_written = 5;
+    log.lines_dropped = 1;
+    log.bytes_written = 500;
+    log.error = "No space left on device";
+    std::string out;
+    appendStatus(out, s, log, ClientCounts{3, 16, 5, 1, 1});
+    const json j = parseLine(out);
+    EXPECT_EQ(j["class"], "STATUS");
+    EXPECT_EQ(j["source"], "replay:/data/rk");
+    EXPECT_EQ(j["uptime_s"], 3.5);
+    EXPECT_EQ(j["fps"], 29.5);
+    EXPECT_EQ(j["frame_id"], 99);
+    EXPECT_EQ(j["frames_total"], 1000);
+    EXPECT_EQ(j["source_finished"], false);
+    EXPECT_EQ(j["frames"], json::parse(R"({"captured":101,"tracked":100,"dropped":1})"));
+    EXPECT_EQ(j["detector"], json::parse(R"({"runs":10,"skipped":2,
+        "latency_ms":{"last":40.5,"mean":41,"max":80}})"));
+    EXPECT_EQ(j["tracking_ms_mean"], 12.5);
+    EXPECT_EQ(j["features"], json::parse(R"({"in_map":40,"tracked":25})"));
+    EXPECT_EQ(j["scale_updates"], 7);
+    EXPECT_EQ(j["epoch"], 1);
+    EXPECT_EQ(j["clients"], json::parse(R"({"connected":3,"max":16,"accepted":5,"rejected":1,
+        "detached":1})"));
+    EXPECT_EQ(j["log"], json::parse(R"({"state":"fault","lines":5,"dropped":1,"bytes":500,
+        "error":"No space left on device"})"));
+
+    out.clear();
+    appendStatus(out, PipelineStatus{}, LogStatus{}, ClientCounts{});
+    const json empty = parseLine(out);
+    EXPECT_EQ(empty["log"], json::parse(R"({"state":"off","lines":0,"dropped":0,"bytes":0})"));
+}
+
+TEST(Protocol, Posterior) {
+    std::string out;
+    appendPosterior(out, PosteriorSnapshot{});
+    json j = parseLine(out);
+    EXPECT_EQ(j, json::parse(R"({"class":"POSTERIOR","epoch":0,"frame_id":-1,"observations":0,
+        "d":[],"log_p":[]})"));
+
+    PosteriorSnapshot p;
+    p.epoch = 3;
+    p.frame_id = 77;
+    p.observations = 4;
+    p.d = {0.5, 1.0, 1.5};
+    p.log_p = {-2.25, 0, -std::numeric_limits<double>::infinity()};
+    out.clear();
+    appendPosterior(out, p);
+    j = parseLine(out);
+    EXPECT_EQ(j["d"], json::array({0.5, 1.0, 1.5}));
+    EXPECT_EQ(j["log_p"], json::parse("[-2.25,0,null]"));  // zero density: null
+    EXPECT_EQ(j["epoch"], 3);
+    EXPECT_EQ(j["frame_id"], 77);
+    EXPECT_EQ(j["observations"], 4);
+}
+
+TEST(Protocol, WatchAckError) {
+    std::string out;
+    appendWatch(out, true);
+    appendWatch(out, false);
+    appendAck(out, "set_gravity");
+    appendError(out, "bad", "");
+    appendError(out, "worse", "watch");
+    EXPECT_EQ(out,
+              "{\"class\":\"WATCH\",\"enable\":true}\n"
+              "{\"class\":\"WATCH\",\"enable\":false}\n"
+              "{\"class\":\"ACK\",\"cmd\":\"set_gravity\"}\n"
+              "{\"class\":\"ERROR\",\"message\":\"bad\"}\n"
+              "{\"class\":\"ERROR\",\"message\":\"worse\",\"cmd\":\"watch\"}\n");
+}
+
+TEST(Protocol, StringsAreEscapedAndValidUtf8) {
+    std::string out;
+    appendJsonString(out,
+                     "a\"b\\c\nd\x01\x7f"
+                     "\xC3\xA9"
+                     "\xFF"
+                     "z");
+    EXPECT_EQ(out, "\"a\\\"b\\\\c\\nd\\u0001\\u007f\xC3\xA9\xEF\xBF\xBDz\"");
+    const json j = json::parse(out, nullptr, false);
+    ASSERT_FALSE(j.is_discarded());
+    EXPECT_EQ(j.get<std::string>(), "a\"b\\c\nd\x01\x7f\xC3\xA9\xEF\xBF\xBDz");
+    out.clear();
+    appendJsonString(out, "\xE2\x82");  // truncated sequence
+    EXPECT_EQ(out, "\"\xEF\xBF\xBD\xEF\xBF\xBD\"");
+}
+
+TEST(Protocol, NumbersReadBackExactly) {
+    for (const double v : {0.976, 1.0 / 3.0, 1e-300, 123456789.123, -0.0, 5e-324}) {
+        std::string out;
+        appendJsonNumber(out, v);
+        EXPECT_EQ(std::strtod(out.c_str(), nullptr), v) << out;
+    }
+    std::string out;
+    appendJsonNumber(out, std::nan(""));
+    EXPECT_EQ(out, "null");
+}
+
+TEST(Protocol, ParsesEveryCommand) {
+    EXPECT_EQ(parseRequest(R"({"cmd":"poll"})").command, Command::kPoll);
+    EXPECT_EQ(parseRequest(R"({"cmd":"status"})").command, Command::kStatus);
+    EXPECT_EQ(parseRequest(R"({"cmd":"posterior","extra":[1,2]})").command, Command::kPosterior);
+    Request w = parseRequest(R"( {"cmd":"watch"} )");
+    EXPECT_EQ(w.command, Command::kWatch);
+    EXPECT_TRUE(w.enable);
+    w = parseRequest(R"({"cmd":"watch","enable":false})");
+    EXPECT_EQ(w.command, Command::kWatch);
+    EXPECT_FALSE(w.enable);
+    const Request g = parseRequest(R"({"cmd":"set_gravity","down":[0,3,4]})");
+    ASSERT_EQ(g.command, Command::kSetGravity) << g.error;
+    EXPECT_DOUBLE_EQ(g.down[0], 0);
+    EXPECT_DOUBLE_EQ(g.down[1], 0.6);
+    EXPECT_DOUBLE_EQ(g.down[2], 0.8);
+    const Request huge = parseRequest(R"({"cmd":"set_gravity","down":[1e308,1e308,0]})");
+    ASSERT_EQ(huge.command, Command::kSetGravity) << huge.error;
+    EXPECT_NEAR(huge.down[0], std::sqrt(0.5), 1e-12);
+}
+
+TEST(Protocol, RejectsBadRequests) {
+    struct Case {
+        const char* line;
+        const char* message;
+        const char* cmd;
+    };
+    const Case cases[] = {
+        {"{\"cmd\":", "request is not valid JSON", ""},
+        {"[1,2]", "request must be a JSON object", ""},
+        {"\"poll\"", "request must be a JSON object", ""},
+        {"{}", "request has no \"cmd\"", ""},
+        {"{\"cmd\":3}", "\"cmd\" must be a string", ""},
+        {"{\"cmd\":\"fly\"}",
+         "unknown command \"fly\" (known: poll, watch, status, posterior, set_gravity)", "fly"},
+        {"{\"cmd\":\"watch\",\"enable\":1}", "\"enable\" must be true or false", "watch"},
+        {"{\"cmd\":\"set_gravity\"}", "\"down\" must be an array of 3 finite numbers, not all zero",
+         "set_gravity"},
+        {"{\"cmd\":\"set_gravity\",\"down\":[0,0,0]}",
+         "\"down\" must be an array of 3 finite numbers, not all zero", "set_gravity"},
+        {"{\"cmd\":\"set_gravity\",\"down\":[0,1]}",
+         "\"down\" must be an array of 3 finite numbers, not all zero", "set_gravity"},
+        {"{\"cmd\":\"set_gravity\",\"down\":[0,\"1\",0]}",
+         "\"down\" must be an array of 3 finite numbers, not all zero", "set_gravity"},
+        {"{\"cmd\":\"set_gravity\",\"down\":[0,1e999,0]}", "request is not valid JSON", ""},
+    };
+    for (const Case& c : cases) {
+        const Request r = parseRequest(c.line);
+        EXPECT_EQ(r.command, Command::kInvalid) << c.line;
+        EXPECT_EQ(r.error, c.message) << c.line;
+        EXPECT_EQ(r.cmd, c.cmd) << c.line;
+    }
+}
+
+// Writes one line of every kind to $SCALED_PROTOCOL_SAMPLES, for the ctest
+// protocol.schema, which checks them against docs/protocol.schema.json.
+TEST(ProtocolSamples, Write) {
+    const char* path = std::getenv("SCALED_PROTOCOL_SAMPLES");
+    if (path == nullptr) {
+        GTEST_SKIP() << "SCALED_PROTOCOL_SAMPLES not set (run by the ctest protocol.schema)";
+    }
+    std::string out;
+    appendVersion(out, "0.1.0");
+    appendScale(out, sampleReport(), 6'000'000'000);
+    ScaleReport faulty = sampleReport();
+    faulty.fault = "log: No space left on device";
+    faulty.state = DaemonState::kFault;
+    appendScale(out, faulty, 6'000'000'000);
+    appendScale(out, ScaleReport{}, 1);
+    LogStatus log;
+    log.state = LogStatus::State::kFault;
+    log.error = "No space left on device";
+    appendStatus(out, PipelineStatus{}, LogStatus{}, ClientCounts{});
+    PipelineStatus st;
+    st.source = "replay:/data/x";
+    st.fps = 29.97;
+    st.frame_id = 10;
+    appendStatus(out, st, log, ClientCounts{2, 16, 3, 1, 0});
+    appendPosterior(out, PosteriorSnapshot{});
+    PosteriorSnapshot p;
+    p.d = {0.5, 1.0};
+    p.log_p = {0, -std::numeric_limits<double>::infinity()};
+    appendPosterior(out, p);
+    appendWatch(out, true);
+    appendWatch(out, false);
+    appendAck(out, "set_gravity");
+    appendError(out, "request is not valid JSON");
+    appendError(out, "unknown command \"x\"", "x");
+    std::ofstream file(path);
+    file << out;
+    EXPECT_TRUE(file.good()) << path;
+}
+
+}  // namespace
+}  // namespace scaled::daemon

@@ -1,1 +1,646 @@
+// The socket service over real UNIX sockets in a temporary directory: the
+// protocol's conversations, the limits (clients, request length, output
+// buffer), the socket file's life (stale, live, mode, group, removal) and
+// socket activation. Clients wait with poll() and a timeout, never sleep.
+
+#include <cstdlib>
+#include <cstring>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <grp.h>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <poll.h>
+#include <string>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+#include <vector>
+
 #include <gtest/gtest.h>
+
+#include <scaled/daemon/socket_service.h>
+#include <scaled/drivers/unix_socket.h>
+
+#include "temp_dir.h"
+
+namespace scaled::daemon {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr int kTimeoutMs = 5000;
+
+// A protocol client: line-oriented reads with a timeout.
+class TestClient {
+public:
+    explicit TestClient(const fs::path& path) {
+        auto fd = drivers::connectUnix(path);
+        if (fd) {
+            fd_ = std::move(*fd);
+        } else {
+            ADD_FAILURE() << fd.error().message;
+        }
+    }
+
+    [[nodiscard]] bool connected() const { return fd_.isValid(); }
+    [[nodiscard]] int fd() const { return fd_.get(); }
+    void close() { fd_.reset(); }
+
+    bool send(std::string_view text) {
+        while (!text.empty()) {
+            const ssize_t n = ::send(fd_.get(), text.data(), text.size(), MSG_NOSIGNAL);
+            if (n <= 0) {
+                return false;
+            }
+            text.remove_prefix(static_cast<std::size_t>(n));
+        }
+        return true;
+    }
+
+    // The next line (without '\n'); nullopt on EOF, error or timeout (eof() tells).
+    std::optional<std::string> readLine(int timeout_ms = kTimeoutMs) {
+        for (;;) {
+            const auto nl = buffer_.find('\n');
+            if (nl != std::string::npos) {
+                std::string line = buffer_.substr(0, nl);
+                buffer_.erase(0, nl + 1);
+                return line;
+            }
+            pollfd p{fd_.get(), POLLIN, 0};
+            if (::poll(&p, 1, timeout_ms) <= 0) {
+                return std::nullopt;
+            }
+            char chunk[65536];
+            const ssize_t n = ::recv(fd_.get(), chunk, sizeof chunk, 0);
+            if (n <= 0) {
+                eof_ = true;
+                return std::nullopt;
+            }
+            buffer_.append(chunk, static_cast<std::size_t>(n));
+        }
+    }
+
+    json readJson(int timeout_ms = kTimeoutMs) {
+        const auto line = readLine(timeout_ms);
+        if (!line) {
+            ADD_FAILURE() << (eof_ ? "EOF" : "timeout") << " instead of a line";
+            return json();
+        }
+        json j = json::parse(*line, nullptr, false);
+        EXPECT_FALSE(j.is_discarded()) << *line;
+        return j;
+    }
+
+    json request(std::string_view line) {
+        EXPECT_TRUE(send(std::string(line) + "\n"));
+        return readJson();
+    }
+
+    // Reads until EOF; true when EOF came before the timeout.
+    bool waitEof(int timeout_ms = kTimeoutMs) {
+        while (readLine(timeout_ms)) {
+        }
+        return eof_;
+    }
+
+    // Nothing arrives within `timeout_ms`.
+    bool silent(int timeout_ms) {
+        if (!buffer_.empty()) {
+            return false;
+        }
+        pollfd p{fd_.get(), POLLIN, 0};
+        return ::poll(&p, 1, timeout_ms) == 0;
+    }
+
+private:
+    drivers::UniqueFd fd_;
+    std::string buffer_;
+    bool eof_ = false;
+};
+
+ScaleReport reportAt(std::int64_t frame_id) {
+    ScaleReport r;
+    r.has_scale = true;
+    r.scale = 0.976 + 1e-6 * static_cast<double>(frame_id);
+    r.mean = 0.98;
+    r.ci68_lo = 0.95;
+    r.ci68_hi = 1.0;
+    r.ci95_lo = 0.9;
+    r.ci95_hi = 1.05;
+    r.state = DaemonState::kConverging;
+    r.epoch = 1;
+    r.observations = static_cast<int>(frame_id / 10);
+    r.frame_id = frame_id;
+    r.t_ns = frame_id * 33'000'000;
+    r.updated_mono_ns = monotonicNowNs();
+    return r;
+}
+
+class SocketServiceTest : public ::testing::Test {
+protected:
+    SocketServiceTest() : dir_("sock"), hub_(64) { config_.path = dir_.path() / "s.sock"; }
+
+    std::unique_ptr<SocketService> startService() {
+        auto svc = SocketService::create(config_, hub_, "0.1.0");
+        if (!svc) {
+            ADD_FAILURE() << svc.error().message;
+            return nullptr;
+        }
+        auto started = (*svc)->start();
+        EXPECT_TRUE(started.ok());
+        return std::move(*svc);
+    }
+
+    // A connected client that has read its VERSION line.
+    std::unique_ptr<TestClient> connect() {
+        auto c = std::make_unique<TestClient>(config_.path);
+        const json v = c->readJson();
+        EXPECT_EQ(v.value("class", ""), "VERSION");
+        return c;
+    }
+
+    test::TempDir dir_;
+    ReportHub hub_;
+    SocketConfig config_;
+};
+
+TEST_F(SocketServiceTest, SendsVersionOnConnect) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    EXPECT_FALSE(svc->socketActivated());
+    EXPECT_EQ(svc->path(), config_.path);
+    TestClient c(config_.path);
+    const json v = c.readJson();
+    EXPECT_EQ(v, json::parse(R"({"class":"VERSION","release":"0.1.0","proto_major":1,
+        "proto_minor":0})"));
+    EXPECT_EQ(svc->stats().accepted, 1U);
+    EXPECT_EQ(svc->stats().connected, 1);
+}
+
+TEST_F(SocketServiceTest, PollReturnsThePublishedReport) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    json s = c->request(R"({"cmd":"poll"})");
+    EXPECT_EQ(s["class"], "SCALE");
+    EXPECT_TRUE(s["scale"].is_null());
+    EXPECT_EQ(s["state"], "initialising");
+
+    ScaleReport r = reportAt(510);
+    r.fault = "log: No space left on device";
+    hub_.publishScale(r);
+    s = c->request(R"({"cmd":"poll"})");
+    EXPECT_EQ(s["scale"].get<double>(), r.scale);
+    EXPECT_EQ(s["frame_id"], 510);
+    EXPECT_EQ(s["state"], "converging");
+    EXPECT_EQ(s["ci95"], json::array({0.9, 1.05}));
+    EXPECT_EQ(s["fault"], "log: No space left on device");
+    ASSERT_TRUE(s["age_s"].is_number());
+    EXPECT_GE(s["age_s"].get<double>(), 0.0);
+    EXPECT_LT(s["age_s"].get<double>(), 60.0);
+    EXPECT_EQ(svc->stats().requests, 2U);
+}
+
+TEST_F(SocketServiceTest, WatchStreamsEveryPublishAndStops) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    hub_.publishScale(reportAt(1));
+    auto c = connect();
+    ASSERT_TRUE(c->send("{\"cmd\":\"watch\",\"enable\":true}\n"));
+    EXPECT_EQ(c->readJson(), json::parse(R"({"class":"WATCH","enable":true})"));
+    json s = c->readJson();
+    EXPECT_EQ(s["class"], "SCALE");
+    EXPECT_EQ(s["frame_id"], 1);
+    for (std::int64_t f = 2; f <= 30; ++f) {
+        hub_.publishScale(reportAt(f));
+        s = c->readJson();
+        ASSERT_EQ(s["class"], "SCALE");
+        ASSERT_EQ(s["frame_id"], f);
+    }
+    // A state change alone is a new report too.
+    ScaleReport lost = reportAt(30);
+    lost.state = DaemonState::kLost;
+    hub_.publishScale(lost);
+    EXPECT_EQ(c->readJson()["state"], "lost");
+
+    EXPECT_EQ(c->request(R"({"cmd":"watch","enable":false})"),
+              json::parse(R"({"class":"WATCH","enable":false})"));
+    hub_.publishScale(reportAt(31));
+    // Had the stream continued, a SCALE would come before the STATUS.
+    EXPECT_EQ(c->request(R"({"cmd":"status"})")["class"], "STATUS");
+}
+
+TEST_F(SocketServiceTest, CoalescedPublishesStillIncrease) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    c->request(R"({"cmd":"watch","enable":true})");
+    EXPECT_EQ(c->readJson()["class"], "SCALE");
+    for (std::int64_t f = 0; f < 200; ++f) {
+        hub_.publishScale(reportAt(f));
+    }
+    ASSERT_TRUE(c->send("{\"cmd\":\"status\"}\n"));
+    std::int64_t last = -1;
+    for (;;) {
+        const json j = c->readJson();
+        ASSERT_TRUE(j.is_object());
+        if (j["class"] == "STATUS") {
+            break;
+        }
+        ASSERT_EQ(j["class"], "SCALE");
+        const auto f = j["frame_id"].get<std::int64_t>();
+        EXPECT_GT(f, last);
+        last = f;
+    }
+    EXPECT_EQ(last, 199);  // the latest always arrives
+}
+
+TEST_F(SocketServiceTest, StatusAndPosterior) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    json p = c->request(R"({"cmd":"posterior"})");
+    EXPECT_EQ(p, json::parse(R"({"class":"POSTERIOR","epoch":0,"frame_id":-1,
+        "observations":0,"d":[],"log_p":[]})"));
+
+    PipelineStatus st;
+    st.source = "sim";
+    st.frame_id = 42;
+    st.fps = 30;
+    st.frames_tracked = 43;
+    hub_.publishStatus(st);
+    LogStatus log;
+    log.state = LogStatus::State::kOk;
+    log.lines_written = 9;
+    hub_.publishLogStatus(log);
+    const std::vector<double> d = {0.5, 1.0, 1.5, 2.0};
+    const std::vector<double> lp = {-3, 0, -1, -4.5};
+    hub_.publishScale(reportAt(42), d, lp);
+
+    const json s = c->request(R"({"cmd":"status"})");
+    EXPECT_EQ(s["class"], "STATUS");
+    EXPECT_EQ(s["source"], "sim");
+    EXPECT_EQ(s["frame_id"], 42);
+    EXPECT_EQ(s["fps"], 30);
+    EXPECT_EQ(s["frames"]["tracked"], 43);
+    EXPECT_EQ(s["clients"]["connected"], 1);
+    EXPECT_EQ(s["clients"]["max"], 16);
+    EXPECT_EQ(s["clients"]["accepted"], 1);
+    EXPECT_EQ(s["log"]["state"], "ok");
+    EXPECT_EQ(s["log"]["lines"], 9);
+    for (const char* k : {"uptime_s", "frames_total", "source_finished", "detector",
+                          "tracking_ms_mean", "features", "scale_updates", "epoch"}) {
+        EXPECT_TRUE(s.contains(k)) << k;
+    }
+
+    p = c->request(R"({"cmd":"posterior"})");
+    EXPECT_EQ(p["frame_id"], 42);
+    EXPECT_EQ(p["epoch"], 1);
+    EXPECT_EQ(p["d"], json(d));
+    EXPECT_EQ(p["log_p"], json(lp));
+}
+
+TEST_F(SocketServiceTest, SetGravityIsNormalisedAndForwarded) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    EXPECT_EQ(c->request(R"({"cmd":"set_gravity","down":[0,2,0]})"),
+              json::parse(R"({"class":"ACK","cmd":"set_gravity"})"));
+    const auto g = hub_.takeGravityRequest();
+    ASSERT_TRUE(g.has_value());
+    EXPECT_DOUBLE_EQ(static_cast<double>((*g)[1]), 1.0);
+    EXPECT_DOUBLE_EQ(static_cast<double>((*g)[0]), 0.0);
+    const json e = c->request(R"({"cmd":"set_gravity","down":[0,0,0]})");
+    EXPECT_EQ(e["class"], "ERROR");
+    EXPECT_EQ(e["cmd"], "set_gravity");
+    EXPECT_FALSE(hub_.takeGravityRequest().has_value());
+}
+
+TEST_F(SocketServiceTest, BadRequestsGetErrorsAndTheConnectionStaysUsable) {
+    config_.max_request_bytes = 256;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    json e = c->request("{\"cmd\":");
+    EXPECT_EQ(e, json::parse(R"({"class":"ERROR","message":"request is not valid JSON"})"));
+    e = c->request("[1]");
+    EXPECT_EQ(e["message"], "request must be a JSON object");
+    e = c->request("{\"command\":\"poll\"}");
+    EXPECT_EQ(e["message"], "request has no \"cmd\"");
+    e = c->request("{\"cmd\":\"fly\"}");
+    EXPECT_EQ(e["class"], "ERROR");
+    EXPECT_EQ(e["cmd"], "fly");
+    // Blank lines are ignored; CRLF is accepted.
+    EXPECT_EQ(c->request("\n  \n{\"cmd\":\"poll\"}\r")["class"], "SCALE");
+
+    // An oversize line, sent in pieces: one ERROR, the rest is discarded.
+    const std::string big = "{\"cmd\":\"poll\",\"pad\":\"" + std::string(1000, 'x') + "\"}";
+    ASSERT_TRUE(c->send(big.substr(0, 100)));
+    ASSERT_TRUE(c->send(big.substr(100, 400)));
+    ASSERT_TRUE(c->send(big.substr(500) + "\n"));
+    e = c->readJson();
+    EXPECT_EQ(e, json::parse(R"j({"class":"ERROR",
+        "message":"request longer than 256 bytes (discarded)"})j"));
+    // The next request still works, also one that follows an oversize line at once.
+    EXPECT_EQ(c->request(R"({"cmd":"poll"})")["class"], "SCALE");
+    ASSERT_TRUE(c->send(std::string(300, ' ') + "x\n{\"cmd\":\"status\"}\n"));
+    EXPECT_EQ(c->readJson()["class"], "ERROR");
+    EXPECT_EQ(c->readJson()["class"], "STATUS");
+    const SocketServiceStats st = svc->stats();
+    EXPECT_EQ(st.errors, 6U);
+    EXPECT_EQ(st.requests, 9U);
+    EXPECT_EQ(st.connected, 1);
+}
+
+TEST_F(SocketServiceTest, RequestWithoutNewlineBeforeEofIsAnswered) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    ASSERT_TRUE(c->send(R"({"cmd":"poll"})"));
+    ASSERT_EQ(::shutdown(c->fd(), SHUT_WR), 0);
+    EXPECT_EQ(c->readJson()["class"], "SCALE");
+    EXPECT_TRUE(c->waitEof());
+}
+
+TEST_F(SocketServiceTest, TheClientOverTheLimitIsRejected) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    std::vector<std::unique_ptr<TestClient>> clients;
+    clients.reserve(16);
+    for (int i = 0; i < 16; ++i) {
+        clients.push_back(connect());
+    }
+    TestClient extra(config_.path);
+    EXPECT_EQ(extra.readJson(),
+              json::parse(R"j({"class":"ERROR","message":"too many clients (16 connected)"})j"));
+    EXPECT_TRUE(extra.waitEof());
+    SocketServiceStats st = svc->stats();
+    EXPECT_EQ(st.connected, 16);
+    EXPECT_EQ(st.accepted, 16U);
+    EXPECT_EQ(st.rejected, 1U);
+    // The others still work; once one leaves, a new client is accepted.
+    EXPECT_EQ(clients[3]->request(R"({"cmd":"poll"})")["class"], "SCALE");
+    clients[0]->close();
+    auto again = std::make_unique<TestClient>(config_.path);
+    json first = again->readJson();
+    for (int retry = 0; retry < 100 && first["class"] == "ERROR"; ++retry) {
+        // The server saw the new connection before the old one's EOF.
+        EXPECT_TRUE(again->waitEof());
+        again = std::make_unique<TestClient>(config_.path);
+        first = again->readJson();
+    }
+    EXPECT_EQ(first["class"], "VERSION");
+}
+
+TEST_F(SocketServiceTest, AClientThatNeverReadsIsDetached) {
+    config_.client_buffer_bytes = 16384;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto stalled = connect();
+    auto reader = connect();
+    stalled->request(R"({"cmd":"watch","enable":true})");
+    stalled->readJson();
+    reader->request(R"({"cmd":"watch","enable":true})");
+    reader->readJson();
+    // Stop reading `stalled`; big reports fill its socket, then its buffer.
+    ScaleReport r = reportAt(0);
+    r.fault = std::string(4000, 'f');
+    std::int64_t f = 1;
+    for (; f < 5000 && svc->stats().detached == 0; ++f) {
+        r.frame_id = f;
+        hub_.publishScale(r);
+        const json j = reader->readJson();
+        ASSERT_EQ(j["frame_id"], f);
+    }
+    EXPECT_EQ(svc->stats().detached, 1U);
+    EXPECT_EQ(svc->stats().connected, 1);
+    // The reader keeps receiving.
+    r.frame_id = f;
+    hub_.publishScale(r);
+    EXPECT_EQ(reader->readJson()["frame_id"], f);
+    // The stalled one finds its data so far, then EOF.
+    EXPECT_TRUE(stalled->waitEof());
+}
+
+TEST_F(SocketServiceTest, ClosedClientsAreCleanedUp) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto a = connect();
+    auto b = connect();
+    auto c = connect();
+    a->close();
+    ASSERT_EQ(::shutdown(b->fd(), SHUT_RDWR), 0);
+    int connected = -1;
+    for (int i = 0; i < 1000 && connected != 1; ++i) {
+        connected = c->request(R"({"cmd":"status"})")["clients"]["connected"].get<int>();
+    }
+    EXPECT_EQ(connected, 1);
+    EXPECT_EQ(svc->stats().detached, 0U);
+}
+
+TEST_F(SocketServiceTest, StopRemovesTheSocketFileAndClosesClients) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    EXPECT_TRUE(fs::exists(fs::symlink_status(config_.path)));
+    svc->stop();
+    EXPECT_FALSE(fs::exists(fs::symlink_status(config_.path)));
+    EXPECT_TRUE(c->waitEof());
+    svc->stop();  // idempotent
+}
+
+TEST_F(SocketServiceTest, StaleSocketFileIsReplaced) {
+    {
+        // A socket file nobody listens on any more (a crashed daemon's).
+        auto stale = drivers::listenUnix({config_.path, 0600, ""});
+        ASSERT_TRUE(stale.ok()) << stale.error().message;
+    }
+    ASSERT_TRUE(fs::is_socket(config_.path));
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    EXPECT_TRUE(c->connected());
+}
+
+TEST_F(SocketServiceTest, LiveSocketIsRefused) {
+    auto first = startService();
+    ASSERT_TRUE(first);
+    auto second = SocketService::create(config_, hub_, "0.1.0");
+    ASSERT_FALSE(second.ok());
+    EXPECT_EQ(second.error().message,
+              config_.path.string() + ": already in use by another process");
+    // The first one is untouched.
+    auto c = connect();
+    EXPECT_EQ(c->request(R"({"cmd":"poll"})")["class"], "SCALE");
+}
+
+TEST_F(SocketServiceTest, OtherFilesAndMissingDirectoriesAreErrors) {
+    std::ofstream(config_.path) << "not a socket\n";
+    auto r = SocketService::create(config_, hub_, "0.1.0");
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message,
+              config_.path.string() + ": exists and is not a socket (not replacing it)");
+    EXPECT_TRUE(fs::is_regular_file(config_.path));
+
+    config_.path = dir_.path() / "missing" / "s.sock";
+    r = SocketService::create(config_, hub_, "0.1.0");
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message, config_.path.string() + ": directory " +
+                                     (dir_.path() / "missing").string() +
+                                     ": No such file or directory");
+}
+
+TEST_F(SocketServiceTest, ModeIgnoresTheUmask) {
+    const mode_t old = ::umask(0077);
+    auto a = SocketService::create(config_, hub_, "0.1.0");
+    ::umask(old);
+    ASSERT_TRUE(a.ok()) << a.error().message;
+    struct stat st {};
+    ASSERT_EQ(::stat(config_.path.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISSOCK(st.st_mode));
+    EXPECT_EQ(st.st_mode & 07777U, 0660U);
+    (*a)->stop();
+
+    config_.mode = 0666;
+    const mode_t old2 = ::umask(0022);
+    auto b = SocketService::create(config_, hub_, "0.1.0");
+    ::umask(old2);
+    ASSERT_TRUE(b.ok()) << b.error().message;
+    ASSERT_EQ(::stat(config_.path.c_str(), &st), 0);
+    EXPECT_EQ(st.st_mode & 07777U, 0666U);
+}
+
+TEST_F(SocketServiceTest, GroupIsAppliedOrNamedWhenUnknown) {
+    config_.group = "scaled-no-such-group-xyz";
+    auto bad = SocketService::create(config_, hub_, "0.1.0");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().message,
+              config_.path.string() + ": unknown group 'scaled-no-such-group-xyz'");
+    EXPECT_FALSE(fs::exists(fs::symlink_status(config_.path)));
+
+    const group* own = ::getgrgid(::getegid());
+    if (own == nullptr) {
+        GTEST_SKIP() << "the process's group has no name";
+    }
+    config_.group = own->gr_name;
+    auto good = SocketService::create(config_, hub_, "0.1.0");
+    ASSERT_TRUE(good.ok()) << good.error().message;
+    struct stat st {};
+    ASSERT_EQ(::stat(config_.path.c_str(), &st), 0);
+    EXPECT_EQ(st.st_gid, ::getegid());
+}
+
+// --- socket activation ----------------------------------------------------------
+
+// Puts `fd` at descriptor number 3 for one test and restores what was there.
+class Fd3Guard {
+public:
+    explicit Fd3Guard(int fd) {
+        if (fd == 3) {
+            ok_ = true;  // already there (descriptor 3 was free)
+            return;
+        }
+        if (::fcntl(3, F_GETFD) >= 0) {
+            saved_ = ::fcntl(3, F_DUPFD_CLOEXEC, 10);
+        }
+        ok_ = ::dup2(fd, 3) == 3;
+    }
+    ~Fd3Guard() {
+        if (saved_ >= 0) {
+            ::dup2(saved_, 3);
+            ::close(saved_);
+        } else {
+            ::close(3);
+        }
+    }
+    Fd3Guard(const Fd3Guard&) = delete;
+    Fd3Guard& operator=(const Fd3Guard&) = delete;
+    Fd3Guard(Fd3Guard&&) = delete;
+    Fd3Guard& operator=(Fd3Guard&&) = delete;
+    [[nodiscard]] bool ok() const { return ok_; }
+
+private:
+    int saved_ = -1;
+    bool ok_ = false;
+};
+
+void setActivationEnv(long pid, int fds) {
+    ::setenv("LISTEN_PID", std::to_string(pid).c_str(), 1);
+    ::setenv("LISTEN_FDS", std::to_string(fds).c_str(), 1);
+    ::setenv("LISTEN_FDNAMES", "scaled.socket", 1);
+}
+
+TEST_F(SocketServiceTest, AdoptsTheSocketFromListenFds) {
+    const fs::path real = dir_.path() / "activated.sock";
+    auto made = drivers::listenUnix({real, 0660, ""});
+    ASSERT_TRUE(made.ok()) << made.error().message;
+    {
+        // The adopted descriptor is number 3; the service closes it in stop().
+        Fd3Guard guard(made->fd.get());
+        ASSERT_TRUE(guard.ok());
+        if (made->fd.get() == 3) {
+            [[maybe_unused]] const int fd3 = made->fd.release();
+        } else {
+            made->fd.reset();
+        }
+        setActivationEnv(::getpid(), 1);
+        auto svc = startService();
+        ASSERT_TRUE(svc);
+        EXPECT_TRUE(svc->socketActivated());
+        EXPECT_EQ(svc->path(), real);
+        EXPECT_EQ(std::getenv("LISTEN_PID"), nullptr);
+        EXPECT_EQ(std::getenv("LISTEN_FDS"), nullptr);
+        EXPECT_EQ(std::getenv("LISTEN_FDNAMES"), nullptr);
+        EXPECT_NE(::fcntl(3, F_GETFD) & FD_CLOEXEC, 0);
+        EXPECT_NE(::fcntl(3, F_GETFL) & O_NONBLOCK, 0);
+        TestClient c(real);
+        EXPECT_EQ(c.readJson()["class"], "VERSION");
+        EXPECT_EQ(c.request(R"({"cmd":"poll"})")["class"], "SCALE");
+        svc->stop();
+        // The file belongs to the service manager: it stays.
+        EXPECT_TRUE(fs::is_socket(real));
+        EXPECT_FALSE(fs::exists(fs::symlink_status(config_.path)));
+    }
+}
+
+TEST_F(SocketServiceTest, ActivationForAnotherProcessIsIgnored) {
+    setActivationEnv(::getpid() + 1, 1);
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    EXPECT_FALSE(svc->socketActivated());
+    EXPECT_EQ(std::getenv("LISTEN_FDS"), nullptr);
+    EXPECT_TRUE(fs::is_socket(config_.path));
+}
+
+TEST_F(SocketServiceTest, ActivationWithAnUnusableDescriptorIsAnError) {
+    // A connected (not listening) socket at an injected descriptor number.
+    int pair[2] = {-1, -1};
+    ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, pair), 0);
+    const drivers::UniqueFd other(pair[1]);
+    setActivationEnv(::getpid(), 1);
+    auto r = drivers::takeActivatedSocket(pair[0]);  // owns pair[0] now
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message, "socket activation (LISTEN_FDS=1): inherited socket (fd " +
+                                     std::to_string(pair[0]) + "): is not listening");
+    EXPECT_EQ(std::getenv("LISTEN_PID"), nullptr);
+
+    const int file = ::open(dir_.path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    ASSERT_GE(file, 0);
+    setActivationEnv(::getpid(), 1);
+    r = drivers::takeActivatedSocket(file);
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("is not a socket"), std::string::npos) << r.error().message;
+
+    // Not activated at all: nothing adopted.
+    auto none = drivers::takeActivatedSocket(3);
+    ASSERT_TRUE(none.ok());
+    EXPECT_FALSE(none->has_value());
+}
+
+}  // namespace
+}  // namespace scaled::daemon

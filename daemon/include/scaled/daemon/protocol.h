@@ -1,0 +1,75 @@
+#pragma once
+
+// The socket protocol (docs/protocol.md): newline-delimited JSON objects, each
+// with a "class". Pure functions: encoders append one complete line (ending in
+// '\n') to a caller's buffer, so a server reuses one buffer for every message;
+// parseRequest turns one request line into a Request or an error to send back.
+//
+// Versioning: proto_major changes only when an existing field changes meaning
+// or disappears; new fields, classes and commands only bump proto_minor.
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include <scaled/daemon/report.h>
+
+namespace scaled::daemon {
+
+inline constexpr int kProtoMajor = 1;
+inline constexpr int kProtoMinor = 0;
+
+// The service's own client counters, for STATUS.
+struct ClientCounts {
+    int connected = 0;
+    int max = 0;
+    std::uint64_t accepted = 0;
+    std::uint64_t rejected = 0;
+    std::uint64_t detached = 0;
+};
+
+// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":0}
+void appendVersion(std::string& out, std::string_view release);
+// SCALE; age_s is measured against `now_mono_ns` (CLOCK_MONOTONIC).
+void appendScale(std::string& out, const ScaleReport& report, std::int64_t now_mono_ns);
+void appendStatus(std::string& out, const PipelineStatus& status, const LogStatus& log,
+                  const ClientCounts& clients);
+void appendPosterior(std::string& out, const PosteriorSnapshot& posterior);
+void appendWatch(std::string& out, bool enable);
+void appendAck(std::string& out, std::string_view cmd);
+// ERROR; `cmd` is included when non-empty.
+void appendError(std::string& out, std::string_view message, std::string_view cmd = {});
+
+// Appends `text` as a JSON string literal (quotes included). Invalid UTF-8
+// becomes U+FFFD, control characters are escaped.
+void appendJsonString(std::string& out, std::string_view text);
+// Appends a number in the shortest form that reads back exactly; non-finite
+// values become null.
+void appendJsonNumber(std::string& out, double value);
+
+enum class Command : std::uint8_t {
+    kInvalid,  // see Request::error
+    kPoll,
+    kWatch,
+    kStatus,
+    kPosterior,
+    kSetGravity,
+};
+const char* toString(Command command);
+
+struct Request {
+    Command command = Command::kInvalid;
+    // The "cmd" the client gave (also for unknown commands; empty when none),
+    // echoed in ERROR replies.
+    std::string cmd;
+    bool enable = true;                   // watch
+    std::array<double, 3> down{0, 0, 0};  // set_gravity: unit vector (normalised here)
+    std::string error;                    // kInvalid: the ERROR message
+};
+
+// Parses one request line (without its newline). Unknown extra members are
+// ignored (clients may be newer than the server).
+Request parseRequest(std::string_view line);
+
+}  // namespace scaled::daemon
