@@ -1,0 +1,113 @@
+#include <memory>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <utility>
+
+#include <scaled/sim/sim_source.h>
+#include <scaled/synth/renderer.h>
+#include <scaled/synth/trajectory.h>
+
+#include "sim_internal.h"
+
+namespace scaled::sim {
+
+namespace {
+
+class SimSource final : public drivers::FrameSource {
+public:
+    SimSource(const SimConfig& config, synth::Trajectory trajectory,
+              core::PinholeRadialCamera camera, std::unique_ptr<synth::Scene> scene)
+        : config_(config),
+          trajectory_(std::move(trajectory)),
+          camera_(camera),
+          scene_(std::move(scene)),
+          renderer_(*scene_, renderOptions(config)) {
+        info_.name = "sim";
+        info_.intrinsics = camera_.intrinsics();
+        info_.has_intrinsics = true;
+        info_.gravity_down_W = synth::gravityDirectionW();
+        info_.frame_count =
+            config.duration_s > 0.0
+                ? static_cast<std::size_t>(std::lround(config.duration_s * config.fps))
+                : 0;
+        info_.listed_count = info_.frame_count;
+        if (info_.frame_count == 0) {
+            info_.notes.emplace_back("sim: unbounded (frame_count 0); the camera loops forever");
+        }
+    }
+
+    [[nodiscard]] const drivers::SequenceInfo& info() const override { return info_; }
+
+    core::Result<bool> next(drivers::Frame& frame) override {
+        if (bounded() && cursor_ >= info_.frame_count) {
+            return false;
+        }
+        const auto id = static_cast<std::int64_t>(cursor_);
+        ++cursor_;
+        frame.id = id;
+        frame.t_ns = detail::frameTimeNs(id, config_.fps);
+        const core::CameraPose pose = trajectory_.poseAt(static_cast<double>(frame.t_ns) * 1e-9);
+        // A fresh buffer per frame: callers may keep the previous frame's images.
+        frame.gray = cv::Mat();
+        renderer_.render(camera_, pose, frame.gray, nullptr, static_cast<std::uint64_t>(id));
+        frame.color = cv::Mat();
+        cv::cvtColor(frame.gray, frame.color, cv::COLOR_GRAY2BGR);
+        frame.T_CtoW_gt = pose;
+        frame.gravity_down_C = pose.R_CtoW.transpose() * synth::gravityDirectionW();
+        frame.depth_path.reset();
+        frame.image_path = "sim:" + std::to_string(id);
+        frame.accel_C.reset();
+        return true;
+    }
+
+    core::Result<bool> seek(std::size_t index) override {
+        if (bounded() && index > info_.frame_count) {
+            return core::makeError(core::ErrorCode::kInvalidArgument,
+                                   "sim: cannot seek to frame " + std::to_string(index) +
+                                       ": the sequence has " + std::to_string(info_.frame_count) +
+                                       " frames");
+        }
+        cursor_ = index;
+        return !bounded() || index < info_.frame_count;
+    }
+
+private:
+    static synth::RenderOptions renderOptions(const SimConfig& config) {
+        synth::RenderOptions o;
+        o.antialias = config.antialias;
+        o.noise_sigma = config.pixel_noise;
+        o.noise_seed = detail::combineSeed(config.seed, 0x72656e64ULL);
+        return o;
+    }
+    [[nodiscard]] bool bounded() const { return info_.frame_count > 0; }
+
+    SimConfig config_;
+    synth::Trajectory trajectory_;
+    core::PinholeRadialCamera camera_;
+    std::unique_ptr<synth::Scene> scene_;  // stable address: the renderer points to it
+    synth::Renderer renderer_;
+    drivers::SequenceInfo info_;
+    std::size_t cursor_ = 0;
+};
+
+}  // namespace
+
+core::Result<std::unique_ptr<drivers::FrameSource>> openSimSource(const SimConfig& config) {
+    auto trajectory = detail::makeTrajectory(config);
+    if (!trajectory) {
+        return trajectory.error();
+    }
+    auto camera = core::PinholeRadialCamera::create(simIntrinsics(config));
+    if (!camera) {
+        return camera.error();
+    }
+    auto scene = synth::Scene::create(simSceneConfig(config));
+    if (!scene) {
+        return scene.error();
+    }
+    return std::unique_ptr<drivers::FrameSource>(
+        std::make_unique<SimSource>(config, std::move(*trajectory), *camera,
+                                    std::make_unique<synth::Scene>(std::move(*scene))));
+}
+
+}  // namespace scaled::sim
