@@ -97,9 +97,9 @@ void BM_Summary(benchmark::State& state) {
 BENCHMARK(BM_Summary)->Arg(512)->Arg(1024)->Arg(2048);
 
 void BM_SimExperiment(benchmark::State& state) {
-    const auto specs = scaled::sim::paperExperiments(1, scaled::sim::defaultSimEstimatorConfig());
+    const auto specs = scaled::papersim::paperExperiments(1, scaled::papersim::defaultSimEstimatorConfig());
     for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
-        benchmark::DoNotOptimize(scaled::sim::runExperiment(specs[0]));
+        benchmark::DoNotOptimize(scaled::papersim::runExperiment(specs[0]));
     }
 }
 BENCHMARK(BM_SimExperiment)->Unit(benchmark::kMillisecond);

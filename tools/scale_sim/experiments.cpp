@@ -2,7 +2,7 @@
 
 #include <array>
 
-namespace scaled::sim {
+namespace scaled::papersim {
 
 using core::HeightPrior;
 using core::PriorTable;
@@ -120,4 +120,4 @@ std::vector<ExperimentSpec> paperExperiments(std::uint32_t seed, const core::Est
     return out;
 }
 
-}  // namespace scaled::sim
+}  // namespace scaled::papersim

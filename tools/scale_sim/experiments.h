@@ -6,7 +6,7 @@
 
 #include "simulation.h"
 
-namespace scaled::sim {
+namespace scaled::papersim {
 
 // (1) four bottles of the same known height, (2) one microwave of known height,
 // (3) four bottles of four heights with a uniform prior over the four.
@@ -16,4 +16,4 @@ std::vector<ExperimentSpec> paperExperiments(std::uint32_t seed,
 // The default estimator configuration used by scale-sim.
 core::EstimatorConfig defaultSimEstimatorConfig();
 
-}  // namespace scaled::sim
+}  // namespace scaled::papersim

@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
     using scaled::core::VarianceModel;
     bool json = false;
     std::uint32_t seed = 1;
-    auto config = scaled::sim::defaultSimEstimatorConfig();
+    auto config = scaled::papersim::defaultSimEstimatorConfig();
     for (int i = 1; i < argc; ++i) {
         const std::string_view a = argv[i];
         const auto next = [&]() -> std::string_view {
@@ -123,9 +123,9 @@ int main(int argc, char** argv) {
     }
 
     int status = 0;
-    std::vector<scaled::sim::ExperimentResult> results;
-    for (const auto& spec : scaled::sim::paperExperiments(seed, config)) {
-        results.push_back(scaled::sim::runExperiment(spec));
+    std::vector<scaled::papersim::ExperimentResult> results;
+    for (const auto& spec : scaled::papersim::paperExperiments(seed, config)) {
+        results.push_back(scaled::papersim::runExperiment(spec));
         if (!results.back().error.empty()) {
             std::cerr << "scale-sim: " << spec.name << ": " << results.back().error << "\n";
             status = kExSoftware;

@@ -8,7 +8,7 @@
 
 #include <Eigen/Geometry>
 
-namespace scaled::sim {
+namespace scaled::papersim {
 
 using core::BoundingBox;
 using core::CameraPose;
@@ -291,4 +291,4 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
     return result;
 }
 
-}  // namespace scaled::sim
+}  // namespace scaled::papersim

@@ -27,7 +27,7 @@
 
 #include <scaled/core/scale/scale_estimator.h>
 
-namespace scaled::sim {
+namespace scaled::papersim {
 
 using core::Scalar;
 using core::Vec3;
@@ -102,4 +102,4 @@ struct ExperimentResult {
 
 ExperimentResult runExperiment(const ExperimentSpec& spec);
 
-}  // namespace scaled::sim
+}  // namespace scaled::papersim

@@ -5,7 +5,7 @@
 
 #include "experiments.h"
 
-namespace scaled::sim {
+namespace scaled::papersim {
 namespace {
 
 TEST(ScaleSim, PaperExperimentsReachOnePercent) {
@@ -46,4 +46,4 @@ TEST(ScaleSim, RollCompensationMattersForAWideObject) {
 }
 
 }  // namespace
-}  // namespace scaled::sim
+}  // namespace scaled::papersim
