@@ -1,1 +1,502 @@
-// placeholder
+// The daemon's configuration: the pipeline's sections plus [source] [socket]
+// [log] [pipeline], one field registry (config_registry.h), and the command
+// line (CLI11; its exceptions stay in parseCommandLine).
+
+#include <CLI/CLI.hpp>
+#include <cstdint>
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <toml++/toml.h>
+
+#include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/version.h>
+#include <scaled/drivers/toml_detail.h>
+
+#include "config_registry.h"
+
+namespace scaled::daemon {
+
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+using drivers::toml_detail::show;
+
+namespace {
+
+using config_detail::Bound;
+using config_detail::Field;
+using config_detail::Locator;
+
+constexpr std::int64_t kMaxInt = std::numeric_limits<std::int64_t>::max();
+constexpr unsigned kMaxMode = 0777;
+constexpr unsigned kWorldWrite = 0002;
+constexpr unsigned kOwnerReadWrite = 0600;
+// sockaddr_un::sun_path is 108 bytes with the terminating NUL.
+constexpr std::size_t kMaxSocketPathBytes = 107;
+
+// The installed layout (a /usr prefix): config/scaled.toml states the same.
+constexpr const char* kDefaultModel = "/usr/share/scaled/models/yolox_nano.onnx";
+constexpr const char* kDefaultPriors = "/etc/scaled/priors.toml";
+
+std::string octal(unsigned mode) {
+    char buf[8];
+    std::snprintf(buf, sizeof buf, "%04o", mode);
+    return buf;
+}
+
+// socket.mode: "0660" (octal digits) or an integer (0o660 in TOML).
+Field socketMode(unsigned* target) {
+    return {"socket", "mode",
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const std::string expected =
+                    "must be an octal mode like \"0660\" (a string of octal digits, or an "
+                    "integer such as 0o660) in [0000, 0777]";
+                std::int64_t mode = -1;
+                if (const auto* s = n.as_string()) {
+                    const std::string& digits = s->get();
+                    if (!digits.empty() && digits.size() <= 4 &&
+                        digits.find_first_not_of("01234567") == std::string::npos) {
+                        mode = std::stoll(digits, nullptr, 8);
+                    }
+                } else if (const auto* i = n.as_integer()) {
+                    mode = i->get();
+                }
+                if (mode < 0 || mode > kMaxMode) {
+                    return expected + " (got " + show(n) + ")";
+                }
+                const auto m = static_cast<unsigned>(mode);
+                if ((m & kWorldWrite) != 0) {
+                    return "must not let others write (no o+w bit, e.g. \"0660\") (got \"" +
+                           octal(m) + "\")";
+                }
+                if ((m & kOwnerReadWrite) != kOwnerReadWrite) {
+                    return "must give the owner read and write (0600) (got \"" + octal(m) + "\")";
+                }
+                *target = m;
+                return std::nullopt;
+            },
+            [=] { return "\"" + octal(*target) + "\""; }};
+}
+
+std::vector<Field> daemonFields(DaemonConfig& c) {
+    using config_detail::boolean;
+    using config_detail::choice;
+    using config_detail::integer;
+    using config_detail::path;
+    using config_detail::real;
+    using config_detail::text;
+    auto& s = c.source;
+    std::vector<Field> out = {
+        choice("source", "kind", &s.kind,
+               {{"sim", SourceKind::kSim},
+                {"replay", SourceKind::kReplay},
+                {"v4l2", SourceKind::kV4l2},
+                {"libcamera", SourceKind::kLibcamera}}),
+        path("source", "replay", &s.replay_path),
+        text("source", "device", &s.device),
+        choice("source", "pacing", &s.pacing,
+               {{"realtime", drivers::PacingMode::kRealTime},
+                {"fast", drivers::PacingMode::kAsFastAsPossible}}),
+        real("source", "speed", &s.speed, 0, 1000, Bound::kOpen),
+        choice("source", "at_end", &s.at_end,
+               {{"stay", AtEnd::kStay}, {"exit", AtEnd::kExit}, {"loop", AtEnd::kLoop}}),
+        integer("source", "max_frames", &s.max_frames, 0, kMaxInt),
+        integer("source", "sim_seed", &s.sim_seed, 0, kMaxInt),
+        real("source", "sim_fps", &s.sim_fps, 0, 240, Bound::kOpen),
+        integer("source", "sim_width_px", &s.sim_width_px, 16, 4096),
+        integer("source", "sim_height_px", &s.sim_height_px, 16, 4096),
+    };
+    for (auto& f : config_detail::pipelineFields(c.pipeline)) {
+        out.push_back(std::move(f));
+    }
+    auto& q = c.queues;
+    auto& k = c.socket;
+    auto& l = c.log;
+    std::vector<Field> rest = {
+        integer("pipeline", "capture_queue_frames", &q.capture_queue_frames, 1, 1000),
+        integer("pipeline", "status_interval_ms", &q.status_interval_ms, 100, 60000),
+        path("socket", "path", &k.path),
+        socketMode(&k.mode),
+        text("socket", "group", &k.group),
+        integer("socket", "max_clients", &k.max_clients, 1, 1024),
+        integer("socket", "max_request_bytes", &k.max_request_bytes, 64, 1 << 20),
+        integer("socket", "client_buffer_bytes", &k.client_buffer_bytes, 4096, 1 << 30),
+        boolean("log", "enabled", &l.enabled),
+        path("log", "dir", &l.dir),
+        integer("log", "frame_every", &l.frame_every, 0, 1000000),
+        integer("log", "max_file_bytes", &l.max_file_bytes, 4096, std::int64_t{1} << 40),
+        integer("log", "max_total_bytes", &l.max_total_bytes, 4096, std::int64_t{1} << 40),
+        integer("log", "fsync_interval_ms", &l.fsync_interval_ms, 0, 3600000),
+        integer("log", "queue_bytes", &l.queue_bytes, 4096, 1 << 30),
+    };
+    for (auto& f : rest) {
+        out.push_back(std::move(f));
+    }
+    return out;
+}
+
+// Cross-field checks of the whole configuration.
+Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where) {
+    using config_detail::checkError;
+    if (auto ok = config_detail::checkPipeline(c.pipeline, where); !ok) {
+        return ok;
+    }
+    const auto& s = c.source;
+    if (s.kind == SourceKind::kReplay && s.replay_path.empty()) {
+        return checkError(where, {"source.replay", "source.kind"},
+                          "required when source.kind = \"replay\" (a dataset directory or video "
+                          "file) (got \"\")");
+    }
+    if (s.kind == SourceKind::kV4l2 && s.device.empty()) {
+        return checkError(where, {"source.device", "source.kind"},
+                          "required when source.kind = \"v4l2\" (e.g. \"/dev/video0\") (got \"\")");
+    }
+    if (s.kind == SourceKind::kLibcamera && s.device.empty()) {
+        return checkError(where, {"source.device", "source.kind"},
+                          "required when source.kind = \"libcamera\" (a camera index such as "
+                          "\"0\" or a libcamera id) (got \"\")");
+    }
+    const std::string socket_path = c.socket.path.string();
+    if (socket_path.empty() || socket_path.size() > kMaxSocketPathBytes) {
+        return checkError(where, {"socket.path"},
+                          "must be a path of 1 to " + std::to_string(kMaxSocketPathBytes) +
+                              " bytes (a Unix socket) (got \"" + socket_path + "\")");
+    }
+    if (c.socket.client_buffer_bytes < c.socket.max_request_bytes) {
+        return checkError(
+            where, {"socket.client_buffer_bytes", "socket.max_request_bytes"},
+            "must be >= socket.max_request_bytes = " + std::to_string(c.socket.max_request_bytes) +
+                " (got " + std::to_string(c.socket.client_buffer_bytes) + ")");
+    }
+    if (c.log.enabled && c.log.dir.empty()) {
+        return checkError(where, {"log.dir", "log.enabled"},
+                          "must not be empty when log.enabled = true (got \"\")");
+    }
+    if (c.log.max_total_bytes < c.log.max_file_bytes) {
+        return checkError(
+            where, {"log.max_total_bytes", "log.max_file_bytes"},
+            "must be >= log.max_file_bytes = " + std::to_string(c.log.max_file_bytes) + " (got " +
+                std::to_string(c.log.max_total_bytes) + ")");
+    }
+    return true;
+}
+
+std::filesystem::path fromCommandLine(const std::filesystem::path& p) {
+    std::error_code ec;
+    const auto abs = std::filesystem::absolute(p, ec);
+    return p.empty() || ec ? p : abs.lexically_normal();
+}
+
+std::optional<drivers::PacingMode> parsePacing(std::string_view text) {
+    if (text == "realtime") {
+        return drivers::PacingMode::kRealTime;
+    }
+    if (text == "fast") {
+        return drivers::PacingMode::kAsFastAsPossible;
+    }
+    return std::nullopt;
+}
+
+}  // namespace
+
+const char* toString(SourceKind kind) {
+    switch (kind) {
+        case SourceKind::kSim:
+            return "sim";
+        case SourceKind::kReplay:
+            return "replay";
+        case SourceKind::kV4l2:
+            return "v4l2";
+        case SourceKind::kLibcamera:
+            return "libcamera";
+    }
+    return "?";
+}
+
+DaemonConfig defaultDaemonConfig() {
+    DaemonConfig c;
+    c.pipeline = defaultPipelineConfig();
+    c.pipeline.detector.model_path = kDefaultModel;
+    c.pipeline.priors_path = kDefaultPriors;
+    return c;
+}
+
+Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source_name,
+                             const std::filesystem::path& base_dir, DaemonConfig& config) {
+    auto root = drivers::toml_detail::parse(toml_text, source_name);
+    if (!root) {
+        return root.error();
+    }
+    DaemonConfig work = config;
+    if (auto ok = config_detail::applyFields(*root, source_name, base_dir, daemonFields(work));
+        !ok) {
+        return ok;
+    }
+    if (auto ok = checkDaemon(work, config_detail::documentLocator(*root, source_name)); !ok) {
+        return ok;
+    }
+    config = std::move(work);
+    return true;
+}
+
+Result<bool> applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config) {
+    auto text = config_detail::readConfigFile(path);
+    if (!text) {
+        return text.error();
+    }
+    const auto absolute = fromCommandLine(path);
+    if (auto ok = applyDaemonToml(*text, path.string(), absolute.parent_path(), config); !ok) {
+        return ok;
+    }
+    config.file = absolute;
+    return true;
+}
+
+Result<bool> applyDaemonOverrides(const std::vector<std::string>& assignments,
+                                  DaemonConfig& config) {
+    DaemonConfig work = config;
+    std::vector<std::pair<std::string, std::string>> set_by;
+    if (auto ok = config_detail::applyAssignments(assignments, daemonFields(work), set_by); !ok) {
+        return ok;
+    }
+    if (auto ok = checkDaemon(work, config_detail::assignmentLocator(std::move(set_by), "--set"));
+        !ok) {
+        return ok;
+    }
+    config = std::move(work);
+    return true;
+}
+
+std::vector<std::string> daemonConfigKeys() {
+    DaemonConfig c;
+    return config_detail::fieldKeys(daemonFields(c));
+}
+
+std::string toToml(const DaemonConfig& config) {
+    DaemonConfig copy = config;
+    return config_detail::fieldsToToml(daemonFields(copy));
+}
+
+Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source) {
+    const std::string where = "--source " + std::string(spec);
+    const auto colon = spec.find(':');
+    const std::string_view kind = spec.substr(0, colon);
+    const std::string_view arg =
+        colon == std::string_view::npos ? std::string_view() : spec.substr(colon + 1);
+    const auto fail = [&](const std::string& what) {
+        return makeError(ErrorCode::kInvalidArgument, where + ": " + what);
+    };
+    if (kind == "sim") {
+        if (colon != std::string_view::npos) {
+            return fail("sim takes no argument (expected sim)");
+        }
+        source.kind = SourceKind::kSim;
+        return true;
+    }
+    const bool known = kind == "replay" || kind == "v4l2" || kind == "libcamera";
+    if (!known) {
+        return fail("unknown source \"" + std::string(kind) +
+                    "\" (expected sim, replay:DIR, v4l2:DEVICE or libcamera:ID)");
+    }
+    if (arg.empty()) {
+        const char* what = kind == "replay" ? "replay:DIR (a dataset directory or video file)"
+                           : kind == "v4l2" ? "v4l2:DEVICE (e.g. v4l2:/dev/video0)"
+                                            : "libcamera:ID (e.g. libcamera:0)";
+        return fail(std::string("missing argument: expected ") + what);
+    }
+    if (kind == "replay") {
+        source.kind = SourceKind::kReplay;
+        source.replay_path = fromCommandLine(std::filesystem::path(arg));
+    } else {
+        source.kind = kind == "v4l2" ? SourceKind::kV4l2 : SourceKind::kLibcamera;
+        source.device = std::string(arg);
+    }
+    return true;
+}
+
+ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
+    ParsedCommandLine out;
+    const auto usage = [&](const std::string& message) {
+        out.exit_now = true;
+        out.exit_code = 64;  // EX_USAGE
+        out.error = "scaled: " + message + "\nRun 'scaled --help' for the options.\n";
+        return out;
+    };
+    try {
+        CLI::App app(
+            "scaled: gives a monocular SLAM map a metric scale from the objects a detector "
+            "finds.",
+            "scaled");
+        app.footer(
+            "Configuration: defaults, then the file (--config, else " SCALED_SYSCONFDIR
+            "/scaled/scaled.toml when it exists), then --set, then "
+            "--source/--socket/--log-dir/--pacing. Every key, its "
+            "default, unit and allowed range is documented in config/scaled.toml (installed as "
+            "/etc/scaled/scaled.toml).\n"
+            "Exit codes: 0 success, 64 usage, 78 configuration error.");
+        std::string config;
+        std::string check_file;
+        std::string source;
+        std::string socket;
+        std::string log_dir;
+        std::string pacing;
+        auto* config_opt =
+            app.add_option("--config", config, "configuration file (TOML)")->type_name("FILE");
+        auto* source_opt = app.add_option("--source", source,
+                                          "frame source: sim, replay:DIR, v4l2:DEVICE or "
+                                          "libcamera:ID (overrides [source] kind)")
+                               ->type_name("SPEC");
+        auto* socket_opt =
+            app.add_option("--socket", socket, "Unix socket path (overrides socket.path)")
+                ->type_name("PATH");
+        auto* log_opt =
+            app.add_option("--log-dir", log_dir, "field log directory (overrides log.dir)")
+                ->type_name("DIR");
+        auto* pacing_opt =
+            app.add_option("--pacing", pacing, "realtime or fast (overrides source.pacing)")
+                ->type_name("realtime|fast");
+        app.add_option("--set", out.cli.sets,
+                       "override one key, e.g. --set detection.every_frames=5 (repeatable)")
+            ->type_name("SECTION.KEY=VALUE")
+            ->allow_extra_args(false)
+            ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+        app.add_flag("--no-tty", out.cli.no_tty, "no live status line on the terminal");
+        auto* check_opt = app.add_option("--check-config", check_file,
+                                         "check the configuration (FILE, else the file that "
+                                         "would be used), print the result and exit")
+                              ->type_name("[FILE]")
+                              ->expected(0, 1);
+        app.add_flag("--version", out.cli.version, "print the version and exit");
+        try {
+            app.parse(argc, argv);
+        } catch (const CLI::ParseError& e) {
+            if (e.get_exit_code() != 0) {
+                return usage(e.what());
+            }
+            out.exit_now = true;  // --help
+            out.output = app.help();
+            return out;
+        }
+
+        if (out.cli.version) {
+            out.exit_now = true;
+            out.output = std::string("scaled ") + version() + "\n";
+            return out;
+        }
+        if (config_opt->count() > 0) {
+            out.cli.config = std::filesystem::path(config);
+        }
+        if (check_opt->count() > 0) {
+            out.cli.check_config = true;
+            if (!check_file.empty()) {
+                if (out.cli.config && *out.cli.config != check_file) {
+                    return usage("--check-config " + check_file + " and --config " + config +
+                                 " name different files");
+                }
+                out.cli.config = std::filesystem::path(check_file);
+            }
+        }
+        if (source_opt->count() > 0) {
+            SourceConfig scratch;
+            if (auto ok = applySourceSpec(source, scratch); !ok) {
+                return usage(ok.error().message);
+            }
+            out.cli.source = source;
+        }
+        if (socket_opt->count() > 0) {
+            if (socket.empty()) {
+                return usage("--socket needs a non-empty path");
+            }
+            out.cli.socket = std::filesystem::path(socket);
+        }
+        if (log_opt->count() > 0) {
+            if (log_dir.empty()) {
+                return usage("--log-dir needs a non-empty directory");
+            }
+            out.cli.log_dir = std::filesystem::path(log_dir);
+        }
+        if (pacing_opt->count() > 0) {
+            if (!parsePacing(pacing)) {
+                return usage("--pacing " + pacing + ": expected realtime or fast");
+            }
+            out.cli.pacing = pacing;
+        }
+        for (const auto& a : out.cli.sets) {
+            const auto eq = a.find('=');
+            const auto dot = a.find('.');
+            if (eq == std::string::npos || dot == std::string::npos || dot > eq || dot == 0 ||
+                eq == dot + 1) {
+                return usage("--set " + a +
+                             ": expected section.key=value (e.g. detection.every_frames=5)");
+            }
+        }
+        return out;
+    } catch (const std::exception& e) {  // CLI11's construction errors, allocation
+        return usage(e.what());
+    }
+}
+
+Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
+                                      const std::filesystem::path& default_config_file) {
+    DaemonConfig config = defaultDaemonConfig();
+    std::filesystem::path file;
+    std::error_code ec;
+    if (cli.config) {
+        file = *cli.config;
+    } else if (!default_config_file.empty() && std::filesystem::exists(default_config_file, ec)) {
+        file = default_config_file;
+    }
+    if (!file.empty()) {
+        if (auto ok = applyDaemonFile(file, config); !ok) {
+            return ok.error();
+        }
+    }
+
+    // The command line: --set, then the dedicated options, checked together.
+    DaemonConfig work = config;
+    std::vector<std::pair<std::string, std::string>> set_by;
+    if (auto ok = config_detail::applyAssignments(cli.sets, daemonFields(work), set_by); !ok) {
+        return ok.error();
+    }
+    if (cli.source) {
+        if (auto ok = applySourceSpec(*cli.source, work.source); !ok) {
+            return ok.error();
+        }
+        for (const char* key : {"source.kind", "source.replay", "source.device"}) {
+            set_by.emplace_back(key, "--source " + *cli.source);
+        }
+    }
+    if (cli.socket) {
+        work.socket.path = fromCommandLine(*cli.socket);
+        set_by.emplace_back("socket.path", "--socket " + cli.socket->string());
+    }
+    if (cli.log_dir) {
+        work.log.dir = fromCommandLine(*cli.log_dir);
+        set_by.emplace_back("log.dir", "--log-dir " + cli.log_dir->string());
+    }
+    if (cli.pacing) {
+        const auto mode = parsePacing(*cli.pacing);
+        if (!mode) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             "--pacing " + *cli.pacing + ": expected realtime or fast");
+        }
+        work.source.pacing = *mode;
+    }
+    if (auto ok =
+            checkDaemon(work, config_detail::assignmentLocator(std::move(set_by), "command line"));
+        !ok) {
+        return ok.error();
+    }
+    return work;
+}
+
+}  // namespace scaled::daemon

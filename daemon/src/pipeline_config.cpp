@@ -1,47 +1,35 @@
+// The pipeline's configuration and the field registry both configurations
+// share (config_registry.h). The pipeline-only API reads a whole daemon file:
+// the daemon's sections ([source] [socket] [log] [pipeline]) are checked like
+// every other and then ignored, so `scale-eval --config config/scaled.toml`
+// works and a typo there is still an error.
+
 #include <cmath>
 #include <cstdint>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include <toml++/toml.h>
 
+#include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/pipeline_config.h>
+#include <scaled/drivers/toml_detail.h>
+
+#include "config_registry.h"
 
 namespace scaled::daemon {
 
-using core::Error;
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
-using core::Scalar;
+using drivers::toml_detail::num;
+using drivers::toml_detail::show;
 
-namespace {
-
-std::string show(const toml::node& n) {
-    std::ostringstream os;
-    if (n.is_string()) {
-        os << '"' << n.as_string()->get() << '"';
-    } else if (n.is_array()) {
-        os << "an array";
-    } else if (n.is_table()) {
-        os << "a table";
-    } else {
-        n.visit([&](const auto& v) { os << v; });
-    }
-    return os.str();
-}
-
-std::string num(double v) {
-    std::ostringstream os;
-    os << v;
-    return os.str();
-}
+namespace config_detail {
 
 std::string tomlQuote(const std::string& s) {
     std::string out = "\"";
@@ -52,61 +40,6 @@ std::string tomlQuote(const std::string& s) {
         out += c;
     }
     return out + "\"";
-}
-
-// One configuration key: how to set it from a TOML node (nullopt = accepted,
-// else the reason it is not) and how to print its current value.
-struct Field {
-    std::string section;
-    std::string key;
-    std::function<std::optional<std::string>(const toml::node&, const std::filesystem::path&)> set;
-    std::function<std::string()> value;
-};
-
-std::optional<double> asNumber(const toml::node& n) {
-    if (const auto* f = n.as_floating_point()) {
-        return f->get();
-    }
-    if (const auto* i = n.as_integer()) {
-        return static_cast<double>(i->get());
-    }
-    return std::nullopt;
-}
-
-enum class Bound : std::uint8_t { kClosed, kOpen };
-
-template <typename T>
-Field real(const char* section, const char* key, T* target, double lo, double hi,
-           Bound lo_bound = Bound::kClosed) {
-    return {section, key,
-            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
-                const auto v = asNumber(n);
-                const bool ok = v && std::isfinite(*v) && *v <= hi &&
-                                (lo_bound == Bound::kOpen ? *v > lo : *v >= lo);
-                if (!ok) {
-                    return std::string("must be a number in ") +
-                           (lo_bound == Bound::kOpen ? "(" : "[") + num(lo) + ", " + num(hi) +
-                           "] (got " + show(n) + ")";
-                }
-                *target = static_cast<T>(*v);
-                return std::nullopt;
-            },
-            [=] { return num(static_cast<double>(*target)); }};
-}
-
-template <typename T>
-Field integer(const char* section, const char* key, T* target, std::int64_t lo, std::int64_t hi) {
-    return {section, key,
-            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
-                const auto* i = n.as_integer();
-                if (i == nullptr || i->get() < lo || i->get() > hi) {
-                    return "must be an integer in [" + std::to_string(lo) + ", " +
-                           std::to_string(hi) + "] (got " + show(n) + ")";
-                }
-                *target = static_cast<T>(i->get());
-                return std::nullopt;
-            },
-            [=] { return std::to_string(*target); }};
 }
 
 Field boolean(const char* section, const char* key, bool* target) {
@@ -121,35 +54,6 @@ Field boolean(const char* section, const char* key, bool* target) {
             [=] { return std::string(*target ? "true" : "false"); }};
 }
 
-template <typename E>
-Field choice(const char* section, const char* key, E* target,
-             std::vector<std::pair<std::string, E>> names) {
-    std::string allowed;
-    for (const auto& [name, value] : names) {
-        allowed += (allowed.empty() ? "" : ", ") + tomlQuote(name);
-    }
-    return {section, key,
-            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
-                if (n.is_string()) {
-                    for (const auto& [name, value] : names) {
-                        if (n.as_string()->get() == name) {
-                            *target = value;
-                            return std::nullopt;
-                        }
-                    }
-                }
-                return "must be one of " + allowed + " (got " + show(n) + ")";
-            },
-            [=] {
-                for (const auto& [name, value] : names) {
-                    if (*target == value) {
-                        return tomlQuote(name);
-                    }
-                }
-                return std::string("\"?\"");
-            }};
-}
-
 Field path(const char* section, const char* key, std::filesystem::path* target) {
     return {
         section, key,
@@ -162,6 +66,18 @@ Field path(const char* section, const char* key, std::filesystem::path* target) 
             return std::nullopt;
         },
         [=] { return tomlQuote(target->string()); }};
+}
+
+Field text(const char* section, const char* key, std::string* target) {
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                if (!n.is_string()) {
+                    return "must be a string (got " + show(n) + ")";
+                }
+                *target = n.as_string()->get();
+                return std::nullopt;
+            },
+            [=] { return tomlQuote(*target); }};
 }
 
 Field stringList(const char* section, const char* key, std::vector<std::string>* target) {
@@ -192,9 +108,29 @@ Field stringList(const char* section, const char* key, std::vector<std::string>*
             }};
 }
 
+namespace {
+
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::vector<Field> fields(PipelineConfig& c) {
+std::string join(const std::vector<std::string>& v) {
+    std::string s;
+    for (const auto& x : v) {
+        s += (s.empty() ? "" : ", ") + x;
+    }
+    return s;
+}
+
+std::pair<std::string, std::string> splitKey(const std::string& full) {
+    const auto dot = full.find('.');
+    if (dot == std::string::npos) {
+        return {full, ""};
+    }
+    return {full.substr(0, dot), full.substr(dot + 1)};
+}
+
+}  // namespace
+
+std::vector<Field> pipelineFields(PipelineConfig& c) {
     auto& s = c.tracker.slam;
     auto& d = c.detector;
     auto& e = c.estimator;
@@ -240,7 +176,7 @@ std::vector<Field> fields(PipelineConfig& c) {
         integer("detector", "max_detections", &d.max_detections, 1, 10000),
         // [detection]
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
-
+        real("detection", "period_s", &c.detection.period_s, 0, 3600),
         // [estimator]
         path("estimator", "priors", &c.priors_path),
         choice("estimator", "variance", &e.likelihood.variance_model,
@@ -274,56 +210,72 @@ std::vector<Field> fields(PipelineConfig& c) {
     };
 }
 
-Error errorAt(std::string_view source, const toml::node* node, const std::string& key,
-              const std::string& what) {
-    std::string where(source);
-    if (node != nullptr && node->source().begin.line > 0) {
-        where += ":" + std::to_string(node->source().begin.line);
-    }
-    return makeError(ErrorCode::kInvalidArgument, where + ": " + key + ": " + what);
+Locator documentLocator(const toml::table& root, std::string_view source) {
+    return [&root, source = std::string(source)](const std::vector<std::string>& keys) {
+        auto at = [&](const toml::node* n) {
+            return n != nullptr && n->source().begin.line > 0
+                       ? source + ":" + std::to_string(n->source().begin.line)
+                       : source;
+        };
+        for (const auto& full : keys) {
+            const auto [section, key] = splitKey(full);
+            const auto* table = root.get_as<toml::table>(section);
+            if (table != nullptr && !key.empty()) {
+                if (const auto* n = table->get(key)) {
+                    return at(n);
+                }
+            }
+        }
+        for (const auto& full : keys) {
+            if (const auto* n = root.get(splitKey(full).first)) {
+                return at(n);
+            }
+        }
+        return source;
+    };
 }
 
-// Cross-field checks, reported at the later key of the pair.
-Result<bool> checkConsistency(const PipelineConfig& c, std::string_view source) {
+core::Error checkError(const Locator& where, const std::vector<std::string>& keys,
+                       const std::string& what) {
+    return makeError(
+        ErrorCode::kInvalidArgument,
+        where(keys) + ": " + (keys.empty() ? std::string() : keys.front()) + ": " + what);
+}
+
+Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where) {
     const auto& g = c.estimator.posterior.grid;
     if (!(g.d_max > g.d_min)) {
-        return errorAt(source, nullptr, "estimator.grid_d_max",
-                       "must be greater than estimator.grid_d_min = " + num(g.d_min) + " (got " +
-                           num(g.d_max) + ")");
+        return checkError(where, {"estimator.grid_d_max", "estimator.grid_d_min"},
+                          "must be greater than estimator.grid_d_min = " + num(g.d_min) + " (got " +
+                              num(g.d_max) + ")");
     }
     const auto& s = c.tracker.slam;
     if (s.ransac_max_hypotheses < s.ransac_min_hypotheses) {
-        return errorAt(source, nullptr, "tracker.ransac_max_hypotheses",
-                       "must be >= tracker.ransac_min_hypotheses = " +
-                           std::to_string(s.ransac_min_hypotheses) + " (got " +
-                           std::to_string(s.ransac_max_hypotheses) + ")");
+        return checkError(where, {"tracker.ransac_max_hypotheses", "tracker.ransac_min_hypotheses"},
+                          "must be >= tracker.ransac_min_hypotheses = " +
+                              std::to_string(s.ransac_min_hypotheses) + " (got " +
+                              std::to_string(s.ransac_max_hypotheses) + ")");
     }
     if (c.tracker.patch_size % 2 == 0) {
-        return errorAt(source, nullptr, "tracker.patch_size",
-                       "must be odd (got " + std::to_string(c.tracker.patch_size) + ")");
+        return checkError(where, {"tracker.patch_size"},
+                          "must be odd (got " + std::to_string(c.tracker.patch_size) + ")");
     }
     if (auto v = vision::validate(c.tracker); !v) {
-        return errorAt(source, nullptr, "tracker", v.error().message);
+        return checkError(where, {"tracker"}, v.error().message);
     }
     return true;
 }
 
-Result<bool> applyTable(const toml::table& root, std::string_view source,
-                        const std::filesystem::path& base_dir, PipelineConfig& config) {
-    PipelineConfig work = config;
-    const std::vector<Field> all = fields(work);
+Result<bool> applyFields(const toml::table& root, std::string_view source,
+                         const std::filesystem::path& base_dir, const std::vector<Field>& fields) {
     std::vector<std::string> sections;
-    for (const auto& f : all) {
+    for (const auto& f : fields) {
         if (sections.empty() || sections.back() != f.section) {
             sections.push_back(f.section);
         }
     }
-    auto join = [](const std::vector<std::string>& v) {
-        std::string s;
-        for (const auto& x : v) {
-            s += (s.empty() ? "" : ", ") + x;
-        }
-        return s;
+    const auto error = [&](const toml::node* n, const std::string& key, const std::string& what) {
+        return drivers::toml_detail::errorAt(ErrorCode::kInvalidArgument, source, n, key, what);
     };
     for (const auto& [sk, snode] : root) {
         const std::string section(sk.str());
@@ -333,17 +285,16 @@ Result<bool> applyTable(const toml::table& root, std::string_view source,
             known = known || name == section;
         }
         if (!known) {
-            return errorAt(source, &snode, section,
-                           "unknown section (allowed: " + join(sections) + ")");
+            return error(&snode, section, "unknown section (allowed: " + join(sections) + ")");
         }
         if (table == nullptr) {
-            return errorAt(source, &snode, section, "must be a table ([" + section + "])");
+            return error(&snode, section, "must be a table ([" + section + "])");
         }
         for (const auto& [k, node] : *table) {
             const std::string key(k.str());
             const Field* field = nullptr;
             std::vector<std::string> allowed;
-            for (const auto& f : all) {
+            for (const auto& f : fields) {
                 if (f.section == section) {
                     allowed.push_back(f.key);
                     if (f.key == key) {
@@ -355,30 +306,139 @@ Result<bool> applyTable(const toml::table& root, std::string_view source,
             full += '.';
             full += key;
             if (field == nullptr) {
-                return errorAt(source, &node, full,
-                               "unknown key (allowed in [" + section + "]: " + join(allowed) + ")");
+                return error(&node, full,
+                             "unknown key (allowed in [" + section + "]: " + join(allowed) + ")");
             }
             if (auto problem = field->set(node, base_dir)) {
-                return errorAt(source, &node, full, *problem);
+                return error(&node, full, *problem);
             }
         }
     }
-    if (auto ok = checkConsistency(work, source); !ok) {
-        return ok.error();
-    }
-    config = std::move(work);
     return true;
 }
 
-Result<toml::table> parse(std::string_view text, std::string_view source) {
-    try {
-        return toml::parse(text, source);
-    } catch (const toml::parse_error& e) {
-        return makeError(ErrorCode::kParse, std::string(source) + ":" +
-                                                std::to_string(e.source().begin.line) + ":" +
-                                                std::to_string(e.source().begin.column) + ": " +
-                                                std::string(e.description()));
+Result<bool> applyAssignments(const std::vector<std::string>& assignments,
+                              const std::vector<Field>& fields,
+                              std::vector<std::pair<std::string, std::string>>& set_by) {
+    using drivers::toml_detail::parse;
+    std::error_code ec;
+    const auto cwd = std::filesystem::current_path(ec);
+    for (const auto& a : assignments) {
+        const auto eq = a.find('=');
+        const auto dot = a.find('.');
+        const std::string source = "--set " + a;
+        if (eq == std::string::npos || dot == std::string::npos || dot > eq) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             source + ": expected section.key=value (e.g. estimator.robust=true)");
+        }
+        const std::string section = a.substr(0, dot);
+        const std::string key = a.substr(dot + 1, eq - dot - 1);
+        std::string value = a.substr(eq + 1);
+        // A bare word that is not a TOML value is taken as a string.
+        if (!parse("v = " + value, source)) {
+            value = tomlQuote(value);
+        }
+        std::string text = "[" + section;
+        text += "]\n";
+        text += key;
+        text += " = ";
+        text += value;
+        text += '\n';
+        auto root = parse(text, source);
+        if (!root) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             source + ": not a valid assignment (" + root.error().message + ")");
+        }
+        if (auto ok = applyFields(*root, source, cwd, fields); !ok) {
+            // The line number of the synthetic text means nothing to the user.
+            std::string msg = ok.error().message;
+            const std::string prefix = source + ":2: ";
+            if (msg.rfind(prefix, 0) == 0) {
+                std::string shorter = source;
+                shorter += ": ";
+                shorter += msg.substr(prefix.size());
+                msg = std::move(shorter);
+            }
+            return makeError(ok.error().code, msg);
+        }
+        std::string full = section;
+        full += '.';
+        full += key;
+        set_by.emplace_back(std::move(full), source);
     }
+    return true;
+}
+
+Locator assignmentLocator(std::vector<std::pair<std::string, std::string>> set_by,
+                          std::string fallback) {
+    return [set_by = std::move(set_by),
+            fallback = std::move(fallback)](const std::vector<std::string>& keys) {
+        for (const auto& key : keys) {
+            // The last assignment of a key is the one that counts.
+            for (auto it = set_by.rbegin(); it != set_by.rend(); ++it) {
+                if (it->first == key) {
+                    return it->second;
+                }
+            }
+        }
+        return fallback;
+    };
+}
+
+std::vector<std::string> fieldKeys(const std::vector<Field>& fields) {
+    std::vector<std::string> keys;
+    keys.reserve(fields.size());
+    for (const auto& f : fields) {
+        keys.push_back(f.section + "." + f.key);
+    }
+    return keys;
+}
+
+std::string fieldsToToml(const std::vector<Field>& fields) {
+    std::string out;
+    std::string section;
+    for (const auto& f : fields) {
+        if (f.section != section) {
+            section = f.section;
+            out += (out.empty() ? "[" : "\n[") + section + "]\n";
+        }
+        out += f.key + " = " + f.value() + "\n";
+    }
+    return out;
+}
+
+Result<std::string> readConfigFile(const std::filesystem::path& path) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) {
+        return makeError(
+            ErrorCode::kIo,
+            path.string() + ": cannot read configuration: " +
+                (std::filesystem::exists(path, ec) ? "not a regular file" : "no such file"));
+    }
+    std::ifstream in(path, std::ios::binary);
+    const auto size = std::filesystem::file_size(path, ec);
+    std::string text(ec ? 0 : size, '\0');
+    if (!in || ec || !in.read(text.data(), static_cast<std::streamsize>(text.size()))) {
+        return makeError(ErrorCode::kIo, path.string() + ": cannot read configuration");
+    }
+    return text;
+}
+
+}  // namespace config_detail
+
+namespace {
+
+// The pipeline-only API applies a daemon configuration around `config` (the
+// daemon's sections checked against its defaults) and keeps the pipeline.
+template <typename Apply>
+Result<bool> viaDaemon(PipelineConfig& config, Apply&& apply) {
+    DaemonConfig work = defaultDaemonConfig();
+    work.pipeline = config;
+    auto ok = std::forward<Apply>(apply)(work);
+    if (ok) {
+        config = std::move(work.pipeline);
+    }
+    return ok;
 }
 
 }  // namespace
@@ -397,98 +457,28 @@ PipelineConfig defaultPipelineConfig() {
 
 Result<bool> applyPipelineToml(std::string_view toml_text, std::string_view source_name,
                                const std::filesystem::path& base_dir, PipelineConfig& config) {
-    auto root = parse(toml_text, source_name);
-    if (!root) {
-        return root.error();
-    }
-    return applyTable(*root, source_name, base_dir, config);
+    return viaDaemon(config, [&](DaemonConfig& d) {
+        return applyDaemonToml(toml_text, source_name, base_dir, d);
+    });
 }
 
 Result<bool> applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config) {
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec)) {
-        return makeError(
-            ErrorCode::kIo,
-            path.string() + ": cannot read configuration: " +
-                (std::filesystem::exists(path, ec) ? "not a regular file" : "no such file"));
-    }
-    std::ifstream in(path, std::ios::binary);
-    const auto size = std::filesystem::file_size(path, ec);
-    std::string text(ec ? 0 : size, '\0');
-    if (!in || ec || !in.read(text.data(), static_cast<std::streamsize>(text.size()))) {
-        return makeError(ErrorCode::kIo, path.string() + ": cannot read configuration");
-    }
-    return applyPipelineToml(text, path.string(), path.parent_path(), config);
+    return viaDaemon(config, [&](DaemonConfig& d) { return applyDaemonFile(path, d); });
 }
 
 Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
                                     PipelineConfig& config) {
-    for (const auto& a : assignments) {
-        const auto eq = a.find('=');
-        const auto dot = a.find('.');
-        const std::string source = "--set " + a;
-        if (eq == std::string::npos || dot == std::string::npos || dot > eq) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             source + ": expected section.key=value (e.g. estimator.robust=true)");
-        }
-        const std::string section = a.substr(0, dot);
-        const std::string key = a.substr(dot + 1, eq - dot - 1);
-        std::string value = a.substr(eq + 1);
-        // A bare word that is not a TOML value is taken as a string.
-        auto attempt = parse("v = " + value, source);
-        if (!attempt) {
-            value = tomlQuote(value);
-        }
-        std::string text = "[" + section;
-        text += "]\n";
-        text += key;
-        text += " = ";
-        text += value;
-        text += '\n';
-        auto root = parse(text, source);
-        if (!root) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             source + ": not a valid assignment (" + root.error().message + ")");
-        }
-        std::error_code ec;
-        const auto cwd = std::filesystem::current_path(ec);
-        if (auto ok = applyTable(*root, source, cwd, config); !ok) {
-            // The line number of the synthetic text means nothing to the user.
-            std::string msg = ok.error().message;
-            const std::string prefix = source + ":2: ";
-            if (msg.rfind(prefix, 0) == 0) {
-                std::string shorter = source;
-                shorter += ": ";
-                shorter += msg.substr(prefix.size());
-                msg = std::move(shorter);
-            }
-            return makeError(ok.error().code, msg);
-        }
-    }
-    return true;
+    return viaDaemon(config, [&](DaemonConfig& d) { return applyDaemonOverrides(assignments, d); });
 }
 
 std::vector<std::string> pipelineConfigKeys() {
     PipelineConfig c;
-    std::vector<std::string> keys;
-    for (const auto& f : fields(c)) {
-        keys.push_back(f.section + "." + f.key);
-    }
-    return keys;
+    return config_detail::fieldKeys(config_detail::pipelineFields(c));
 }
 
 std::string toToml(const PipelineConfig& config) {
     PipelineConfig copy = config;
-    std::string out;
-    std::string section;
-    for (const auto& f : fields(copy)) {
-        if (f.section != section) {
-            section = f.section;
-            out += (out.empty() ? "[" : "\n[") + section + "]\n";
-        }
-        out += f.key + " = " + f.value() + "\n";
-    }
-    return out;
+    return config_detail::fieldsToToml(config_detail::pipelineFields(copy));
 }
 
 }  // namespace scaled::daemon

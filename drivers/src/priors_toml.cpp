@@ -10,6 +10,7 @@
 #include <toml++/toml.h>
 
 #include <scaled/drivers/priors_toml.h>
+#include <scaled/drivers/toml_detail.h>
 
 namespace scaled::drivers {
 
@@ -20,6 +21,8 @@ using core::makeError;
 using core::PriorTable;
 using core::Result;
 using core::Scalar;
+using toml_detail::num;
+using toml_detail::show;
 
 namespace {
 
@@ -32,39 +35,16 @@ public:
 
     [[nodiscard]] Error at(const toml::node* node, const std::string& key,
                            const std::string& what) const {
-        std::string where = source_;
-        if (node != nullptr && node->source().begin.line > 0) {
-            where += ":" + std::to_string(node->source().begin.line);
-        }
-        return makeError(ErrorCode::kParse, where + ": " + key + ": " + what);
+        return toml_detail::errorAt(ErrorCode::kParse, source_, node, key, what);
     }
 
 private:
     std::string source_;
 };
 
-std::string show(const toml::node& n) {
-    std::ostringstream os;
-    if (n.is_string()) {
-        os << '"' << n.as_string()->get() << '"';
-    } else if (n.is_array()) {
-        os << "an array";
-    } else if (n.is_table()) {
-        os << "a table";
-    } else {
-        n.visit([&](const auto& v) { os << v; });
-    }
-    return os.str();
-}
-
 std::optional<Scalar> number(const toml::node& n) {
-    if (const auto* f = n.as_floating_point()) {
-        return static_cast<Scalar>(f->get());
-    }
-    if (const auto* i = n.as_integer()) {
-        return static_cast<Scalar>(i->get());
-    }
-    return std::nullopt;
+    const auto v = toml_detail::asNumber(n);
+    return v ? std::optional<Scalar>(static_cast<Scalar>(*v)) : std::nullopt;
 }
 
 // A value read from the file with the node it stands at, so that a range error
@@ -113,12 +93,6 @@ struct ClassSpec {
         return key == "probabilities" ? &probabilities : nullptr;
     }
 };
-
-std::string num(Scalar v) {
-    std::ostringstream os;
-    os << v;
-    return os.str();
-}
 
 // Range checks of one class, each reported at the offending key's line. The
 // core constructors check the same again; these exist for the message.
@@ -304,15 +278,11 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
 
 Result<PriorTable> parsePriors(std::string_view text, std::string_view source_name) {
     const Reporter rep(source_name);
-    toml::table root;
-    try {
-        root = toml::parse(text, source_name);
-    } catch (const toml::parse_error& e) {
-        return makeError(ErrorCode::kParse, std::string(source_name) + ":" +
-                                                std::to_string(e.source().begin.line) + ":" +
-                                                std::to_string(e.source().begin.column) + ": " +
-                                                std::string(e.description()));
+    auto parsed = toml_detail::parse(text, source_name);
+    if (!parsed) {
+        return parsed.error();
     }
+    const toml::table& root = *parsed;
 
     int default_bins = kDefaultBins;
     const toml::table* classes = nullptr;

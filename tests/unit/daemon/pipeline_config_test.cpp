@@ -34,6 +34,7 @@ TEST(PipelineConfig, AppliesKeysAndKeepsTheRest) {
     PipelineConfig c = defaultPipelineConfig();
     const std::string text = R"([detection]
 every_frames = 5
+period_s = 2.5
 [estimator]
 variance = "paper"
 robust = false
@@ -51,6 +52,7 @@ seed = 7
     auto r = applyPipelineToml(text, "test.toml", "/etc/scaled", c);
     ASSERT_TRUE(r.ok()) << r.error().message;
     EXPECT_EQ(c.detection.every_frames, 5);
+    EXPECT_DOUBLE_EQ(c.detection.period_s, 2.5);
     EXPECT_EQ(c.estimator.likelihood.variance_model, core::VarianceModel::kPaper);
     EXPECT_FALSE(c.estimator.likelihood.robust);
     EXPECT_DOUBLE_EQ(static_cast<double>(c.estimator.likelihood.outlier_weight), 0.1);
@@ -76,8 +78,8 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
               "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
               "converged_rel_width, drift_sigma_log)");
     EXPECT_EQ(applyError("\n[estimatr]\n", c),
-              "test.toml:2: estimatr: unknown section (allowed: tracker, detector, detection, "
-              "estimator)");
+              "test.toml:2: estimatr: unknown section (allowed: source, tracker, detector, "
+              "detection, estimator, pipeline, socket, log)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 0\n", c),
               "test.toml:2: detection.every_frames: must be an integer in [1, 100000] (got 0)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 2.5\n", c),
@@ -96,10 +98,30 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
     EXPECT_EQ(applyError("detection = 3\n", c),
               "test.toml:1: detection: must be a table ([detection])");
     EXPECT_EQ(applyError("[estimator]\ngrid_d_min = 5\ngrid_d_max = 2\n", c),
-              "test.toml: estimator.grid_d_max: must be greater than estimator.grid_d_min = 5 "
+              "test.toml:3: estimator.grid_d_max: must be greater than estimator.grid_d_min = 5 "
               "(got 2)");
+    EXPECT_EQ(applyError("[detection]\nperiod_s = -0.5\n", c),
+              "test.toml:2: detection.period_s: must be a number in [0, 3600] (got -0.5)");
+    // The daemon's sections are checked too (and then ignored).
+    EXPECT_EQ(applyError("[log]\nmax_file_bytes = 1\n", c),
+              "test.toml:2: log.max_file_bytes: must be an integer in [4096, 1099511627776] (got "
+              "1)");
     const std::string syntax = applyError("[estimator\n", c);
     EXPECT_EQ(syntax.rfind("test.toml:1:", 0), 0U) << syntax;
+}
+
+TEST(PipelineConfig, DaemonSectionsAreCheckedAndIgnored) {
+    PipelineConfig c = defaultPipelineConfig();
+    const std::string before = toToml(c);
+    auto r = applyPipelineToml(
+        "[source]\nkind = \"sim\"\n[socket]\nmax_clients = 2\n[log]\nenabled = false\n"
+        "[pipeline]\ncapture_queue_frames = 1\n",
+        "test.toml", "/base", c);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(toToml(c), before);
+    EXPECT_EQ(applyError("[socket]\nmode = \"0777\"\n", c).rfind("test.toml:2: socket.mode: ", 0),
+              0U);
+    EXPECT_EQ(toToml(c), before);
 }
 
 TEST(PipelineConfig, AFailedApplyChangesNothing) {

@@ -51,10 +51,10 @@ struct SourceConfig {
 // [socket]
 struct SocketConfig {
     std::filesystem::path path = "/run/scaled/scaled.sock";
-    unsigned mode = 0660;                 // file mode of the socket
-    std::string group;                    // owning group; empty: the process's group
-    int max_clients = 16;                 // the next one gets an ERROR and is closed
-    std::size_t max_request_bytes = 4096;   // a longer line is an ERROR (and discarded)
+    unsigned mode = 0660;                      // file mode of the socket
+    std::string group;                         // owning group; empty: the process's group
+    int max_clients = 16;                      // the next one gets an ERROR and is closed
+    std::size_t max_request_bytes = 4096;      // a longer line is an ERROR (and discarded)
     std::size_t client_buffer_bytes = 262144;  // unsent output per client before it is detached
 };
 
@@ -62,16 +62,16 @@ struct SocketConfig {
 struct LogConfig {
     bool enabled = true;
     std::filesystem::path dir = "/var/log/scaled";
-    int frame_every = 30;                    // per-frame summary every N tracked frames (0: none)
-    std::uint64_t max_file_bytes = 8u << 20;    // rotate after this size
+    int frame_every = 30;                     // per-frame summary every N tracked frames (0: none)
+    std::uint64_t max_file_bytes = 8u << 20;  // rotate after this size
     std::uint64_t max_total_bytes = 64u << 20;  // delete the oldest files above this total
-    int fsync_interval_ms = 1000;            // flush + fsync at most this often
-    std::size_t queue_bytes = 1u << 20;      // in-memory queue; full: lines dropped and counted
+    int fsync_interval_ms = 1000;               // flush + fsync at most this often
+    std::size_t queue_bytes = 1u << 20;         // in-memory queue; full: lines dropped and counted
 };
 
 // [pipeline]
 struct QueueConfig {
-    int capture_queue_frames = 4;  // frames between capture and tracking
+    int capture_queue_frames = 4;   // frames between capture and tracking
     int status_interval_ms = 1000;  // STATUS= to systemd, live status line refresh
 };
 
@@ -85,14 +85,22 @@ struct DaemonConfig {
     std::filesystem::path file;
 };
 
+// defaultPipelineConfig() plus the installed paths (a /usr prefix):
+// detector.model /usr/share/scaled/models/yolox_nano.onnx, estimator.priors
+// /etc/scaled/priors.toml. config/scaled.toml states exactly these values.
 DaemonConfig defaultDaemonConfig();
 
-// Applies TOML text / a file (relative paths against the file's directory).
+// Applies TOML text / a file (relative paths against the file's directory;
+// applyDaemonFile also sets `file` to the file's absolute path). Cross-field
+// checks (source.kind "replay" needs source.replay, "v4l2" and "libcamera"
+// need source.device, log.max_total_bytes >= log.max_file_bytes, ...) are
+// reported at the line of the key or of the key it depends on.
 // On error `config` is unchanged.
 core::Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source_name,
                                    const std::filesystem::path& base_dir, DaemonConfig& config);
 core::Result<bool> applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config);
-// `section.key=value` overrides (the pipeline's and the daemon's sections).
+// `section.key=value` overrides (the pipeline's and the daemon's sections),
+// cross-field checks after all of them; errors name the `--set` to blame.
 core::Result<bool> applyDaemonOverrides(const std::vector<std::string>& assignments,
                                         DaemonConfig& config);
 // Every key as `section.key`, in file order.
@@ -105,15 +113,15 @@ core::Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source);
 
 // The command line (CLI11). Everything optional overrides the file.
 struct CommandLine {
-    std::optional<std::filesystem::path> config;  // --config FILE
-    std::optional<std::string> source;            // --source SPEC
-    std::optional<std::filesystem::path> socket;  // --socket PATH
-    std::optional<std::filesystem::path> log_dir; // --log-dir DIR
-    std::optional<std::string> pacing;            // --pacing realtime|fast
-    std::vector<std::string> sets;                // --set section.key=value (repeatable)
-    bool no_tty = false;                          // --no-tty: no live status line
-    bool check_config = false;                    // --check-config [FILE]: validate and exit
-    bool version = false;                         // --version
+    std::optional<std::filesystem::path> config;   // --config FILE
+    std::optional<std::string> source;             // --source SPEC
+    std::optional<std::filesystem::path> socket;   // --socket PATH
+    std::optional<std::filesystem::path> log_dir;  // --log-dir DIR
+    std::optional<std::string> pacing;             // --pacing realtime|fast
+    std::vector<std::string> sets;                 // --set section.key=value (repeatable)
+    bool no_tty = false;                           // --no-tty: no live status line
+    bool check_config = false;                     // --check-config [FILE]: validate and exit
+    bool version = false;                          // --version
 };
 
 // Outcome of parsing argv: run, or exit at once with `exit_code` after

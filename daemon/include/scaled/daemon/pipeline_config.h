@@ -10,7 +10,14 @@
 //
 // Overrides (`--set section.key=value` on a command line) are TOML lines
 // applied after the file with the same checks; their paths resolve against
-// the working directory.
+// the working directory. Cross-field checks (grid_d_max > grid_d_min, ...)
+// run once after all of them.
+//
+// One field registry serves this and the daemon's configuration
+// (daemon_config.h). The functions here read a whole daemon file: the
+// daemon's sections ([source] [socket] [log] [pipeline]) are checked like the
+// rest (an unknown key or a bad value there is still an error) and then
+// ignored, so `scale-eval --config config/scaled.toml` works.
 
 #include <filesystem>
 #include <string>
@@ -28,6 +35,7 @@ struct DetectionSchedule {
     int every_frames = 10;  // run the detector on every Nth tracked frame (the paper: 10)
     // When > 0, run the detector at most this often instead (seconds of frame
     // time between the frames handed to it); every_frames is then ignored.
+    // Key detection.period_s, in [0, 3600]. scale-eval uses every_frames only.
     double period_s = 0;
 };
 

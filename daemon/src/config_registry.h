@@ -1,0 +1,163 @@
+#pragma once
+
+// The configuration field registry shared by pipeline_config.cpp and
+// daemon_config.cpp (private to scaled_daemon: it includes toml++).
+//
+// A Field is one `section.key`, bound to a member of a configuration object:
+// `set` checks a TOML node and stores it (nullopt = accepted, else what is
+// wrong, with the allowed range and the value), `value` prints the member as
+// TOML. A configuration is a list of fields bound to a working copy; applying
+// a document or an override checks every key against the list, then the
+// caller runs its cross-field checks and commits the copy.
+
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <toml++/toml.h>
+
+#include <scaled/core/result.h>
+#include <scaled/daemon/pipeline_config.h>
+#include <scaled/drivers/toml_detail.h>
+
+namespace scaled::daemon::config_detail {
+
+using SetFn =
+    std::function<std::optional<std::string>(const toml::node&, const std::filesystem::path&)>;
+
+struct Field {
+    std::string section;
+    std::string key;
+    SetFn set;
+    std::function<std::string()> value;
+};
+
+std::string tomlQuote(const std::string& s);
+
+enum class Bound : std::uint8_t { kClosed, kOpen };
+
+template <typename T>
+Field real(const char* section, const char* key, T* target, double lo, double hi,
+           Bound lo_bound = Bound::kClosed) {
+    using drivers::toml_detail::num;
+    using drivers::toml_detail::show;
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const auto v = drivers::toml_detail::asNumber(n);
+                const bool ok = v && std::isfinite(*v) && *v <= hi &&
+                                (lo_bound == Bound::kOpen ? *v > lo : *v >= lo);
+                if (!ok) {
+                    return std::string("must be a number in ") +
+                           (lo_bound == Bound::kOpen ? "(" : "[") + num(lo) + ", " + num(hi) +
+                           "] (got " + show(n) + ")";
+                }
+                *target = static_cast<T>(*v);
+                return std::nullopt;
+            },
+            [=] { return num(static_cast<double>(*target)); }};
+}
+
+template <typename T>
+Field integer(const char* section, const char* key, T* target, std::int64_t lo, std::int64_t hi) {
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const auto* i = n.as_integer();
+                if (i == nullptr || i->get() < lo || i->get() > hi) {
+                    return "must be an integer in [" + std::to_string(lo) + ", " +
+                           std::to_string(hi) + "] (got " + drivers::toml_detail::show(n) + ")";
+                }
+                *target = static_cast<T>(i->get());
+                return std::nullopt;
+            },
+            [=] { return std::to_string(*target); }};
+}
+
+template <typename E>
+Field choice(const char* section, const char* key, E* target,
+             std::vector<std::pair<std::string, E>> names) {
+    std::string allowed;
+    for (const auto& [name, value] : names) {
+        allowed += (allowed.empty() ? "" : ", ") + tomlQuote(name);
+    }
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                if (n.is_string()) {
+                    for (const auto& [name, value] : names) {
+                        if (n.as_string()->get() == name) {
+                            *target = value;
+                            return std::nullopt;
+                        }
+                    }
+                }
+                return "must be one of " + allowed + " (got " + drivers::toml_detail::show(n) + ")";
+            },
+            [=] {
+                for (const auto& [name, value] : names) {
+                    if (*target == value) {
+                        return tomlQuote(name);
+                    }
+                }
+                return std::string("\"?\"");
+            }};
+}
+
+Field boolean(const char* section, const char* key, bool* target);
+// A path; a relative one resolves against the base directory (the file's,
+// or the working directory for overrides). "" stays empty.
+Field path(const char* section, const char* key, std::filesystem::path* target);
+// Any string (empty allowed).
+Field text(const char* section, const char* key, std::string* target);
+Field stringList(const char* section, const char* key, std::vector<std::string>* target);
+
+// The pipeline's sections ([tracker] [detector] [detection] [estimator]) in
+// file order, bound to `c`.
+std::vector<Field> pipelineFields(PipelineConfig& c);
+
+// Where a key stands, for cross-field errors: `SOURCE[:LINE]` of the first
+// of `keys` (`section.key`) that the input set, else of the input as a whole.
+using Locator = std::function<std::string(const std::vector<std::string>& keys)>;
+
+// A Locator over a parsed document: the line of the key, else of its section.
+Locator documentLocator(const toml::table& root, std::string_view source);
+
+// `WHERE: KEY: WHAT` (kInvalidArgument).
+core::Error checkError(const Locator& where, const std::vector<std::string>& keys,
+                       const std::string& what);
+
+// The pipeline's cross-field checks, each reported at the later key of a pair.
+core::Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where);
+
+// Checks every section and key of `root` against `fields` and sets them
+// (unknown sections and keys, types and ranges; no cross-field checks). On
+// error the bound object may be partly set: callers bind a working copy.
+core::Result<bool> applyFields(const toml::table& root, std::string_view source,
+                               const std::filesystem::path& base_dir,
+                               const std::vector<Field>& fields);
+
+// `section.key=value` assignments, each checked as applyFields does (paths
+// against the working directory; a bare word is a string). `set_by` records,
+// for each `section.key`, the assignment that set it (for a Locator).
+core::Result<bool> applyAssignments(const std::vector<std::string>& assignments,
+                                    const std::vector<Field>& fields,
+                                    std::vector<std::pair<std::string, std::string>>& set_by);
+
+// A Locator over assignments recorded by applyAssignments; keys not set by
+// them are attributed to `fallback`.
+Locator assignmentLocator(std::vector<std::pair<std::string, std::string>> set_by,
+                          std::string fallback);
+
+// `section.key` of every field, in order.
+std::vector<std::string> fieldKeys(const std::vector<Field>& fields);
+// The fields as TOML, one [section] after another.
+std::string fieldsToToml(const std::vector<Field>& fields);
+
+// A configuration file's text; kIo errors read `PATH: cannot read configuration: why`.
+core::Result<std::string> readConfigFile(const std::filesystem::path& path);
+
+}  // namespace scaled::daemon::config_detail
