@@ -201,9 +201,18 @@ int main(int argc, char** argv) {
     if (cfg.priors_path.empty()) {
         cfg.priors_path = std::filesystem::path(SCALED_SOURCE_DIR) / "config" / "priors.toml";
     }
+    const auto shared_model =
+        defaultModelPath(std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared");
+    std::error_code model_ec;
     if (cfg.detector.model_path.empty()) {
-        cfg.detector.model_path =
-            defaultModelPath(std::filesystem::path(SCALED_SOURCE_DIR) / ".." / "shared");
+        cfg.detector.model_path = shared_model;
+    } else if (!std::filesystem::exists(cfg.detector.model_path, model_ec) &&
+               std::filesystem::exists(shared_model, model_ec)) {
+        // config/scaled.toml names the installed model; in a source tree the
+        // development copy is in ../shared. Said, not silent.
+        std::fprintf(stderr, "scale-eval: %s not found; using %s\n",
+                     cfg.detector.model_path.c_str(), shared_model.c_str());
+        cfg.detector.model_path = shared_model;
     }
 
     auto priors = scaled::drivers::loadPriorsFile(cfg.priors_path);
