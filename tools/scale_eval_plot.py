@@ -3,12 +3,15 @@
 (after Sucar & Hayet, CVPR-W 2017: likelihoods, posterior, estimates, errors).
 
 Usage:
-    tools/scale_eval_plot.py OUT_DIR [--title TEXT]
+    tools/scale_eval_plot.py OUT_DIR [--title TEXT] [--no-curves]
 
 Reads frames.csv, updates.csv, observations.csv, posterior.csv,
 likelihoods.csv and (if present) summary.json from OUT_DIR and writes
 fig_a_likelihoods.png, fig_b_posterior.png, fig_c_estimates.png and
 fig_d_rel_error.png into OUT_DIR, printing one line per written file.
+With --no-curves (field-log output: no posterior curves are logged)
+posterior.csv and likelihoods.csv are not read and only figures (c) and (d)
+are drawn.
 Empty CSV fields mean "not available". Needs python3-numpy and
 python3-matplotlib (Agg backend, no display).
 
@@ -333,7 +336,7 @@ def fig_errors(ax, frames, n_updates, conv_frame):
     ax.legend(loc="best", fontsize=8)
 
 
-def run(out_dir, extra_title):
+def run(out_dir, extra_title, curves=True):
     warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows etc.
     if not os.path.isdir(out_dir):
         raise InputError(EX_NOINPUT, f"{out_dir}: OUT_DIR is not a directory")
@@ -341,8 +344,9 @@ def run(out_dir, extra_title):
     frames = read_table(path("frames.csv"), FRAMES_COLS)
     upd = read_table(path("updates.csv"), UPDATES_COLS)
     obs = read_table(path("observations.csv"), OBS_COLS)
-    post = read_grid(path("posterior.csv"), ["update", "frame"])
-    lik = read_grid(path("likelihoods.csv"), ["observation", "update"])
+    if curves:
+        post = read_grid(path("posterior.csv"), ["update", "frame"])
+        lik = read_grid(path("likelihoods.csv"), ["observation", "update"])
     summary = read_summary(path("summary.json"))
 
     dataset = summary.get("dataset") or os.path.basename(
@@ -363,6 +367,8 @@ def run(out_dir, extra_title):
              lambda ax, fig: fig_estimates(ax, upd, obs, conv_frame)),
             ("fig_d_rel_error.png", "(d) Relative error",
              lambda ax, fig: fig_errors(ax, frames, n_upd, conv_frame))]
+    if not curves:
+        figs = figs[2:]
     for name, title, draw in figs:
         fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
         draw(ax, fig)
@@ -381,6 +387,9 @@ def main(argv=None):
     ap.add_argument("out_dir", metavar="OUT_DIR",
                     help="directory written by scale-eval --out")
     ap.add_argument("--title", default="", help="text appended to titles")
+    ap.add_argument("--no-curves", action="store_true",
+                    help="no posterior.csv/likelihoods.csv (field-log): "
+                    "draw figures (c) and (d) only")
     args = ap.parse_args(argv)
     if IMPORT_ERROR is not None:
         print(f"scale_eval_plot: cannot import numpy/matplotlib "
@@ -388,7 +397,7 @@ def main(argv=None):
               file=sys.stderr)
         return EX_UNAVAILABLE
     try:
-        return run(args.out_dir, args.title)
+        return run(args.out_dir, args.title, not args.no_curves)
     except InputError as e:
         print(f"scale_eval_plot: {e}", file=sys.stderr)
         return e.code

@@ -1,1 +1,567 @@
-// placeholder
+// The field log thread and the event formatters (docs/field-log.md).
+
+#include <algorithm>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <utility>
+
+#include <scaled/daemon/log_service.h>
+#include <scaled/drivers/field_log.h>
+
+namespace scaled::daemon {
+
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+
+namespace {
+
+// --- JSON pieces --------------------------------------------------------------
+
+// Length of the valid UTF-8 sequence starting at s[i], 0 if invalid.
+std::size_t utf8Length(std::string_view s, std::size_t i) {
+    const auto b = static_cast<unsigned char>(s[i]);
+    std::size_t n = 0;
+    unsigned min = 0;
+    unsigned cp = 0;
+    if (b < 0x80) {
+        return 1;
+    }
+    if (b >= 0xC2 && b <= 0xDF) {
+        n = 2;
+        cp = b & 0x1Fu;
+        min = 0x80;
+    } else if (b >= 0xE0 && b <= 0xEF) {
+        n = 3;
+        cp = b & 0x0Fu;
+        min = 0x800;
+    } else if (b >= 0xF0 && b <= 0xF4) {
+        n = 4;
+        cp = b & 0x07u;
+        min = 0x10000;
+    } else {
+        return 0;
+    }
+    if (i + n > s.size()) {
+        return 0;
+    }
+    for (std::size_t k = 1; k < n; ++k) {
+        const auto c = static_cast<unsigned char>(s[i + k]);
+        if ((c & 0xC0u) != 0x80u) {
+            return 0;
+        }
+        cp = (cp << 6u) | (c & 0x3Fu);
+    }
+    if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) {
+        return 0;
+    }
+    return n;
+}
+
+void appendString(std::string& out, std::string_view s) {
+    static constexpr char kHex[] = "0123456789abcdef";
+    out += '"';
+    for (std::size_t i = 0; i < s.size();) {
+        const char c = s[i];
+        const auto u = static_cast<unsigned char>(c);
+        if (c == '"' || c == '\\') {
+            out += '\\';
+            out += c;
+            ++i;
+        } else if (c == '\n') {
+            out += "\\n";
+            ++i;
+        } else if (c == '\t') {
+            out += "\\t";
+            ++i;
+        } else if (c == '\r') {
+            out += "\\r";
+            ++i;
+        } else if (u < 0x20 || u == 0x7F) {
+            out += "\\u00";
+            out += kHex[u >> 4u];
+            out += kHex[u & 0xFu];
+            ++i;
+        } else if (u < 0x80) {
+            out += c;
+            ++i;
+        } else if (const std::size_t n = utf8Length(s, i); n > 0) {
+            out.append(s.substr(i, n));
+            i += n;
+        } else {
+            out += "\\ufffd";
+            ++i;
+        }
+    }
+    out += '"';
+}
+
+void appendNumber(std::string& out, double v, int digits = 9) {
+    if (!std::isfinite(v)) {
+        out += "null";
+        return;
+    }
+    std::array<char, 32> buf{};
+    const auto r =
+        std::to_chars(buf.data(), buf.data() + buf.size(), v, std::chars_format::general, digits);
+    out.append(buf.data(), r.ptr);
+}
+
+template <typename Int>
+void appendInt(std::string& out, Int v) {
+    std::array<char, 24> buf{};
+    const auto r = std::to_chars(buf.data(), buf.data() + buf.size(), v);
+    out.append(buf.data(), r.ptr);
+}
+
+void key(std::string& out, const char* name) {
+    out += ",\"";
+    out += name;
+    out += "\":";
+}
+
+void begin(std::string& out, const char* cls, std::int64_t mono_ns) {
+    out.clear();
+    out += "{\"class\":\"";
+    out += cls;
+    out += "\",\"mono_ns\":";
+    appendInt(out, mono_ns != 0 ? mono_ns : monotonicNowNs());
+}
+
+void frameFields(std::string& out, std::int64_t frame_id, std::int64_t t_ns, std::uint64_t epoch) {
+    key(out, "frame_id");
+    appendInt(out, frame_id);
+    key(out, "t_ns");
+    appendInt(out, t_ns);
+    key(out, "epoch");
+    appendInt(out, epoch);
+}
+
+void pair(std::string& out, bool has, double lo, double hi) {
+    if (!has) {
+        out += "null";
+        return;
+    }
+    out += '[';
+    appendNumber(out, lo);
+    out += ',';
+    appendNumber(out, hi);
+    out += ']';
+}
+
+// The buffer the *Event() members format into (one per thread, reused).
+std::string& lineBuffer() {
+    thread_local std::string buffer = [] {
+        std::string s;
+        s.reserve(8192);
+        return s;
+    }();
+    return buffer;
+}
+
+}  // namespace
+
+// --- formatters ------------------------------------------------------------------
+
+ScaleEvent scaleEventFrom(const ScaleReport& report) {
+    ScaleEvent e;
+    e.frame_id = report.frame_id;
+    e.t_ns = report.t_ns;
+    e.epoch = report.epoch;
+    e.state = report.state;
+    e.has_scale = report.has_scale;
+    e.scale = report.scale;
+    e.mean = report.mean;
+    e.ci68_lo = report.ci68_lo;
+    e.ci68_hi = report.ci68_hi;
+    e.ci95_lo = report.ci95_lo;
+    e.ci95_hi = report.ci95_hi;
+    e.observations = report.observations;
+    return e;
+}
+
+void formatEvent(const StartEvent& event, std::string& out) {
+    begin(out, "START", event.mono_ns);
+    key(out, "release");
+    appendString(out, event.release);
+    key(out, "source");
+    appendString(out, event.source);
+    key(out, "config");
+    appendString(out, event.config_toml);
+    out += '}';
+}
+
+void formatEvent(const StopEvent& event, std::string& out) {
+    begin(out, "STOP", event.mono_ns);
+    key(out, "reason");
+    appendString(out, event.reason);
+    out += '}';
+}
+
+void formatEvent(const FrameEvent& event, std::string& out) {
+    begin(out, "FRAME", event.mono_ns);
+    frameFields(out, event.frame_id, event.t_ns, event.epoch);
+    key(out, "health");
+    appendString(out, event.health);
+    key(out, "features");
+    appendInt(out, event.features);
+    key(out, "tracked");
+    appendInt(out, event.tracked);
+    key(out, "ms");
+    appendNumber(out, event.ms, 5);
+    key(out, "dropped");
+    appendInt(out, event.dropped);
+    out += '}';
+}
+
+void formatEvent(const DetectionEvent& event, std::string& out) {
+    begin(out, "DETECTION", event.mono_ns);
+    frameFields(out, event.frame_id, event.t_ns, event.epoch);
+    key(out, "latency_ms");
+    appendNumber(out, event.latency_ms, 5);
+    key(out, "boxes");
+    out += '[';
+    bool first = true;
+    for (const LogBox& b : event.boxes) {
+        out += first ? "{\"class\":" : ",{\"class\":";
+        first = false;
+        appendString(out, b.class_name);
+        key(out, "score");
+        appendNumber(out, b.score, 4);
+        key(out, "box");
+        out += '[';
+        appendNumber(out, b.x0, 6);
+        out += ',';
+        appendNumber(out, b.y0, 6);
+        out += ',';
+        appendNumber(out, b.x1, 6);
+        out += ',';
+        appendNumber(out, b.y1, 6);
+        out += "]}";
+    }
+    out += "]}";
+}
+
+void formatEvent(const ScaleEvent& event, std::string& out) {
+    begin(out, "SCALE", event.mono_ns);
+    frameFields(out, event.frame_id, event.t_ns, event.epoch);
+    key(out, "state");
+    appendString(out, toString(event.state));
+    key(out, "scale");
+    if (event.has_scale) {
+        appendNumber(out, event.scale);
+    } else {
+        out += "null";
+    }
+    key(out, "mean");
+    if (event.has_scale) {
+        appendNumber(out, event.mean);
+    } else {
+        out += "null";
+    }
+    key(out, "ci68");
+    pair(out, event.has_scale, event.ci68_lo, event.ci68_hi);
+    key(out, "ci95");
+    pair(out, event.has_scale, event.ci95_lo, event.ci95_hi);
+    key(out, "observations");
+    appendInt(out, event.observations);
+    key(out, "new_observations");
+    appendInt(out, event.new_observations);
+    key(out, "detections");
+    appendInt(out, event.detections);
+    key(out, "obs");
+    out += '[';
+    const std::size_t n = std::min(event.obs.size(), kMaxLoggedObservations);
+    for (std::size_t i = 0; i < n; ++i) {
+        const LogObservation& o = event.obs[i];
+        out += i == 0 ? "{\"class\":" : ",{\"class\":";
+        appendString(out, o.class_name);
+        key(out, "D");
+        appendNumber(out, o.D, 7);
+        key(out, "sigma_D");
+        appendNumber(out, o.sigma_D, 5);
+        key(out, "local");
+        appendNumber(out, o.local, 6);
+        key(out, "weight");
+        appendNumber(out, o.weight, 4);
+        out += '}';
+    }
+    out += "]}";
+}
+
+void formatEvent(const StateEvent& event, std::string& out) {
+    begin(out, "STATE", event.mono_ns);
+    key(out, "from");
+    appendString(out, toString(event.from));
+    key(out, "to");
+    appendString(out, toString(event.to));
+    key(out, "epoch");
+    appendInt(out, event.epoch);
+    key(out, "frame_id");
+    appendInt(out, event.frame_id);
+    key(out, "reason");
+    appendString(out, event.reason);
+    out += '}';
+}
+
+void formatEvent(const ErrorEvent& event, std::string& out) {
+    begin(out, "ERROR", event.mono_ns);
+    key(out, "where");
+    appendString(out, event.where);
+    key(out, "message");
+    appendString(out, event.message);
+    out += '}';
+}
+
+// --- the service -------------------------------------------------------------------
+
+LogService::LogService(const LogConfig& config, ReportHub& hub) : config_(config), hub_(hub) {}
+
+Result<std::unique_ptr<LogService>> LogService::create(const LogConfig& config, ReportHub& hub,
+                                                       LogServiceHooks hooks) {
+    if (config.enabled && config.queue_bytes < 2) {
+        return makeError(ErrorCode::kInvalidArgument, "log.queue_bytes: must be at least 2 (got " +
+                                                          std::to_string(config.queue_bytes) + ")");
+    }
+    if (config.enabled && config.fsync_interval_ms < 1) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "log.fsync_interval_ms: must be at least 1 (got " +
+                             std::to_string(config.fsync_interval_ms) + ")");
+    }
+    std::unique_ptr<LogService> s(new LogService(config, hub));
+    if (config.enabled) {
+        s->half_bytes_ = config.queue_bytes / 2;
+        for (auto& b : s->buf_) {
+            b = std::make_unique<char[]>(s->half_bytes_);  // NOLINT(*-avoid-c-arrays)
+        }
+        drivers::FieldLogWriterOptions options;
+        options.dir = config.dir;
+        options.max_file_bytes = config.max_file_bytes;
+        options.max_total_bytes = config.max_total_bytes;
+        options.open_file = std::move(hooks.open_file);
+        options.utc_now_s = std::move(hooks.utc_now_s);
+        auto writer = drivers::FieldLogWriter::open(std::move(options));
+        const std::lock_guard io(s->io_mutex_);
+        if (writer) {
+            s->writer_ = std::move(*writer);
+        } else {
+            s->setFault(writer.error().message);
+        }
+        s->last_sync_mono_ns_ = monotonicNowNs();
+    }
+    s->publish();
+    return s;
+}
+
+LogService::~LogService() {
+    stop();
+}
+
+void LogService::start() {
+    if (!config_.enabled || thread_.joinable()) {
+        return;
+    }
+    {
+        const std::lock_guard lock(mutex_);
+        if (stopped_) {
+            return;
+        }
+    }
+    thread_ = std::thread([this] { run(); });
+}
+
+void LogService::stop() {
+    if (!config_.enabled) {
+        return;
+    }
+    {
+        const std::lock_guard lock(mutex_);
+        if (stopped_) {
+            return;
+        }
+        stop_requested_ = true;
+        stopped_ = true;  // from here appends are refused; the last drain takes the rest
+    }
+    cv_.notify_one();
+    if (thread_.joinable()) {
+        thread_.join();  // its last drain wrote and synced everything
+    } else {
+        drain(true);
+    }
+}
+
+void LogService::run() {
+    const auto interval = std::chrono::milliseconds(config_.fsync_interval_ms);
+    std::unique_lock lock(mutex_);
+    while (!stop_requested_) {
+        cv_.wait_for(lock, interval, [this] { return stop_requested_ || wake_; });
+        wake_ = false;
+        if (stop_requested_) {
+            break;
+        }
+        lock.unlock();
+        drain(false);
+        lock.lock();
+    }
+    lock.unlock();
+    drain(true);
+}
+
+bool LogService::append(std::string_view line) {
+    if (!config_.enabled) {
+        return false;
+    }
+    if (!line.empty() && line.back() == '\n') {
+        line.remove_suffix(1);
+    }
+    if (line.empty() || std::memchr(line.data(), '\n', line.size()) != nullptr) {
+        lines_dropped_.fetch_add(1, std::memory_order_relaxed);
+        return false;
+    }
+    bool notify = false;
+    {
+        const std::lock_guard lock(mutex_);
+        const auto a = static_cast<std::size_t>(active_);
+        if (faulted_ || stopped_ || used_[a] + line.size() + 1 > half_bytes_) {
+            lines_dropped_.fetch_add(1, std::memory_order_relaxed);
+            return false;
+        }
+        char* dst = buf_[a].get() + used_[a];
+        std::memcpy(dst, line.data(), line.size());
+        dst[line.size()] = '\n';  // NOLINT(cppcoreguidelines-pro-bounds-pointer-arithmetic)
+        const std::size_t before = used_[a];
+        used_[a] += line.size() + 1;
+        ++lines_[a];
+        // Wake the thread once when the half passes half full.
+        notify = before <= half_bytes_ / 2 && used_[a] > half_bytes_ / 2 && !wake_;
+        if (notify) {
+            wake_ = true;
+        }
+    }
+    if (notify) {
+        cv_.notify_one();
+    }
+    return true;
+}
+
+bool LogService::flush() {
+    if (!config_.enabled) {
+        return false;
+    }
+    drain(true);
+    const std::lock_guard lock(mutex_);
+    return !faulted_;
+}
+
+void LogService::setFault(const std::string& message) {
+    {
+        const std::lock_guard lock(mutex_);
+        if (faulted_) {
+            return;
+        }
+        faulted_ = true;
+        error_ = message;
+    }
+    // NOLINTNEXTLINE(cppcoreguidelines-pro-type-vararg)
+    std::fprintf(stderr, "scaled: field log stopped: %s (the daemon keeps running)\n",
+                 message.c_str());
+}
+
+void LogService::drain(bool force_sync) {
+    const std::lock_guard io(io_mutex_);
+    std::size_t idx = 0;
+    {
+        const std::lock_guard lock(mutex_);
+        idx = static_cast<std::size_t>(active_);
+        active_ ^= 1;
+    }
+    // Appends go to the other half now; this one is ours until the next swap
+    // (which needs io_mutex_).
+    const std::string_view batch(buf_[idx].get(), used_[idx]);
+    const std::uint64_t lines = lines_[idx];
+    if (!batch.empty()) {
+        if (writer_ != nullptr && !writer_->faulted()) {
+            if (auto ok = writer_->write(batch); ok) {
+                lines_written_.fetch_add(lines, std::memory_order_relaxed);
+                unsynced_ = true;
+            } else {
+                lines_dropped_.fetch_add(lines, std::memory_order_relaxed);
+                setFault(ok.error().message);
+            }
+        } else {
+            lines_dropped_.fetch_add(lines, std::memory_order_relaxed);
+        }
+    }
+    {
+        const std::lock_guard lock(mutex_);
+        used_[idx] = 0;
+        lines_[idx] = 0;
+    }
+    const std::int64_t now = monotonicNowNs();
+    const std::int64_t interval_ns = std::int64_t{config_.fsync_interval_ms} * 1'000'000;
+    if (writer_ != nullptr && !writer_->faulted() && unsynced_ &&
+        (force_sync || now - last_sync_mono_ns_ >= interval_ns)) {
+        if (auto ok = writer_->sync(); !ok) {
+            setFault(ok.error().message);
+        }
+        unsynced_ = false;
+        last_sync_mono_ns_ = now;
+    }
+    if (writer_ != nullptr) {
+        bytes_written_.store(writer_->bytesWritten(), std::memory_order_relaxed);
+    }
+    publish();
+}
+
+LogStatus LogService::status() const {
+    LogStatus s;
+    {
+        const std::lock_guard lock(mutex_);
+        s.state = !config_.enabled ? LogStatus::State::kOff
+                  : faulted_       ? LogStatus::State::kFault
+                                   : LogStatus::State::kOk;
+        s.error = error_;
+    }
+    s.lines_written = lines_written_.load(std::memory_order_relaxed);
+    s.lines_dropped = lines_dropped_.load(std::memory_order_relaxed);
+    s.bytes_written = bytes_written_.load(std::memory_order_relaxed);
+    return s;
+}
+
+void LogService::publish() {
+    hub_.publishLogStatus(status());
+}
+
+bool LogService::startEvent(const StartEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::stopEvent(const StopEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::frameEvent(const FrameEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::detectionEvent(const DetectionEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::scaleEvent(const ScaleEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::stateEvent(const StateEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::errorEvent(const ErrorEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+
+}  // namespace scaled::daemon

@@ -1,1 +1,466 @@
+// The daemon's log service: lines complete after stop(), the event lines,
+// the bounded queue, faults (a real ENOSPC from /dev/full, a directory that
+// cannot be created), LogStatus in the hub, and a SIGKILLed writer process.
+
+#include <atomic>
+#include <csignal>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
 #include <gtest/gtest.h>
+
+#include <scaled/daemon/log_service.h>
+#include <scaled/drivers/field_log.h>
+
+#include "temp_dir.h"
+
+namespace scaled::daemon {
+namespace {
+
+using nlohmann::json;
+using test::TempDir;
+namespace fs = std::filesystem;
+
+LogConfig configIn(const fs::path& dir) {
+    LogConfig c;
+    c.enabled = true;
+    c.dir = dir;
+    c.max_file_bytes = 1u << 20;
+    c.max_total_bytes = 16u << 20;
+    c.fsync_interval_ms = 3'600'000;  // tests drive flush() / stop() themselves
+    c.queue_bytes = 1u << 16;
+    return c;
+}
+
+std::unique_ptr<LogService> make(const LogConfig& config, ReportHub& hub,
+                                 LogServiceHooks hooks = {}) {
+    auto s = LogService::create(config, hub, std::move(hooks));
+    EXPECT_TRUE(s) << s.error().message;
+    return s ? std::move(*s) : nullptr;
+}
+
+json parse(const std::string& line) {
+    json j = json::parse(line, nullptr, false);
+    EXPECT_FALSE(j.is_discarded()) << line;
+    return j;
+}
+
+drivers::FieldLogContents readAll(const fs::path& dir) {
+    auto r = drivers::readFieldLog(dir);
+    EXPECT_TRUE(r) << r.error().message;
+    return r ? std::move(*r) : drivers::FieldLogContents{};
+}
+
+TEST(LogService, LinesAreCompleteAfterStop) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    LogConfig c = configIn(tmp.path());
+    c.queue_bytes = 1u << 20;  // room for all 500 lines: none dropped however the thread runs
+    auto log = make(c, hub);
+    ASSERT_NE(log, nullptr);
+    log->start();
+    for (int i = 0; i < 500; ++i) {
+        FrameEvent f;
+        f.frame_id = i;
+        f.t_ns = 1000LL * i;
+        f.features = 40;
+        f.tracked = 25;
+        f.ms = 3.25;
+        ASSERT_TRUE(log->frameEvent(f));
+    }
+    log->stop();
+    const auto contents = readAll(tmp.path());
+    ASSERT_EQ(contents.lines.size(), 500u);
+    EXPECT_EQ(contents.partial_lines, 0u);
+    EXPECT_EQ(contents.corrupt_lines, 0u);
+    for (std::size_t i = 0; i < contents.lines.size(); ++i) {
+        const json j = parse(contents.lines[i].text);
+        EXPECT_EQ(j["frame_id"], static_cast<int>(i));
+    }
+    const LogStatus st = hub.logStatus();
+    EXPECT_EQ(st.state, LogStatus::State::kOk);
+    EXPECT_EQ(st.lines_written, 500u);
+    EXPECT_EQ(st.lines_dropped, 0u);
+    EXPECT_EQ(st.bytes_written, fs::file_size(contents.files.at(0)));
+    EXPECT_TRUE(st.error.empty());
+    EXPECT_FALSE(log->append("{\"late\":1}"));  // after stop: refused and counted
+    EXPECT_EQ(log->status().lines_dropped, 1u);
+}
+
+TEST(LogService, FlushWritesWithoutTheThreadAndPublishes) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    auto log = make(configIn(tmp.path()), hub);
+    ASSERT_NE(log, nullptr);
+    EXPECT_EQ(hub.logStatus().state, LogStatus::State::kOk);
+    EXPECT_TRUE(log->append("{\"a\":1}\n"));  // one trailing newline is allowed
+    EXPECT_TRUE(log->append("{\"a\":2}"));
+    EXPECT_FALSE(log->append("{\"a\":3}\n{\"a\":4}"));  // two lines in one: refused
+    EXPECT_FALSE(log->append(""));
+    EXPECT_EQ(hub.logStatus().lines_written, 0u);  // nothing written before a batch
+    ASSERT_TRUE(log->flush());
+    const LogStatus st = hub.logStatus();
+    EXPECT_EQ(st.lines_written, 2u);
+    EXPECT_EQ(st.lines_dropped, 2u);
+    EXPECT_EQ(st.bytes_written, 16u);
+    const auto contents = readAll(tmp.path());
+    ASSERT_EQ(contents.lines.size(), 2u);
+    EXPECT_EQ(contents.lines[1].text, "{\"a\":2}");
+}
+
+TEST(LogService, FullQueueDropsAndCounts) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    LogConfig c = configIn(tmp.path());
+    c.queue_bytes = 512;  // two halves of 256 bytes
+    auto log = make(c, hub);
+    ASSERT_NE(log, nullptr);
+    const std::string line = "{\"pad\":\"" + std::string(90, 'x') + "\"}";  // 100 bytes + \n
+    EXPECT_TRUE(log->append(line));
+    EXPECT_TRUE(log->append(line));
+    EXPECT_FALSE(log->append(line));  // 303 > 256
+    EXPECT_FALSE(log->append(line));
+    EXPECT_EQ(log->status().lines_dropped, 2u);
+    ASSERT_TRUE(log->flush());
+    EXPECT_TRUE(log->append(line));  // room again
+    ASSERT_TRUE(log->flush());
+    EXPECT_EQ(log->status().lines_written, 3u);
+    EXPECT_EQ(hub.logStatus().lines_dropped, 2u);
+    // A line longer than half the queue can never fit.
+    EXPECT_FALSE(log->append("{\"pad\":\"" + std::string(300, 'x') + "\"}"));
+    EXPECT_EQ(log->status().lines_dropped, 3u);
+}
+
+TEST(LogService, DisabledIsOffAndWritesNothing) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    LogConfig c = configIn(tmp.path() / "logs");
+    c.enabled = false;
+    auto log = make(c, hub);
+    ASSERT_NE(log, nullptr);
+    log->start();
+    EXPECT_EQ(hub.logStatus().state, LogStatus::State::kOff);
+    EXPECT_FALSE(log->append("{\"a\":1}"));
+    EXPECT_FALSE(log->stopEvent({.reason = "test"}));
+    EXPECT_FALSE(log->flush());
+    log->stop();
+    EXPECT_FALSE(fs::exists(tmp.path() / "logs"));
+    EXPECT_EQ(log->status().lines_dropped, 0u);
+    EXPECT_EQ(std::string(toString(log->status().state)), "off");
+}
+
+TEST(LogService, ADirectoryThatCannotBeCreatedIsAFaultNotAFailure) {
+    TempDir tmp("log_service");
+    { std::ofstream(tmp.path() / "plain") << "x"; }
+    const fs::path dir = tmp.path() / "plain" / "logs";
+    ReportHub hub(16);
+    testing::internal::CaptureStderr();
+    auto log = make(configIn(dir), hub);
+    const std::string err = testing::internal::GetCapturedStderr();
+    ASSERT_NE(log, nullptr);
+    log->start();
+    EXPECT_FALSE(log->append("{\"a\":1}"));
+    EXPECT_FALSE(log->flush());
+    log->stop();
+    const LogStatus st = hub.logStatus();
+    EXPECT_EQ(st.state, LogStatus::State::kFault);
+    EXPECT_NE(st.error.find(dir.string()), std::string::npos) << st.error;
+    EXPECT_EQ(st.lines_dropped, 1u);
+    EXPECT_NE(err.find("field log stopped"), std::string::npos) << err;
+}
+
+// Every file the log opens is /dev/full: the first batch fails with a real ENOSPC.
+TEST(LogService, NoSpaceLeftFaultsOnceAndKeepsRunning) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    LogServiceHooks hooks;
+    hooks.open_file = [](const fs::path&) {
+        // NOLINTNEXTLINE(cppcoreguidelines-pro-type-vararg)
+        return ::open("/dev/full", O_WRONLY | O_CLOEXEC);
+    };
+    auto log = make(configIn(tmp.path()), hub, hooks);
+    ASSERT_NE(log, nullptr);
+    EXPECT_EQ(hub.logStatus().state, LogStatus::State::kOk);
+    log->start();
+    EXPECT_TRUE(log->append("{\"a\":1}"));  // queued: the card is not touched yet
+    EXPECT_TRUE(log->append("{\"a\":2}"));
+    testing::internal::CaptureStderr();
+    EXPECT_FALSE(log->flush());
+    EXPECT_FALSE(log->flush());
+    const std::string err = testing::internal::GetCapturedStderr();
+    LogStatus st = hub.logStatus();
+    EXPECT_EQ(st.state, LogStatus::State::kFault);
+    EXPECT_NE(st.error.find("No space left on device"), std::string::npos) << st.error;
+    EXPECT_EQ(st.lines_written, 0u);
+    EXPECT_EQ(st.lines_dropped, 2u);
+    // One message on stderr, not one per attempt.
+    const auto first = err.find("field log stopped");
+    ASSERT_NE(first, std::string::npos) << err;
+    EXPECT_EQ(err.find("field log stopped", first + 1), std::string::npos) << err;
+    // From now on appends are refused and counted; nothing blocks or crashes.
+    for (int i = 0; i < 100; ++i) {
+        EXPECT_FALSE(log->errorEvent({.where = "test", .message = "x"}));
+    }
+    log->stop();
+    st = hub.logStatus();
+    EXPECT_EQ(st.state, LogStatus::State::kFault);
+    EXPECT_EQ(st.lines_dropped, 102u);
+}
+
+// The symlink variant: the log's next file is a symlink to /dev/full.
+TEST(LogService, NoSpaceLeftOnRotationThroughASymlink) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    LogConfig c = configIn(tmp.path());
+    c.max_file_bytes = 64;
+    LogServiceHooks hooks;
+    hooks.utc_now_s = [] { return std::int64_t{1700000000}; };
+    auto log = make(c, hub, hooks);
+    ASSERT_NE(log, nullptr);
+    fs::create_symlink("/dev/full", tmp.path() / drivers::fieldLogFileName(1700000000, 2));
+    ASSERT_TRUE(log->append("{\"pad\":\"" + std::string(40, 'x') + "\"}"));
+    ASSERT_TRUE(log->flush());
+    ASSERT_TRUE(log->append("{\"pad\":\"" + std::string(40, 'y') + "\"}"));
+    testing::internal::CaptureStderr();
+    EXPECT_FALSE(log->flush());
+    (void)testing::internal::GetCapturedStderr();
+    const LogStatus st = hub.logStatus();
+    EXPECT_EQ(st.state, LogStatus::State::kFault);
+    EXPECT_NE(st.error.find(drivers::fieldLogFileName(1700000000, 2)), std::string::npos)
+        << st.error;
+    EXPECT_NE(st.error.find("No space left on device"), std::string::npos) << st.error;
+    EXPECT_EQ(st.lines_written, 1u);
+}
+
+TEST(LogService, EventLinesAreJsonWithTheirFields) {
+    std::string out;
+    formatEvent(
+        StartEvent{.release = "0.1.0", .source = "sim", .config_toml = "[log]\ndir = \"x\"\n"},
+        out);
+    json j = parse(out);
+    EXPECT_EQ(j["class"], "START");
+    EXPECT_GT(j["mono_ns"].get<std::int64_t>(), 0);
+    EXPECT_EQ(j["config"], "[log]\ndir = \"x\"\n");
+    EXPECT_EQ(j["release"], "0.1.0");
+
+    formatEvent(StopEvent{.reason = "SIGTERM", .mono_ns = 42}, out);
+    j = parse(out);
+    EXPECT_EQ(j["class"], "STOP");
+    EXPECT_EQ(j["mono_ns"], 42);
+    EXPECT_EQ(j["reason"], "SIGTERM");
+
+    formatEvent(FrameEvent{.frame_id = 7,
+                           .t_ns = 123456789012LL,
+                           .epoch = 2,
+                           .health = "lost",
+                           .features = 30,
+                           .tracked = 12,
+                           .ms = 4.5,
+                           .dropped = 3},
+                out);
+    j = parse(out);
+    EXPECT_EQ(j["class"], "FRAME");
+    EXPECT_EQ(j["frame_id"], 7);
+    EXPECT_EQ(j["t_ns"], 123456789012LL);
+    EXPECT_EQ(j["epoch"], 2);
+    EXPECT_EQ(j["health"], "lost");
+    EXPECT_EQ(j["features"], 30);
+    EXPECT_EQ(j["tracked"], 12);
+    EXPECT_DOUBLE_EQ(j["ms"].get<double>(), 4.5);
+    EXPECT_EQ(j["dropped"], 3);
+
+    const std::vector<LogBox> boxes = {{"chair", 0.875, 1, 2, 30.5, 40}, {"cup", 0.5, 5, 6, 7, 8}};
+    formatEvent(
+        DetectionEvent{.frame_id = 9, .t_ns = 1, .epoch = 0, .latency_ms = 80.25, .boxes = boxes},
+        out);
+    j = parse(out);
+    EXPECT_EQ(j["class"], "DETECTION");
+    ASSERT_EQ(j["boxes"].size(), 2u);
+    EXPECT_EQ(j["boxes"][0]["class"], "chair");
+    EXPECT_DOUBLE_EQ(j["boxes"][0]["score"].get<double>(), 0.875);
+    EXPECT_EQ(j["boxes"][0]["box"], json({1, 2, 30.5, 40}));
+    EXPECT_DOUBLE_EQ(j["latency_ms"].get<double>(), 80.25);
+
+    formatEvent(StateEvent{.from = DaemonState::kConverging,
+                           .to = DaemonState::kLost,
+                           .epoch = 3,
+                           .frame_id = 100,
+                           .reason = "tracking lost"},
+                out);
+    j = parse(out);
+    EXPECT_EQ(j["class"], "STATE");
+    EXPECT_EQ(j["from"], "converging");
+    EXPECT_EQ(j["to"], "lost");
+    EXPECT_EQ(j["epoch"], 3);
+    EXPECT_EQ(j["frame_id"], 100);
+
+    formatEvent(ErrorEvent{.where = "detector", .message = "model \"x\" missing"}, out);
+    j = parse(out);
+    EXPECT_EQ(j["class"], "ERROR");
+    EXPECT_EQ(j["message"], "model \"x\" missing");
+}
+
+TEST(LogService, ScaleLinesHaveNullsBeforeTheFirstScaleAndCapObservations) {
+    std::string out;
+    ScaleReport r;
+    r.frame_id = 12;
+    r.epoch = 1;
+    r.state = DaemonState::kTracking;
+    ScaleEvent e = scaleEventFrom(r);
+    formatEvent(e, out);
+    json j = parse(out);
+    EXPECT_EQ(j["class"], "SCALE");
+    EXPECT_EQ(j["state"], "tracking");
+    EXPECT_TRUE(j["scale"].is_null());
+    EXPECT_TRUE(j["mean"].is_null());
+    EXPECT_TRUE(j["ci68"].is_null());
+    EXPECT_TRUE(j["ci95"].is_null());
+    EXPECT_EQ(j["obs"].size(), 0u);
+
+    r.has_scale = true;
+    r.scale = 1.25;
+    r.mean = 1.3;
+    r.ci68_lo = 1.1;
+    r.ci68_hi = 1.4;
+    r.ci95_lo = 0.9;
+    r.ci95_hi = 1.6;
+    r.observations = 200;
+    r.state = DaemonState::kConverging;
+    e = scaleEventFrom(r);
+    std::vector<LogObservation> obs(100, LogObservation{"bottle", 0.21, 0.02, 1.2, 0.5});
+    obs[0].D = std::numeric_limits<double>::quiet_NaN();
+    e.obs = obs;
+    e.new_observations = 100;
+    e.detections = 4;
+    formatEvent(e, out);
+    j = parse(out);
+    EXPECT_DOUBLE_EQ(j["scale"].get<double>(), 1.25);
+    EXPECT_DOUBLE_EQ(j["mean"].get<double>(), 1.3);
+    EXPECT_EQ(j["ci68"], json({1.1, 1.4}));
+    EXPECT_EQ(j["ci95"], json({0.9, 1.6}));
+    EXPECT_EQ(j["observations"], 200);
+    EXPECT_EQ(j["new_observations"], 100);
+    EXPECT_EQ(j["detections"], 4);
+    ASSERT_EQ(j["obs"].size(), kMaxLoggedObservations);
+    EXPECT_TRUE(j["obs"][0]["D"].is_null());  // NaN is not JSON
+    EXPECT_EQ(j["obs"][1]["class"], "bottle");
+    EXPECT_DOUBLE_EQ(j["obs"][1]["D"].get<double>(), 0.21);
+    EXPECT_DOUBLE_EQ(j["obs"][1]["sigma_D"].get<double>(), 0.02);
+    EXPECT_DOUBLE_EQ(j["obs"][1]["local"].get<double>(), 1.2);
+    EXPECT_DOUBLE_EQ(j["obs"][1]["weight"].get<double>(), 0.5);
+}
+
+TEST(LogService, TextIsEscapedIntoValidJson) {
+    std::string out;
+    const std::string nasty = std::string("a\"b\\c\nd\te\x01 \x7f") + "\xc3\xa9" + "\xff\xc3" +
+                              std::string(1, '\0') + "\xed\xa0\x80";
+    formatEvent(ErrorEvent{.where = nasty, .message = "\xe2\x82\xac ok"}, out);
+    EXPECT_EQ(out.find('\n'), std::string::npos);
+    EXPECT_TRUE(drivers::isJsonObjectLine(out)) << out;
+    const json j = parse(out);
+    EXPECT_EQ(j["message"], "\xe2\x82\xac ok");
+    EXPECT_EQ(j["where"].get<std::string>().substr(0, 7), "a\"b\\c\nd");
+}
+
+TEST(LogService, ConcurrentAppendersLoseNothingTheyWereToldWasQueued) {
+    TempDir tmp("log_service");
+    ReportHub hub(16);
+    LogConfig c = configIn(tmp.path());
+    c.fsync_interval_ms = 5;
+    c.max_file_bytes = 20000;  // a few rotations too
+    auto log = make(c, hub);
+    ASSERT_NE(log, nullptr);
+    log->start();
+    constexpr int kThreads = 4;
+    constexpr int kLines = 2000;
+    std::atomic<int> accepted{0};
+    std::vector<std::thread> threads;
+    threads.reserve(kThreads);
+    for (int t = 0; t < kThreads; ++t) {
+        threads.emplace_back([&, t] {
+            for (int i = 0; i < kLines; ++i) {
+                ErrorEvent e{.where = "thread", .message = std::to_string(t * kLines + i)};
+                if (log->errorEvent(e)) {
+                    accepted.fetch_add(1);
+                }
+            }
+        });
+    }
+    for (auto& th : threads) {
+        th.join();
+    }
+    log->stop();
+    const auto contents = readAll(tmp.path());
+    EXPECT_EQ(contents.lines.size(), static_cast<std::size_t>(accepted.load()));
+    EXPECT_EQ(contents.corrupt_lines + contents.partial_lines, 0u);
+    const LogStatus st = hub.logStatus();
+    EXPECT_EQ(st.lines_written, static_cast<std::uint64_t>(accepted.load()));
+    EXPECT_EQ(st.lines_written + st.lines_dropped, std::uint64_t{kThreads} * kLines);
+    EXPECT_GT(contents.files.size(), 1u);
+}
+
+// A real crash: a child process logs until it is killed with SIGKILL. Every
+// line on disk but possibly the last one of the file must parse.
+TEST(LogService, SigkillLeavesOnlyWholeLinesButTheLast) {
+    TempDir tmp("log_service");
+    std::array<int, 2> ready{};
+    ASSERT_EQ(::pipe(ready.data()), 0);
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+        ::close(ready[0]);
+        ReportHub hub(16);
+        LogConfig c = configIn(tmp.path());
+        c.fsync_interval_ms = 1;
+        c.max_file_bytes = 1u << 30;
+        auto created = LogService::create(c, hub);
+        if (!created) {
+            ::_exit(2);
+        }
+        LogService& log = **created;
+        log.start();
+        const std::string pad(200, 'z');
+        for (std::int64_t i = 0;; ++i) {
+            ErrorEvent e{.where = pad, .message = std::to_string(i)};
+            if (!log.errorEvent(e)) {
+                ::_exit(3);  // a drop would leave a gap the parent reports
+            }
+            if (i % 50 == 0) {
+                (void)log.flush();  // keeps the queue from filling up
+            }
+            if (i == 1000) {
+                const char byte = 'r';
+                (void)!::write(ready[1], &byte, 1);
+            }
+        }
+    }
+    ::close(ready[1]);
+    char byte = 0;
+    ASSERT_EQ(::read(ready[0], &byte, 1), 1);  // the child has written >= 1001 lines
+    ::close(ready[0]);
+    ASSERT_EQ(::kill(child, SIGKILL), 0);
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFSIGNALED(status));
+    EXPECT_EQ(WTERMSIG(status), SIGKILL);
+
+    const auto contents = readAll(tmp.path());
+    EXPECT_EQ(contents.corrupt_lines, 0u);
+    EXPECT_LE(contents.partial_lines, 1u);
+    ASSERT_GE(contents.lines.size(), 1001u);
+    for (std::size_t i = 0; i < contents.lines.size(); ++i) {
+        const json j = parse(contents.lines[i].text);
+        ASSERT_EQ(j["message"], std::to_string(i));  // in order, none missing
+    }
+}
+
+}  // namespace
+}  // namespace scaled::daemon

@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# field-log end to end: usage errors, a small hand-written log with a corrupt
+# line and a partial last line (a crash), the CSV files in scale-eval's shape
+# and, with matplotlib, the figures.
+#   tests/cli/field_log_cli.sh PATH/TO/field-log
+set -euo pipefail
+fl=$1
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+expect() {  # expect RC SUBSTRING -- command...
+    local want=$1 text=$2; shift 3
+    local err rc
+    set +e; err=$("$@" 2>&1 >/dev/null); rc=$?; set -e
+    [[ $rc -eq $want ]] || fail "$*: exit $rc, expected $want ($err)"
+    [[ $err == *"$text"* ]] || fail "$*: message '$err' does not mention '$text'"
+}
+
+"$fl" --help | grep -q '^usage: field-log' || fail "--help does not print usage"
+expect 64 "a log directory or file is required" -- "$fl"
+expect 64 "unknown option --bogus" -- "$fl" x --bogus
+expect 64 "--out needs a value" -- "$fl" x --out
+expect 66 "$tmp/none: no such file or directory" -- "$fl" "$tmp/none"
+mkdir "$tmp/empty"
+expect 66 "no field log files" -- "$fl" "$tmp/empty"
+printf 'garbage\n{"class":"FR' > "$tmp/junk.jsonl"
+expect 65 "no readable line" -- "$fl" "$tmp/junk.jsonl"
+
+# Two runs in two files; the second was killed in the middle of a line.
+mkdir "$tmp/log"
+f1="$tmp/log/scaled-20240101T000000Z-000001.jsonl"
+f2="$tmp/log/scaled-20240101T001000Z-000002.jsonl"
+cat > "$f1" <<'EOF'
+{"class":"START","mono_ns":1000000000,"release":"0.1.0","source":"sim","config":"[log]\nenabled = true\n"}
+{"class":"FRAME","mono_ns":1100000000,"frame_id":0,"t_ns":0,"epoch":0,"health":"ok","features":30,"tracked":20,"ms":3.5,"dropped":0}
+{"class":"DETECTION","mono_ns":1200000000,"frame_id":0,"t_ns":0,"epoch":0,"latency_ms":80.5,"boxes":[{"class":"chair","score":0.9,"box":[1,2,3,4]}]}
+{"class":"SCALE","mono_ns":1300000000,"frame_id":0,"t_ns":0,"epoch":0,"state":"tracking","scale":null,"mean":null,"ci68":null,"ci95":null,"observations":0,"new_observations":0,"detections":1,"obs":[]}
+{"class":"SCALE","mono_ns":1400000000,"frame_id":5,"t_ns":166666666,"epoch":0,"state":"converging","scale":1.2,"mean":1.25,"ci68":[1.1,1.3],"ci95":[1.0,1.5],"observations":3,"new_observations":3,"detections":2,"obs":[{"class":"chair","D":0.5,"sigma_D":0.05,"local":1.2,"weight":1},{"class":"cup","D":0.08,"sigma_D":0.01,"local":1.1,"weight":0.5}]}
+this line is not JSON
+{"class":"FRAME","mono_ns":1500000000,"frame_id":30,"t_ns":1000000000,"epoch":0,"health":"ok","features":35,"tracked":22,"ms":3.1,"dropped":0}
+{"class":"STOP","mono_ns":1600000000,"reason":"SIGTERM"}
+EOF
+cat > "$f2" <<'EOF'
+{"class":"START","mono_ns":5000000000,"release":"0.1.0","source":"sim","config":""}
+{"class":"STATE","mono_ns":5100000000,"from":"initialising","to":"tracking","epoch":0,"frame_id":0,"reason":"map"}
+{"class":"SCALE","mono_ns":5200000000,"frame_id":45,"t_ns":1500000000,"epoch":0,"state":"converged","scale":1.21,"mean":1.22,"ci68":[1.18,1.24],"ci95":[1.15,1.27],"observations":9,"new_observations":6,"detections":2,"obs":[{"class":"chair","D":0.5,"sigma_D":0.05,"local":1.2,"weight":1}]}
+{"class":"ERROR","mono_ns":5300000000,"where":"detector","message":"slow"}
+{"class":"FRAME","mono_ns":5400000000,"frame_id":60,"t_ns":2000000000,"epoch":0,"health":"lost","features":35,"tracked":0,"ms":3.1,"dropped":1}
+EOF
+printf '{"class":"SCALE","mono_ns":55000' >> "$f2"
+
+"$fl" "$tmp/log" --json --out "$tmp/out" --no-plots > "$tmp/s.json" 2> "$tmp/s.err" \
+    || fail "field-log failed: $(cat "$tmp/s.err")"
+grep -q "$f1:6: not a JSON object" "$tmp/s.err" || fail "corrupt line not reported: $(cat "$tmp/s.err")"
+grep -q "$f2:6: last line has no newline" "$tmp/s.err" || fail "partial line not reported"
+py=/usr/bin/python3
+[[ -x $py ]] || py=python3
+"$py" - "$tmp/s.json" "$tmp/out" <<'PY' || fail "summary or CSV check failed"
+import csv, json, os, sys
+lines = open(sys.argv[1]).read().splitlines()
+assert len(lines) == 1, "stdout must be one JSON line"
+j = json.loads(lines[0])
+assert j == json.load(open(os.path.join(sys.argv[2], "summary.json"))), "summary.json differs"
+assert j["files"] == 2 and j["lines"] == 12, j
+assert j["corrupt_lines"] == 1 and j["partial_lines"] == 1, j
+assert j["runs"] == 2 and j["stops"] == 1 and j["last_stop_reason"] == "SIGTERM", j
+assert j["epochs"] == 2 and j["updates"] == 3 and j["frames_logged"] == 3, j
+assert j["errors"] == 1 and j["last_error"] == "detector: slow", j
+assert j["classes"]["SCALE"] == 3 and j["boxes"] == 1, j
+assert abs(j["time_span_s"] - 0.6 - 0.4) < 1e-9, j["time_span_s"]
+ls = j["last_scale"]
+assert ls["scale"] == 1.21 and ls["ci95"] == [1.15, 1.27] and ls["state"] == "converged", ls
+def rows(name):
+    with open(os.path.join(sys.argv[2], name), newline="") as f:
+        r = list(csv.reader(f))
+    assert all(len(x) == len(r[0]) for x in r), name + ": ragged rows"
+    return [dict(zip(r[0], x)) for x in r[1:]]
+u = rows("updates.csv")
+assert [x["frame"] for x in u] == ["0", "5", "45"], u
+assert u[0]["scale_est"] == "" and u[1]["scale_est"] == "1.2" and u[2]["converged"] == "1", u
+assert u[1]["ci95_lo"] == "1" and u[1]["ci95_hi"] == "1.5" and u[2]["total_observations"] == "9", u
+assert all(x["scale_true"] == "" and x["rel_error"] == "" for x in u), "truth columns must be empty"
+fr = rows("frames.csv")
+assert [x["frame"] for x in fr] == ["0", "30", "60"], fr
+assert fr[1]["scale_est"] == "1.2" and fr[1]["state"] == "converging", fr[1]
+assert fr[2]["tracked"] == "0" and fr[2]["scale_est"] == "1.21", fr[2]
+o = rows("observations.csv")
+assert [x["class"] for x in o] == ["chair", "cup", "chair"] and o[1]["D"] == "0.08", o
+for c in ("frame", "t_s", "tracked", "epoch", "features_measured", "scale_est", "ci95_lo",
+          "ci95_hi", "state", "scale_true", "rel_error", "baseline_single_rel_error"):
+    assert c in fr[0], c
+PY
+
+# Text summary on stdout without --json.
+"$fl" "$f1" 2>/dev/null | grep -q "last scale 1.2 m/unit" || fail "text summary"
+
+# The figures (figures (c) and (d): a field log has no posterior curves).
+if "$py" -c 'import matplotlib, numpy' 2>/dev/null; then
+    SCALED_PYTHON=$py "$fl" "$tmp/log" --out "$tmp/fig" > /dev/null 2> "$tmp/fig.err" \
+        || fail "field-log with figures failed: $(cat "$tmp/fig.err")"
+    for f in fig_c_estimates.png fig_d_rel_error.png; do
+        [[ -s "$tmp/fig/$f" ]] || fail "$f not written"
+    done
+else
+    echo "SKIP figures: python3 matplotlib/numpy not installed"
+fi
+# A python that cannot run: exit 69, CSV files kept.
+set +e
+SCALED_PYTHON=/nonexistent/python "$fl" "$tmp/log" --out "$tmp/nopy" > /dev/null 2> "$tmp/nopy.err"
+rc=$?
+set -e
+[[ $rc -eq 69 ]] || fail "missing python: exit $rc, expected 69"
+[[ -s "$tmp/nopy/updates.csv" ]] || fail "CSV files not kept when plotting fails"
+echo "field-log CLI: ok"

@@ -1,0 +1,445 @@
+// field-log: the lines of a field log into scale-eval's CSV shapes and a summary.
+
+#include "field_log_report.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <utility>
+
+#include "json.h"
+
+namespace scaled::tools {
+
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+using nlohmann::json;
+
+namespace {
+
+constexpr std::size_t kMaxProblems = 20;
+
+const char* const kFramesHeader =
+    "frame,t_s,tracked,epoch,features_measured,scale_est,ci95_lo,ci95_hi,state,scale_true,"
+    "scale_true_window,rel_error,rel_error_window,baseline_constant_rel_error,"
+    "baseline_single_rel_error,features_in_map,tracking_ms,frames_dropped,run";
+const char* const kUpdatesHeader =
+    "update,frame,t_s,epoch,detections,observations,total_observations,scale_est,mean,ci68_lo,"
+    "ci68_hi,ci95_lo,ci95_hi,rel_width95,state,converged,scale_true,scale_true_window,"
+    "rel_error,rel_error_window,run";
+const char* const kObservationsHeader =
+    "update,frame,observation,class,score,D,sigma_D,local_estimate,weight";
+
+std::optional<double> number(const json& j, const char* key) {
+    const auto it = j.find(key);
+    if (it == j.end() || !it->is_number()) {
+        return std::nullopt;
+    }
+    return it->get<double>();
+}
+
+std::optional<std::int64_t> integer(const json& j, const char* key) {
+    const auto it = j.find(key);
+    if (it == j.end() || !it->is_number_integer()) {
+        return std::nullopt;
+    }
+    return it->get<std::int64_t>();
+}
+
+std::string text(const json& j, const char* key) {
+    const auto it = j.find(key);
+    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+
+// [lo, hi] from a two-number array.
+bool interval(const json& j, const char* key, double& lo, double& hi) {
+    const auto it = j.find(key);
+    if (it == j.end() || !it->is_array() || it->size() != 2 || !(*it)[0].is_number() ||
+        !(*it)[1].is_number()) {
+        return false;
+    }
+    lo = (*it)[0].get<double>();
+    hi = (*it)[1].get<double>();
+    return true;
+}
+
+std::string field(std::optional<double> v, int digits = 7) {
+    return v ? jsonNumber(*v, digits) : std::string();
+}
+
+std::string intField(std::optional<std::int64_t> v) {
+    return v ? std::to_string(*v) : std::string();
+}
+
+// A CSV text field (quoted when it holds a comma, quote or line break).
+std::string csvText(const std::string& s) {
+    if (s.find_first_of(",\"\n\r") == std::string::npos) {
+        return s;
+    }
+    std::string q = "\"";
+    for (const char c : s) {
+        q += c;
+        if (c == '"') {
+            q += '"';
+        }
+    }
+    return q + "\"";
+}
+
+std::string tSeconds(std::optional<std::int64_t> t_ns) {
+    return t_ns ? jsonNumber(static_cast<double>(*t_ns) * 1e-9, 12) : std::string();
+}
+
+// What the log says about the scale of the current (run, epoch).
+struct Current {
+    std::int64_t epoch = -1;
+    std::optional<double> scale;
+    std::optional<double> ci95_lo;
+    std::optional<double> ci95_hi;
+    std::string state = "initialising";
+};
+
+class Analyser {
+public:
+    explicit Analyser(FieldLogAnalysis& a) : a_(a) {}
+
+    void line(const json& j, const std::string& where) {
+        const auto cls_it = j.find("class");
+        if (cls_it == j.end() || !cls_it->is_string()) {
+            ++a_.unknown_lines;
+            problem(where + ": no \"class\" (skipped)");
+            return;
+        }
+        const std::string cls = cls_it->get<std::string>();
+        ++a_.classes[cls];
+        if (cls == "START") {
+            endRun();  // before this line's mono_ns counts: it starts the next run
+        }
+        if (const auto mono = integer(j, "mono_ns")) {
+            if (!run_first_mono_) {
+                run_first_mono_ = *mono;
+            }
+            run_last_mono_ = *mono;
+            a_.first_mono_ns = a_.first_mono_ns ? std::min(*a_.first_mono_ns, *mono) : *mono;
+            a_.last_mono_ns = a_.last_mono_ns ? std::max(*a_.last_mono_ns, *mono) : *mono;
+        }
+        if (cls == "START") {
+            ++a_.runs;
+            ++run_;
+            current_ = Current{};
+            a_.release = text(j, "release");
+            a_.source = text(j, "source");
+        } else if (cls == "STOP") {
+            ++a_.stops;
+            a_.last_stop_reason = text(j, "reason");
+        } else if (cls == "ERROR") {
+            ++a_.errors;
+            a_.last_error = text(j, "where") + ": " + text(j, "message");
+        } else if (cls == "STATE") {
+            ++a_.state_changes;
+            epoch(integer(j, "epoch"));
+            if (auto to = text(j, "to"); !to.empty()) {
+                current_.state = std::move(to);
+            }
+        } else if (cls == "FRAME") {
+            frame(j, where);
+        } else if (cls == "DETECTION") {
+            ++a_.detection_runs;
+            const auto it = j.find("boxes");
+            if (it != j.end() && it->is_array()) {
+                a_.boxes += it->size();
+            }
+        } else if (cls == "SCALE") {
+            scale(j, where);
+        }
+    }
+
+    void finish() {
+        endRun();
+        a_.epochs = epochs_.size();
+    }
+
+    [[nodiscard]] double spanSeconds() const { return span_ns_ * 1e-9; }
+
+private:
+    void problem(const std::string& s) {
+        if (a_.problems.size() < kMaxProblems) {
+            a_.problems.push_back(s);
+        }
+    }
+
+    void endRun() {
+        if (run_first_mono_ && run_last_mono_) {
+            span_ns_ += static_cast<double>(*run_last_mono_ - *run_first_mono_);
+        }
+        run_first_mono_.reset();
+        run_last_mono_.reset();
+    }
+
+    void epoch(std::optional<std::int64_t> e) {
+        if (!e) {
+            return;
+        }
+        epochs_.insert({run_, *e});
+        if (*e != current_.epoch) {
+            const std::string state = current_.state;
+            current_ = Current{};
+            current_.epoch = *e;
+            current_.state = state;
+        }
+    }
+
+    void frame(const json& j, const std::string& where) {
+        const auto frame_id = integer(j, "frame_id");
+        const auto ep = integer(j, "epoch");
+        if (!frame_id || !ep) {
+            ++a_.bad_fields;
+            problem(where + ": FRAME without frame_id or epoch (skipped)");
+            return;
+        }
+        epoch(ep);
+        const std::string health = text(j, "health");
+        a_.frame_rows.push_back(std::to_string(*frame_id) + "," + tSeconds(integer(j, "t_ns")) +
+                                "," + (health == "ok" ? "1" : "0") + "," + std::to_string(*ep) +
+                                "," + intField(integer(j, "tracked")) + "," +
+                                field(current_.scale) + "," + field(current_.ci95_lo) + "," +
+                                field(current_.ci95_hi) + "," + csvText(current_.state) +
+                                ",,,,,,," + intField(integer(j, "features")) + "," +
+                                field(number(j, "ms"), 5) + "," + intField(integer(j, "dropped")) +
+                                "," + std::to_string(run_));
+    }
+
+    void scale(const json& j, const std::string& where) {
+        const auto frame_id = integer(j, "frame_id");
+        const auto ep = integer(j, "epoch");
+        if (!frame_id || !ep) {
+            ++a_.bad_fields;
+            problem(where + ": SCALE without frame_id or epoch (skipped)");
+            return;
+        }
+        epoch(ep);
+        const std::string state = text(j, "state");
+        if (!state.empty()) {
+            current_.state = state;
+        }
+        const auto map = number(j, "scale");
+        double lo68 = 0;
+        double hi68 = 0;
+        double lo95 = 0;
+        double hi95 = 0;
+        const bool has68 = interval(j, "ci68", lo68, hi68);
+        const bool has95 = interval(j, "ci95", lo95, hi95);
+        current_.scale = map;
+        current_.ci95_lo = has95 ? std::optional<double>(lo95) : std::nullopt;
+        current_.ci95_hi = has95 ? std::optional<double>(hi95) : std::nullopt;
+        const auto opt = [](bool has, double v) {
+            return has ? std::optional<double>(v) : std::nullopt;
+        };
+        const std::optional<double> width =
+            map && has95 && *map > 0 ? std::optional<double>((hi95 - lo95) / *map) : std::nullopt;
+        const std::size_t update = a_.update_rows.size();
+        const std::string t_s = tSeconds(integer(j, "t_ns"));
+        a_.update_rows.push_back(
+            std::to_string(update) + "," + std::to_string(*frame_id) + "," + t_s + "," +
+            std::to_string(*ep) + "," + intField(integer(j, "detections")) + "," +
+            intField(integer(j, "new_observations")) + "," + intField(integer(j, "observations")) +
+            "," + field(map) + "," + field(number(j, "mean")) + "," + field(opt(has68, lo68)) +
+            "," + field(opt(has68, hi68)) + "," + field(opt(has95, lo95)) + "," +
+            field(opt(has95, hi95)) + "," + field(width, 5) + "," + csvText(state) + "," +
+            (state == "converged" ? "1" : "0") + ",,,,," + std::to_string(run_));
+        const auto obs = j.find("obs");
+        if (obs != j.end() && obs->is_array()) {
+            for (const json& o : *obs) {
+                if (!o.is_object()) {
+                    ++a_.bad_fields;
+                    continue;
+                }
+                const std::size_t k = a_.observation_rows.size();
+                a_.observation_rows.push_back(
+                    std::to_string(update) + "," + std::to_string(*frame_id) + "," +
+                    std::to_string(k) + "," + csvText(text(o, "class")) + ",," +
+                    field(number(o, "D")) + "," + field(number(o, "sigma_D"), 5) + "," +
+                    field(number(o, "local"), 6) + "," + field(number(o, "weight"), 4));
+            }
+        }
+        FieldLogAnalysis::LastScale last;
+        last.frame_id = *frame_id;
+        last.epoch = static_cast<std::uint64_t>(std::max<std::int64_t>(*ep, 0));
+        last.state = state;
+        last.scale = map;
+        last.ci95_lo = current_.ci95_lo;
+        last.ci95_hi = current_.ci95_hi;
+        last.observations = static_cast<int>(integer(j, "observations").value_or(0));
+        a_.last_scale = last;
+    }
+
+    FieldLogAnalysis& a_;
+    Current current_;
+    std::size_t run_ = 0;
+    std::set<std::pair<std::size_t, std::int64_t>> epochs_;
+    std::optional<std::int64_t> run_first_mono_;
+    std::optional<std::int64_t> run_last_mono_;
+    double span_ns_ = 0;
+};
+
+std::string num(std::optional<double> v, int digits = 7) {
+    return v ? jsonNumber(*v, digits) : "null";
+}
+
+}  // namespace
+
+FieldLogAnalysis analyseFieldLog(const drivers::FieldLogContents& contents,
+                                 const std::string& log) {
+    FieldLogAnalysis a;
+    a.log = log;
+    a.files = contents.files.size();
+    a.lines = contents.lines.size();
+    a.corrupt_lines = contents.corrupt_lines;
+    a.partial_lines = contents.partial_lines;
+    a.problems = contents.problems;
+    Analyser an(a);
+    for (const auto& l : contents.lines) {
+        const json j = json::parse(l.text, nullptr, false);
+        const std::string where =
+            contents.files.at(l.file).string() + ":" + std::to_string(l.line_no);
+        if (j.is_discarded() || !j.is_object()) {
+            ++a.corrupt_lines;  // the reader already checks; kept for safety
+            continue;
+        }
+        an.line(j, where);
+    }
+    an.finish();
+    a.time_span_s = an.spanSeconds();
+    return a;
+}
+
+std::string toJson(const FieldLogAnalysis& a) {
+    std::string s = "{\"dataset\":" + jsonString(a.log);
+    s += ",\"files\":" + std::to_string(a.files);
+    s += ",\"lines\":" + std::to_string(a.lines);
+    s += ",\"corrupt_lines\":" + std::to_string(a.corrupt_lines);
+    s += ",\"partial_lines\":" + std::to_string(a.partial_lines);
+    s += ",\"unknown_lines\":" + std::to_string(a.unknown_lines);
+    s += ",\"bad_fields\":" + std::to_string(a.bad_fields);
+    s += ",\"classes\":{";
+    bool first = true;
+    for (const auto& [cls, n] : a.classes) {
+        s += (first ? "" : ",") + jsonString(cls) + ":" + std::to_string(n);
+        first = false;
+    }
+    s += "}";
+    s += ",\"runs\":" + std::to_string(a.runs);
+    s += ",\"release\":" + jsonString(a.release);
+    s += ",\"source\":" + jsonString(a.source);
+    s += ",\"stops\":" + std::to_string(a.stops);
+    s += ",\"last_stop_reason\":" + jsonString(a.last_stop_reason);
+    s += ",\"errors\":" + std::to_string(a.errors);
+    s += ",\"last_error\":" + jsonString(a.last_error);
+    s += ",\"state_changes\":" + std::to_string(a.state_changes);
+    s += ",\"epochs\":" + std::to_string(a.epochs);
+    s += ",\"frames_logged\":" + std::to_string(a.frame_rows.size());
+    s += ",\"detection_runs\":" + std::to_string(a.detection_runs);
+    s += ",\"boxes\":" + std::to_string(a.boxes);
+    s += ",\"updates\":" + std::to_string(a.update_rows.size());
+    s += ",\"observations_logged\":" + std::to_string(a.observation_rows.size());
+    s += ",\"first_mono_ns\":" + (a.first_mono_ns ? std::to_string(*a.first_mono_ns) : "null");
+    s += ",\"last_mono_ns\":" + (a.last_mono_ns ? std::to_string(*a.last_mono_ns) : "null");
+    s += ",\"time_span_s\":" + jsonNumber(a.time_span_s, 6);
+    if (a.last_scale) {
+        const auto& l = *a.last_scale;
+        s += ",\"last_scale\":{\"frame_id\":" + std::to_string(l.frame_id) +
+             ",\"epoch\":" + std::to_string(l.epoch) + ",\"state\":" + jsonString(l.state) +
+             ",\"scale\":" + num(l.scale) + ",\"ci95\":" +
+             (l.ci95_lo && l.ci95_hi
+                  ? "[" + jsonNumber(*l.ci95_lo, 7) + "," + jsonNumber(*l.ci95_hi, 7) + "]"
+                  : std::string("null")) +
+             ",\"observations\":" + std::to_string(l.observations) + "}";
+    } else {
+        s += ",\"last_scale\":null";
+    }
+    // What the plot script reads; a field log has no ground truth.
+    s += ",\"scale_true_final\":null,\"converged_at_frame\":null";
+    s += ",\"problems\":[";
+    for (std::size_t i = 0; i < a.problems.size(); ++i) {
+        s += (i == 0 ? "" : ",") + jsonString(a.problems[i]);
+    }
+    s += "]}";
+    return s;
+}
+
+std::string toText(const FieldLogAnalysis& a) {
+    std::string s =
+        a.log + ": " + std::to_string(a.files) + " file(s), " + std::to_string(a.lines) + " lines";
+    if (a.corrupt_lines + a.partial_lines + a.unknown_lines > 0) {
+        s += " (skipped: " + std::to_string(a.corrupt_lines) + " corrupt, " +
+             std::to_string(a.partial_lines) + " partial, " + std::to_string(a.unknown_lines) +
+             " without class)";
+    }
+    s += "\n" + std::to_string(a.runs) + " run(s), " + std::to_string(a.epochs) + " epoch(s), " +
+         std::to_string(a.frame_rows.size()) + " frame lines, " + std::to_string(a.detection_runs) +
+         " detector runs, " + std::to_string(a.update_rows.size()) + " scale updates, " +
+         std::to_string(a.errors) + " errors, " + jsonNumber(a.time_span_s, 6) + " s\n";
+    if (a.last_scale && a.last_scale->scale) {
+        const auto& l = *a.last_scale;
+        s += "last scale " + jsonNumber(*l.scale, 6) + " m/unit";
+        if (l.ci95_lo && l.ci95_hi) {
+            s += " (95% " + jsonNumber(*l.ci95_lo, 5) + " .. " + jsonNumber(*l.ci95_hi, 5) + ")";
+        }
+        s += ", " + l.state + ", epoch " + std::to_string(l.epoch) + ", frame " +
+             std::to_string(l.frame_id) + "\n";
+    } else {
+        s += "no scale in the log\n";
+    }
+    if (!a.last_error.empty()) {
+        s += "last error: " + a.last_error + "\n";
+    }
+    return s;
+}
+
+Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir) {
+    const std::filesystem::path dir(out_dir);
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) {
+        return makeError(ErrorCode::kIo,
+                         out_dir + ": cannot create the output directory: " + ec.message());
+    }
+    const auto write = [&](const char* name, const char* header,
+                           const std::vector<std::string>& rows) -> Result<bool> {
+        const std::filesystem::path path = dir / name;
+        std::ofstream out(path);
+        if (!out) {
+            return makeError(ErrorCode::kIo,
+                             path.string() + ": cannot create: " + std::strerror(errno));
+        }
+        if (header != nullptr) {
+            out << header << '\n';
+        }
+        for (const auto& r : rows) {
+            out << r << '\n';
+        }
+        out.close();
+        if (out.fail()) {
+            return makeError(ErrorCode::kIo,
+                             path.string() + ": write failed: " + std::strerror(errno));
+        }
+        return true;
+    };
+    if (auto ok = write("frames.csv", kFramesHeader, a.frame_rows); !ok) {
+        return ok;
+    }
+    if (auto ok = write("updates.csv", kUpdatesHeader, a.update_rows); !ok) {
+        return ok;
+    }
+    if (auto ok = write("observations.csv", kObservationsHeader, a.observation_rows); !ok) {
+        return ok;
+    }
+    return write("summary.json", nullptr, {toJson(a)});
+}
+
+}  // namespace scaled::tools

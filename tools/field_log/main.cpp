@@ -1,0 +1,178 @@
+// field-log: a field log (the daemon's JSON lines, docs/field-log.md) into
+// scale-eval's CSV files, a summary and the figures.
+//
+//   field-log LOG_DIR_OR_FILE [--out DIR] [--json] [--no-plots] [--title TEXT]
+//
+// Exit codes (sysexits): 0 ok, 64 usage, 65 no readable line in the log, 66
+// log not found, 69 figures not drawn (the CSV files are written), 73 cannot
+// write --out, 74 the log cannot be read.
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <spawn.h>
+#include <string>
+#include <string_view>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+#include <scaled/drivers/field_log.h>
+
+#include "field_log_report.h"
+#include "sysexits.h"
+
+namespace {
+
+using namespace scaled::tools;  // NOLINT(google-build-using-namespace)
+
+void usage(std::FILE* to) {
+    std::fprintf(
+        to,
+        "usage: field-log LOG_DIR_OR_FILE [--out DIR] [--json] [--no-plots] [--title TEXT]\n"
+        "\n"
+        "Reads a field log (a directory of scaled-*.jsonl files, or one file; partial and\n"
+        "corrupt lines are skipped and counted) and prints a summary.\n"
+        "  --out DIR       write frames.csv, updates.csv, observations.csv (scale-eval's\n"
+        "                  columns; ground-truth columns empty), summary.json and\n"
+        "                  fig_c_estimates.png, fig_d_rel_error.png (tools/scale_eval_plot.py)\n"
+        "  --json          print the summary as one JSON object\n"
+        "  --no-plots      with --out: write the CSV files only\n"
+        "  --title TEXT    appended to the figure titles\n"
+        "Exit codes: 64 usage, 65 no readable line, 66 log not found, 69 figures not drawn\n"
+        "(CSV files kept), 73 cannot write --out, 74 cannot read the log.\n");
+}
+
+// Runs the plotting script; its exit code (or 69 when it cannot start).
+int drawFigures(const std::string& out_dir, const std::string& title) {
+    const std::string script = std::string(SCALED_SOURCE_DIR) + "/tools/scale_eval_plot.py";
+    std::string python =
+        std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+    if (const char* env = std::getenv("SCALED_PYTHON"); env != nullptr && *env != '\0') {
+        python = env;
+    }
+    std::vector<std::string> args = {python, script, out_dir, "--no-curves"};
+    if (!title.empty()) {
+        args.emplace_back("--title");
+        args.push_back(title);
+    }
+    std::vector<char*> argv;
+    argv.reserve(args.size() + 1);
+    for (auto& a : args) {
+        argv.push_back(a.data());
+    }
+    argv.push_back(nullptr);
+    // The script's messages go to stderr: stdout may carry --json.
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, STDERR_FILENO, STDOUT_FILENO);
+    pid_t pid = 0;
+    const int spawned = posix_spawnp(&pid, python.c_str(), &actions, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    if (spawned != 0) {
+        return kExUnavailable;
+    }
+    int status = 0;
+    if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status)) {
+        return kExSoftware;
+    }
+    return WEXITSTATUS(status);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::string log;
+    std::string out_dir;
+    std::string title;
+    bool json = false;
+    bool plots = true;
+    for (int i = 1; i < argc; ++i) {
+        const std::string_view a =
+            argv[i];  // NOLINT(cppcoreguidelines-pro-bounds-pointer-arithmetic)
+        const auto value = [&](std::string& into) {
+            if (i + 1 >= argc) {
+                std::fprintf(stderr, "field-log: %s needs a value\n", argv[i]);  // NOLINT
+                return false;
+            }
+            into = argv[++i];  // NOLINT(cppcoreguidelines-pro-bounds-pointer-arithmetic)
+            return true;
+        };
+        if (a == "--help" || a == "-h") {
+            usage(stdout);
+            return 0;
+        }
+        if (a == "--json") {
+            json = true;
+        } else if (a == "--no-plots") {
+            plots = false;
+        } else if (a == "--out") {
+            if (!value(out_dir)) {
+                return kExUsage;
+            }
+        } else if (a == "--title") {
+            if (!value(title)) {
+                return kExUsage;
+            }
+        } else if (a.size() > 1 && a[0] == '-') {
+            std::fprintf(stderr, "field-log: unknown option %s\n", argv[i]);  // NOLINT
+            usage(stderr);
+            return kExUsage;
+        } else if (log.empty()) {
+            log = a;
+        } else {
+            std::fprintf(stderr, "field-log: more than one log given ('%s', '%s')\n", log.c_str(),
+                         argv[i]);  // NOLINT
+            return kExUsage;
+        }
+    }
+    if (log.empty()) {
+        std::fprintf(stderr, "field-log: a log directory or file is required\n");
+        usage(stderr);
+        return kExUsage;
+    }
+    if (out_dir.empty() && (!title.empty() || !plots)) {
+        std::fprintf(stderr, "field-log: --title and --no-plots need --out\n");
+        return kExUsage;
+    }
+
+    auto contents = scaled::drivers::readFieldLog(log);
+    if (!contents) {
+        std::fprintf(stderr, "field-log: %s\n", contents.error().message.c_str());
+        return contents.error().code == scaled::core::ErrorCode::kNotFound ? kExNoInput : kExIoErr;
+    }
+    const FieldLogAnalysis analysis = analyseFieldLog(*contents, log);
+    for (const auto& p : analysis.problems) {
+        std::fprintf(stderr, "field-log: %s\n", p.c_str());
+    }
+    if (json) {
+        std::printf("%s\n", toJson(analysis).c_str());
+    } else {
+        std::printf("%s", toText(analysis).c_str());
+    }
+    if (analysis.lines == 0) {
+        std::fprintf(stderr, "field-log: %s: no readable line\n", log.c_str());
+        return kExDataErr;
+    }
+    if (!out_dir.empty()) {
+        if (auto ok = writeFieldLogOutputs(analysis, out_dir); !ok) {
+            std::fprintf(stderr, "field-log: %s\n", ok.error().message.c_str());
+            return kExCantCreat;
+        }
+        if (plots) {
+            const int rc = drawFigures(out_dir, title);
+            if (rc != 0) {
+                std::fprintf(stderr,
+                             "field-log: figures not drawn (tools/scale_eval_plot.py exit %d%s); "
+                             "the CSV files are in %s\n",
+                             rc,
+                             rc == kExUnavailable ? ": python3 with matplotlib and numpy is needed "
+                                                    "(apt install python3-matplotlib python3-numpy)"
+                                                  : "",
+                             out_dir.c_str());
+                return kExUnavailable;
+            }
+        }
+    }
+    return 0;
+}
