@@ -1,2 +1,6 @@
-// placeholder: the lead writes main.cpp
-int main() { return 0; }
+// scaled: the metric-scale daemon. Everything is in scaled_daemon (app.h).
+#include <scaled/daemon/app.h>
+
+int main(int argc, char** argv) {
+    return scaled::daemon::runMain(argc, argv);
+}

@@ -1,41 +1,43 @@
 #!/usr/bin/env bash
-# Installs dependencies, builds the release preset and runs the main job:
-#  1. scale-sim: the paper's three experiments in simulation (arguments go to it);
-#  2. without arguments, also slam-run: the EKF MonoSLAM tracker on 7-Scenes redkitchen
-#     from ../shared (or $SCALED_SHARED_DIR), or on a rendered synthetic room if absent;
-#  3. and scaled-detect: YOLOX-Nano on redkitchen frame 0 (when the model and data exist),
-#     drawn to build/redkitchen_000000_detections.png.
+# The main job: installs dependencies, builds the release preset, then runs the
+# daemon `scaled` on 7-Scenes redkitchen from ../shared ($SCALED_SHARED_DIR),
+# replayed at its recorded 30 fps, with YOLOX-Nano detecting objects every 10
+# frames. On a terminal it prints a live status line (frame/total, fps,
+# scale ± 95% half-width, state). In another terminal,
+#
+#     build/bin/scalectl --socket "$XDG_RUNTIME_DIR/scaled-demo/scaled.sock" watch
+#
+# (the exact command is printed at start) shows the stream of scale reports.
+# Without the data or the model it says so and runs the built-in `sim`
+# source instead (a rendered room with objects of known height).
+# The field log goes to build/demo-log. The daemon stops at the end of the
+# sequence (sim: after 60 s), or on Ctrl-C.
+#   scripts/demo.sh [extra scaled options, e.g. --pacing fast]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 scripts/install-deps.sh
 cmake --preset release >/dev/null
-cmake --build --preset release -j "$(nproc)"
+cmake --build --preset release -j "$(nproc)" --target scaled scalectl
 ln -sfn release/bin build/bin
-build/bin/scale-sim "$@"
-(($# == 0)) || exit 0
 
 shared=${SCALED_SHARED_DIR:-../shared}
-echo
-if [[ -d $shared/data/redkitchen ]]; then
-  echo "=== slam-run on $shared/data/redkitchen (600 frames)"
-  build/bin/slam-run --dataset "$shared/data/redkitchen" --out build/redkitchen_traj.txt
-  echo "trajectory: build/redkitchen_traj.txt"
-else
-  echo "=== slam-run on a synthetic room ($shared/data/redkitchen not found)"
-  tmp=$(mktemp -d)
-  trap 'rm -rf "$tmp"' EXIT
-  build/bin/synth-render --out "$tmp/room" --frames 150 >/dev/null
-  build/bin/slam-run --dataset "$tmp/room"
-fi
-
+data=$shared/data/redkitchen
 model=$shared/models/yolox_nano.onnx
-frame=$shared/data/redkitchen/rgb/000000.jpg
-echo
-if [[ -f $model && -f $frame ]]; then
-  echo "=== scaled-detect on $frame (YOLOX-Nano, 416)"
-  build/bin/scaled-detect --image "$frame" --model "$model" --draw build/redkitchen_000000_detections.png
-  echo "drawn: build/redkitchen_000000_detections.png"
+run_dir=${XDG_RUNTIME_DIR:-/tmp}/scaled-demo
+mkdir -p "$run_dir" build/demo-log
+sock=$run_dir/scaled.sock
+
+args=(--config config/scaled.toml --socket "$sock" --log-dir build/demo-log
+      --set source.at_end=exit)
+if [[ -d $data && -f $model ]]; then
+  echo "demo: scaled on $data (real-time replay), YOLOX-Nano $model"
+  args+=(--source "replay:$data" --set "detector.model=$model")
 else
-  echo "=== scaled-detect skipped: $model or $frame not found (set SCALED_SHARED_DIR)"
+  [[ -d $data ]] || echo "demo: $data not found (set SCALED_SHARED_DIR)"
+  [[ -f $model ]] || echo "demo: $model not found (set SCALED_SHARED_DIR)"
+  echo "demo: running the built-in sim source instead (60 s)"
+  args+=(--source sim --set source.max_frames=1800)
 fi
+echo "demo: in another terminal: build/bin/scalectl --socket $sock watch"
+exec build/bin/scaled "${args[@]}" "$@"

@@ -1,1 +1,457 @@
-// placeholder
+#include <algorithm>
+#include <cerrno>
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <memory>
+#include <optional>
+#include <pthread.h>
+#include <string>
+#include <sysexits.h>
+#include <unistd.h>
+#include <utility>
+
+#include <scaled/daemon/app.h>
+#include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/log_service.h>
+#include <scaled/daemon/pipeline.h>
+#include <scaled/daemon/report.h>
+#include <scaled/daemon/sd_notify.h>
+#include <scaled/daemon/socket_service.h>
+#include <scaled/daemon/version.h>
+#include <scaled/detector/dnn_detector.h>
+#include <scaled/drivers/paced_source.h>
+#include <scaled/drivers/priors_toml.h>
+#include <scaled/sim/sim_source.h>
+
+#include "log_events.h"
+
+namespace scaled::daemon {
+
+using core::Error;
+using core::ErrorCode;
+using core::makeError;
+using core::Result;
+
+namespace {
+
+// An error with the exit code it should end the process with.
+struct Failure {
+    int exit_code = EX_SOFTWARE;
+    std::string message;
+};
+
+void printError(const std::string& message) {
+    std::fprintf(stderr, "scaled: %s\n", message.c_str());
+}
+
+void printInfo(const std::string& message) {
+    std::fprintf(stderr, "scaled: %s\n", message.c_str());
+}
+
+int exitCodeFor(const Error& e, int fallback) {
+    switch (e.code) {
+        case ErrorCode::kNotFound:
+            return EX_NOINPUT;
+        case ErrorCode::kInvalidArgument:
+        case ErrorCode::kParse:
+            return EX_CONFIG;
+        default:
+            return fallback;
+    }
+}
+
+sim::SimConfig simConfig(const SourceConfig& s) {
+    sim::SimConfig c;
+    c.seed = s.sim_seed;
+    c.fps = s.sim_fps;
+    c.width_px = s.sim_width_px;
+    c.height_px = s.sim_height_px;
+    c.duration_s = 0;  // unbounded: the loop goes on
+    return c;
+}
+
+std::string sourceName(const SourceConfig& s) {
+    switch (s.kind) {
+        case SourceKind::kSim:
+            return "sim";
+        case SourceKind::kReplay:
+            return "replay:" + s.replay_path.string();
+        case SourceKind::kV4l2:
+            return "v4l2:" + s.device;
+        case SourceKind::kLibcamera:
+            return "libcamera:" + s.device;
+    }
+    return "?";
+}
+
+// The detector the source needs: the simulated one for `sim`, the network otherwise.
+Result<std::unique_ptr<detector::ObjectDetector>> openDetector(const DaemonConfig& config) {
+    if (config.source.kind == SourceKind::kSim) {
+        return sim::createSimDetector(simConfig(config.source));
+    }
+    const auto& d = config.pipeline.detector;
+    if (d.model_path.empty()) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "detector.model: not set (the YOLOX-Nano ONNX model; see "
+                         "config/scaled.toml)");
+    }
+    auto det = detector::DnnDetector::create(d);
+    if (!det) {
+        return det.error();
+    }
+    return std::unique_ptr<detector::ObjectDetector>(std::move(*det));
+}
+
+Result<core::PriorTable> openPriors(const DaemonConfig& config) {
+    if (config.pipeline.priors_path.empty()) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "estimator.priors: not set (the height priors file, e.g. "
+                         "/etc/scaled/priors.toml)");
+    }
+    return drivers::loadPriorsFile(config.pipeline.priors_path);
+}
+
+// The source, paced as configured, and what goes with it.
+std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& parts) {
+    const auto& s = config.source;
+    parts.source_name = sourceName(s);
+    std::unique_ptr<drivers::FrameSource> source;
+    switch (s.kind) {
+        case SourceKind::kSim: {
+            auto src = sim::openSimSource(simConfig(s));
+            if (!src) {
+                return Failure{EX_CONFIG, "source sim: " + src.error().message};
+            }
+            source = std::move(*src);
+            break;
+        }
+        case SourceKind::kReplay: {
+            auto src = drivers::openDataset(s.replay_path);
+            if (!src) {
+                return Failure{EX_NOINPUT,
+                               "source " + parts.source_name + ": " + src.error().message};
+            }
+            source = std::move(*src);
+            break;
+        }
+        case SourceKind::kV4l2:
+        case SourceKind::kLibcamera:
+            // The seam for the live drivers (issue 7): a FrameSource like the others.
+            return Failure{EX_UNAVAILABLE, "source " + parts.source_name +
+                                               ": live cameras are not in this build yet "
+                                               "(use --source sim or replay:DIR)"};
+    }
+    parts.lossless = s.pacing == drivers::PacingMode::kAsFastAsPossible;
+    if (s.pacing == drivers::PacingMode::kRealTime) {
+        drivers::PacingOptions pacing;
+        pacing.mode = drivers::PacingMode::kRealTime;
+        pacing.speed = s.speed;
+        pacing.drop_late = false;  // the capture ring drops, and counts, instead
+        auto paced = drivers::PacedFrameSource::create(std::move(source), pacing);
+        if (!paced) {
+            return Failure{EX_CONFIG, "source.speed: " + paced.error().message};
+        }
+        source = std::move(*paced);
+    }
+    parts.source = std::move(source);
+    auto det = openDetector(config);
+    if (!det) {
+        return Failure{exitCodeFor(det.error(), EX_UNAVAILABLE), det.error().message};
+    }
+    parts.detector = std::move(*det);
+    auto priors = openPriors(config);
+    if (!priors) {
+        return Failure{EX_CONFIG, priors.error().message};
+    }
+    parts.priors = std::move(*priors);
+    return std::nullopt;
+}
+
+std::string formatScale(const ScaleReport& r) {
+    char buf[160];
+    if (!r.has_scale) {
+        std::snprintf(buf, sizeof buf, "scale -  %s  epoch %llu", toString(r.state),
+                      static_cast<unsigned long long>(r.epoch));
+    } else {
+        std::snprintf(buf, sizeof buf, "scale %.4f (95%% %.4f-%.4f)  %s  epoch %llu  obs %d",
+                      r.scale, r.ci95_lo, r.ci95_hi, toString(r.state),
+                      static_cast<unsigned long long>(r.epoch), r.observations);
+    }
+    return buf;
+}
+
+// The live status line on a terminal: frame/total, fps, scale ± interval, state.
+void printStatusLine(const PipelineStatus& st, const ScaleReport& r) {
+    char frames[64];
+    const auto shown = static_cast<long long>(st.frame_id) + 1;  // frames are counted from 1
+    if (st.frames_total > 0) {
+        std::snprintf(frames, sizeof frames, "frame %lld/%lld", shown,
+                      static_cast<long long>(st.frames_total));
+    } else {
+        std::snprintf(frames, sizeof frames, "frame %lld", shown);
+    }
+    char scale[96];
+    if (r.has_scale) {
+        std::snprintf(scale, sizeof scale, "scale %.4f ± %.4f", r.scale,
+                      (r.ci95_hi - r.ci95_lo) / 2);
+    } else {
+        std::snprintf(scale, sizeof scale, "scale -");
+    }
+    std::fprintf(stderr, "\r\033[K%s  %5.1f fps  %s  %s  epoch %llu", frames, st.fps, scale,
+                 toString(r.state), static_cast<unsigned long long>(r.epoch));
+    std::fflush(stderr);
+}
+
+class Daemon {
+public:
+    Daemon(CommandLine cli, DaemonConfig config)
+        : cli_(std::move(cli)), config_(std::move(config)) {}
+    int run();
+
+private:
+    void reload();
+    void tick(std::int64_t now_ns);
+    void teardown(const char* reason);
+
+    CommandLine cli_;
+    DaemonConfig config_;
+    SdNotifier notifier_;
+    std::unique_ptr<ReportHub> hub_;
+    std::unique_ptr<LogService> log_;
+    std::unique_ptr<LogEvents> events_;
+    std::unique_ptr<SocketService> socket_;
+    std::unique_ptr<Pipeline> pipeline_;
+    bool tty_ = false;
+    std::int64_t last_status_ns_ = 0;
+    std::int64_t last_line_ns_ = 0;
+    std::int64_t last_watchdog_ns_ = 0;
+    std::uint64_t last_heartbeat_ = 0;
+    std::string last_log_fault_;
+};
+
+int Daemon::run() {
+    // Signals go to the main loop only (sigtimedwait); the threads started
+    // below inherit the mask. A client that hangs up must not kill us.
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGTERM);
+    sigaddset(&signals, SIGINT);
+    sigaddset(&signals, SIGHUP);
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+    std::signal(SIGPIPE, SIG_IGN);  // NOLINT(cert-err33-c): the previous handler is not needed
+
+    tty_ = !cli_.no_tty && isatty(STDERR_FILENO) == 1;
+    printInfo(std::string("scaled ") + version() + ", config " +
+              (config_.file.empty() ? std::string("built-in defaults") : config_.file.string()) +
+              ", source " + sourceName(config_.source));
+
+    // 1. The report hub everything publishes to.
+    const auto bins = static_cast<std::size_t>(config_.pipeline.estimator.posterior.grid.bins);
+    hub_ = std::make_unique<ReportHub>(bins);
+
+    // 2. The field log first, so that everything after it is logged. A log
+    //    that cannot open is a fault, not a reason to stop serving the scale.
+    auto log = LogService::create(config_.log, *hub_);
+    if (!log) {
+        printError("log: " + log.error().message);
+        return EX_CONFIG;
+    }
+    log_ = std::move(*log);
+    log_->start();
+    events_ = std::make_unique<LogEvents>(*log_);
+    events_->start(version(), sourceName(config_.source), toToml(config_));
+
+    // 3. Source, detector, priors.
+    PipelineParts parts;
+    if (auto f = openParts(config_, parts)) {
+        printError(f->message);
+        events_->onError("start", f->message);
+        teardown("start failed");
+        return f->exit_code;
+    }
+
+    // 4. The socket.
+    auto sock = SocketService::create(config_.socket, *hub_, version());
+    if (!sock) {
+        printError("socket: " + sock.error().message);
+        events_->onError("socket", sock.error().message);
+        teardown("socket failed");
+        return EX_CANTCREAT;
+    }
+    socket_ = std::move(*sock);
+
+    // 5. The pipeline.
+    auto pipeline = Pipeline::create(config_, std::move(parts), *hub_, events_.get());
+    if (!pipeline) {
+        printError("pipeline: " + pipeline.error().message);
+        teardown("pipeline failed");
+        return exitCodeFor(pipeline.error(), EX_SOFTWARE);
+    }
+    pipeline_ = std::move(*pipeline);
+    if (auto s = socket_->start(); !s) {
+        printError("socket: " + s.error().message);
+        teardown("socket failed");
+        return EX_CANTCREAT;
+    }
+    if (auto s = pipeline_->start(); !s) {
+        printError("pipeline: " + s.error().message);
+        teardown("pipeline failed");
+        return EX_SOFTWARE;
+    }
+    printInfo("listening on " + socket_->path().string() +
+              (socket_->socketActivated() ? " (socket activation)" : ""));
+    notifier_.notify("READY=1\nSTATUS=started, " + sourceName(config_.source));
+
+    // 6. The main loop: signals, watchdog, status.
+    const char* reason = "end of source";
+    int exit_code = EX_OK;
+    while (true) {
+        timespec wait{0, 100'000'000};
+        const int sig = sigtimedwait(&signals, nullptr, &wait);
+        if (sig == SIGTERM || sig == SIGINT) {
+            reason = sig == SIGTERM ? "SIGTERM" : "SIGINT";
+            break;
+        }
+        if (sig == SIGHUP) {
+            reload();
+        }
+        tick(monotonicNowNs());
+        if (pipeline_->finished()) {
+            if (auto f = pipeline_->failure()) {
+                printError(f->message);
+                reason = "source failed";
+                exit_code = EX_IOERR;
+            }
+            break;
+        }
+    }
+    if (tty_) {
+        std::fputc('\n', stderr);
+    }
+    printInfo(std::string("stopping (") + reason + "), " + formatScale(hub_->scale()));
+    teardown(reason);
+    return exit_code;
+}
+
+void Daemon::tick(std::int64_t now_ns) {
+    const PipelineStatus st = hub_->status();
+    const ScaleReport r = hub_->scale();
+    // Watchdog: only while the tracking loop moves, so a stuck pipeline gets restarted.
+    if (auto wd = notifier_.watchdogTimeout()) {
+        const std::int64_t half_ns = wd->count() * 1000 / 2;
+        const std::uint64_t hb = pipeline_->heartbeat();
+        if (now_ns - last_watchdog_ns_ >= half_ns && hb != last_heartbeat_) {
+            notifier_.notify("WATCHDOG=1");
+            last_watchdog_ns_ = now_ns;
+            last_heartbeat_ = hb;
+        }
+    }
+    // A field-log fault shows in every SCALE report.
+    const LogStatus ls = hub_->logStatus();
+    const std::string log_fault =
+        ls.state == LogStatus::State::kFault ? "log: " + ls.error : std::string();
+    if (log_fault != last_log_fault_) {
+        pipeline_->setFault(log_fault);
+        if (!log_fault.empty()) {
+            printError(log_fault + " (logging stopped; the scale is still served)");
+        }
+        last_log_fault_ = log_fault;
+    }
+    if (now_ns - last_status_ns_ >=
+        static_cast<std::int64_t>(config_.queues.status_interval_ms) * 1'000'000) {
+        char fps[32];
+        std::snprintf(fps, sizeof fps, ", %.1f fps", st.fps);
+        notifier_.notify("STATUS=" + formatScale(r) + fps);
+        last_status_ns_ = now_ns;
+    }
+    if (tty_ && now_ns - last_line_ns_ >= 250'000'000) {
+        printStatusLine(st, r);
+        last_line_ns_ = now_ns;
+    }
+}
+
+// SIGHUP: re-read the file; apply the priors, the detector and the detection
+// schedule; keep the posterior. Anything else that changed needs a restart.
+void Daemon::reload() {
+    notifier_.notify("RELOADING=1");
+    auto fresh = loadDaemonConfig(cli_, config_.file);
+    if (!fresh) {
+        printError("reload: " + fresh.error().message + " (keeping the running configuration)");
+        events_->onError("reload", fresh.error().message);
+        notifier_.notify("READY=1");
+        return;
+    }
+    DaemonConfig next = config_;
+    next.pipeline.priors_path = fresh->pipeline.priors_path;
+    next.pipeline.detector = fresh->pipeline.detector;
+    next.pipeline.detection = fresh->pipeline.detection;
+    auto priors = openPriors(next);
+    auto det = openDetector(next);
+    if (!priors || !det) {
+        const std::string msg = !priors ? priors.error().message : det.error().message;
+        printError("reload: " + msg + " (keeping the running configuration)");
+        events_->onError("reload", msg);
+        notifier_.notify("READY=1");
+        return;
+    }
+    if (toToml(*fresh) != toToml(next)) {
+        printInfo(
+            "reload: only estimator.priors, [detector] and [detection] are reloaded; other "
+            "changes take effect at the next restart");
+    }
+    pipeline_->reload(std::move(*priors), std::move(*det), next.pipeline.detection);
+    config_ = std::move(next);
+    printInfo("reload: priors " + config_.pipeline.priors_path.string() + " and detector reloaded");
+    events_->onError("reload", "reloaded priors, detector and detection schedule (not an error)");
+    notifier_.notify("READY=1");
+}
+
+// Reverse order of start-up: nothing new comes in, then the pipeline drains,
+// then the socket closes, and the log is flushed and synced last.
+void Daemon::teardown(const char* reason) {
+    notifier_.notify("STOPPING=1");
+    if (pipeline_) {
+        pipeline_->stop();
+    }
+    if (socket_) {
+        socket_->stop();
+    }
+    if (events_) {
+        events_->stop(reason);
+    }
+    if (log_) {
+        log_->stop();
+    }
+}
+
+}  // namespace
+
+int runMain(int argc, const char* const* argv) {
+    ParsedCommandLine parsed = parseCommandLine(argc, argv);
+    if (parsed.exit_now) {
+        if (!parsed.output.empty()) {
+            std::fputs(parsed.output.c_str(), stdout);
+        }
+        if (!parsed.error.empty()) {
+            std::fprintf(stderr, "scaled: %s\n", parsed.error.c_str());
+        }
+        return parsed.exit_code;
+    }
+    const std::filesystem::path default_file =
+        std::filesystem::path(SCALED_SYSCONFDIR) / "scaled" / "scaled.toml";
+    auto config = loadDaemonConfig(parsed.cli, default_file);
+    if (!config) {
+        printError(config.error().message);
+        return EX_CONFIG;
+    }
+    if (parsed.cli.check_config) {
+        std::printf("%s: configuration OK\n",
+                    config->file.empty() ? "built-in defaults" : config->file.string().c_str());
+        return EX_OK;
+    }
+    Daemon daemon(std::move(parsed.cli), std::move(*config));
+    return daemon.run();
+}
+
+}  // namespace scaled::daemon

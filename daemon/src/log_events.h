@@ -1,0 +1,116 @@
+#pragma once
+
+// PipelineEvents written to the field log: the pipeline's callbacks turned
+// into LogService events. Box and observation lists are converted into
+// buffers reserved here (the detection thread is their only caller).
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <string>
+#include <string_view>
+
+#include <scaled/daemon/log_service.h>
+#include <scaled/daemon/pipeline.h>
+
+namespace scaled::daemon {
+
+class LogEvents final : public PipelineEvents {
+public:
+    explicit LogEvents(LogService& log) : log_(log) {}
+
+    void start(std::string_view release, std::string_view source, const std::string& config) {
+        StartEvent e;
+        e.release = release;
+        e.source = source;
+        e.config_toml = config;
+        log_.startEvent(e);
+    }
+    void stop(std::string_view reason) {
+        StopEvent e;
+        e.reason = reason;
+        log_.stopEvent(e);
+    }
+
+    void onFrame(const Frame& f) override {
+        FrameEvent e;
+        e.frame_id = f.frame_id;
+        e.t_ns = f.t_ns;
+        e.epoch = f.epoch;
+        e.health = f.health;
+        e.features = f.features;
+        e.tracked = f.tracked;
+        e.ms = f.ms;
+        e.dropped = f.dropped;
+        log_.frameEvent(e);
+    }
+
+    void onDetection(const detector::DetectionResult& r, std::uint64_t epoch,
+                     double latency_ms) override {
+        const std::size_t n = std::min(r.detections.size(), boxes_.size());
+        for (std::size_t i = 0; i < n; ++i) {
+            const auto& d = r.detections[i];
+            boxes_[i] = LogBox{d.class_name,
+                               static_cast<double>(d.score),
+                               static_cast<double>(d.box.x_min_px),
+                               static_cast<double>(d.box.y_min_px),
+                               static_cast<double>(d.box.x_max_px),
+                               static_cast<double>(d.box.y_max_px)};
+        }
+        DetectionEvent e;
+        e.frame_id = r.frame_id;
+        e.t_ns = r.t_ns;
+        e.epoch = epoch;
+        e.latency_ms = latency_ms;
+        e.boxes = std::span<const LogBox>(boxes_.data(), n);
+        log_.detectionEvent(e);
+    }
+
+    void onScale(const Scale& s) override {
+        ScaleEvent e = scaleEventFrom(*s.report);
+        e.new_observations = s.new_observations;
+        e.detections = s.detections;
+        const std::size_t n = std::min(s.records.size(), obs_.size());
+        for (std::size_t i = 0; i < n; ++i) {
+            const auto& rec = s.records[i];
+            const auto det = static_cast<std::size_t>(rec.detection_index);
+            const double sigma = s.paper_variance
+                                     ? static_cast<double>(rec.sigma_D_paper)
+                                     : std::hypot(static_cast<double>(rec.sigma_D_feature),
+                                                  static_cast<double>(rec.sigma_D_box));
+            obs_[i] = LogObservation{
+                det < s.detections_used.size() ? s.detections_used[det].class_name
+                                               : std::string_view("?"),
+                static_cast<double>(rec.D), sigma, static_cast<double>(rec.local_estimate),
+                static_cast<double>(rec.weight)};
+        }
+        e.obs = std::span<const LogObservation>(obs_.data(), n);
+        log_.scaleEvent(e);
+    }
+
+    void onState(DaemonState from, DaemonState to, std::uint64_t epoch, std::int64_t frame_id,
+                 const char* reason) override {
+        StateEvent e;
+        e.from = from;
+        e.to = to;
+        e.epoch = epoch;
+        e.frame_id = frame_id;
+        e.reason = reason;
+        log_.stateEvent(e);
+    }
+
+    void onError(const char* where, const std::string& message) override {
+        ErrorEvent e;
+        e.where = where;
+        e.message = message;
+        log_.errorEvent(e);
+    }
+
+private:
+    LogService& log_;
+    std::array<LogBox, 256> boxes_{};
+    std::array<LogObservation, kMaxLoggedObservations> obs_{};
+};
+
+}  // namespace scaled::daemon
