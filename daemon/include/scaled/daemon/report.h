@@ -129,7 +129,9 @@ public:
 
     // An eventfd that becomes readable after publishScale(); a poll() loop
     // waits on it and calls consumeWake() before reading. -1 if eventfd failed
-    // (then readers must poll scaleSequence()).
+    // (then readers must poll scaleSequence()). It has ONE reader, the socket
+    // service: a second consumer would steal its wakes. Others (the main
+    // loop, LEDs) poll scaleSequence().
     [[nodiscard]] int wakeFd() const { return wake_fd_; }
     void consumeWake() const;
 
