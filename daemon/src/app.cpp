@@ -403,7 +403,9 @@ void Daemon::reload() {
     pipeline_->reload(std::move(*priors), std::move(*det), next.pipeline.detection);
     config_ = std::move(next);
     printInfo("reload: priors " + config_.pipeline.priors_path.string() + " and detector reloaded");
-    events_->onError("reload", "reloaded priors, detector and detection schedule (not an error)");
+    const ScaleReport now = hub_->scale();
+    events_->onState(now.state, now.state, now.epoch, now.frame_id,
+                     "reload: priors, detector and detection schedule");
     notifier_.notify("READY=1");
 }
 

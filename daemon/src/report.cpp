@@ -61,6 +61,11 @@ void ReportHub::publishScale(const ScaleReport& report, std::span<const double> 
     {
         const std::lock_guard lock(mutex_);
         scale_ = report;
+        if (report.epoch != posterior_.epoch) {
+            // A new map: the old posterior is about a scale that no longer exists.
+            has_posterior_ = false;
+            posterior_.epoch = report.epoch;
+        }
         if (!grid_d.empty() && grid_d.size() == log_p.size() &&
             grid_d.size() <= posterior_.d.capacity()) {
             posterior_.d.assign(grid_d.begin(), grid_d.end());

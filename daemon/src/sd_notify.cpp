@@ -66,8 +66,11 @@ bool SdNotifier::notify(std::string_view state) const {
     if (fd_ < 0) {
         return false;
     }
+    // Never block: if the manager does not read its socket (its queue holds
+    // net.unix.max_dgram_qlen datagrams), a notification is dropped rather
+    // than stalling the main loop, which must stay free to handle SIGTERM.
     const ssize_t sent =
-        sendto(fd_, state.data(), state.size(), MSG_NOSIGNAL,
+        sendto(fd_, state.data(), state.size(), MSG_NOSIGNAL | MSG_DONTWAIT,
                reinterpret_cast<const sockaddr*>(address_),  // NOLINT: sockaddr API
                address_len_);
     return sent == static_cast<ssize_t>(state.size());

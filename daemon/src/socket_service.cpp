@@ -309,7 +309,8 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
         }
         case Command::kPosterior:
             if (!svc.hub_.posterior(posterior)) {
-                posterior.epoch = 0;
+                // No evidence yet in this epoch: an empty grid, the current epoch.
+                posterior.epoch = svc.hub_.scale().epoch;
                 posterior.frame_id = -1;
                 posterior.observations = 0;
                 posterior.d.clear();

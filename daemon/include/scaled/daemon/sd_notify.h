@@ -25,6 +25,8 @@ public:
 
     // Sends `state` (e.g. "READY=1", "STATUS=converged 0.976", "WATCHDOG=1",
     // "STOPPING=1"; several lines joined by '\n'). true when it was sent.
+    // Never blocks: when the manager's queue is full the message is dropped
+    // (false).
     bool notify(std::string_view state) const;
 
     [[nodiscard]] bool enabled() const { return fd_ >= 0; }
