@@ -429,9 +429,14 @@ TEST_F(DaemonTest, NonReadingClientIsDetachedWithoutStallingThePipeline) {
     }
     const auto st = status(ctl);
     ASSERT_TRUE(st.has_value());
+    EXPECT_GE((*st)["clients"].value("detached", 0), 1);
+#if defined(__SANITIZE_ADDRESS__)
+    // Under ASan the real-time sim itself runs below 30 fps and drops frames
+    // whatever the clients do; the frame-rate half is checked in release.
+    GTEST_SKIP() << "frame rate not checked under AddressSanitizer (detach checked above)";
+#endif
     EXPECT_EQ((*st)["frames"].value("dropped", -1), 0) << st->dump();
     EXPECT_GT(st->value("fps", 0.0), 20.0) << "the daemon's own fps counter: " << st->dump();
-    EXPECT_GE((*st)["clients"].value("detached", 0), 1);
 }
 
 // 7. Malformed requests: one ERROR each, and the connection stays usable.
