@@ -8,6 +8,7 @@
 #include <cstring>
 #include <utility>
 
+#include <scaled/daemon/json_write.h>
 #include <scaled/daemon/log_service.h>
 #include <scaled/drivers/field_log.h>
 
@@ -21,101 +22,8 @@ namespace {
 
 // --- JSON pieces --------------------------------------------------------------
 
-// Length of the valid UTF-8 sequence starting at s[i], 0 if invalid.
-std::size_t utf8Length(std::string_view s, std::size_t i) {
-    const auto b = static_cast<unsigned char>(s[i]);
-    std::size_t n = 0;
-    unsigned min = 0;
-    unsigned cp = 0;
-    if (b < 0x80) {
-        return 1;
-    }
-    if (b >= 0xC2 && b <= 0xDF) {
-        n = 2;
-        cp = b & 0x1Fu;
-        min = 0x80;
-    } else if (b >= 0xE0 && b <= 0xEF) {
-        n = 3;
-        cp = b & 0x0Fu;
-        min = 0x800;
-    } else if (b >= 0xF0 && b <= 0xF4) {
-        n = 4;
-        cp = b & 0x07u;
-        min = 0x10000;
-    } else {
-        return 0;
-    }
-    if (i + n > s.size()) {
-        return 0;
-    }
-    for (std::size_t k = 1; k < n; ++k) {
-        const auto c = static_cast<unsigned char>(s[i + k]);
-        if ((c & 0xC0u) != 0x80u) {
-            return 0;
-        }
-        cp = (cp << 6u) | (c & 0x3Fu);
-    }
-    if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) {
-        return 0;
-    }
-    return n;
-}
-
-void appendString(std::string& out, std::string_view s) {
-    static constexpr char kHex[] = "0123456789abcdef";
-    out += '"';
-    for (std::size_t i = 0; i < s.size();) {
-        const char c = s[i];
-        const auto u = static_cast<unsigned char>(c);
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-            ++i;
-        } else if (c == '\n') {
-            out += "\\n";
-            ++i;
-        } else if (c == '\t') {
-            out += "\\t";
-            ++i;
-        } else if (c == '\r') {
-            out += "\\r";
-            ++i;
-        } else if (u < 0x20 || u == 0x7F) {
-            out += "\\u00";
-            out += kHex[u >> 4u];
-            out += kHex[u & 0xFu];
-            ++i;
-        } else if (u < 0x80) {
-            out += c;
-            ++i;
-        } else if (const std::size_t n = utf8Length(s, i); n > 0) {
-            out.append(s.substr(i, n));
-            i += n;
-        } else {
-            out += "\\ufffd";
-            ++i;
-        }
-    }
-    out += '"';
-}
-
-void appendNumber(std::string& out, double v, int digits = 9) {
-    if (!std::isfinite(v)) {
-        out += "null";
-        return;
-    }
-    std::array<char, 32> buf{};
-    const auto r =
-        std::to_chars(buf.data(), buf.data() + buf.size(), v, std::chars_format::general, digits);
-    out.append(buf.data(), r.ptr);
-}
-
-template <typename Int>
-void appendInt(std::string& out, Int v) {
-    std::array<char, 24> buf{};
-    const auto r = std::to_chars(buf.data(), buf.data() + buf.size(), v);
-    out.append(buf.data(), r.ptr);
-}
+// Numbers in the log keep 9 significant digits unless a field says otherwise.
+constexpr int kLogDigits = 9;
 
 void key(std::string& out, const char* name) {
     out += ",\"";
@@ -128,16 +36,16 @@ void begin(std::string& out, const char* cls, std::int64_t mono_ns) {
     out += "{\"class\":\"";
     out += cls;
     out += "\",\"mono_ns\":";
-    appendInt(out, mono_ns != 0 ? mono_ns : monotonicNowNs());
+    appendJsonInt(out, mono_ns != 0 ? mono_ns : monotonicNowNs());
 }
 
 void frameFields(std::string& out, std::int64_t frame_id, std::int64_t t_ns, std::uint64_t epoch) {
     key(out, "frame_id");
-    appendInt(out, frame_id);
+    appendJsonInt(out, frame_id);
     key(out, "t_ns");
-    appendInt(out, t_ns);
+    appendJsonInt(out, t_ns);
     key(out, "epoch");
-    appendInt(out, epoch);
+    appendJsonInt(out, epoch);
 }
 
 void pair(std::string& out, bool has, double lo, double hi) {
@@ -146,9 +54,9 @@ void pair(std::string& out, bool has, double lo, double hi) {
         return;
     }
     out += '[';
-    appendNumber(out, lo);
+    appendJsonNumber(out, lo, kLogDigits);
     out += ',';
-    appendNumber(out, hi);
+    appendJsonNumber(out, hi, kLogDigits);
     out += ']';
 }
 
@@ -186,18 +94,18 @@ ScaleEvent scaleEventFrom(const ScaleReport& report) {
 void formatEvent(const StartEvent& event, std::string& out) {
     begin(out, "START", event.mono_ns);
     key(out, "release");
-    appendString(out, event.release);
+    appendJsonString(out, event.release);
     key(out, "source");
-    appendString(out, event.source);
+    appendJsonString(out, event.source);
     key(out, "config");
-    appendString(out, event.config_toml);
+    appendJsonString(out, event.config_toml);
     out += '}';
 }
 
 void formatEvent(const StopEvent& event, std::string& out) {
     begin(out, "STOP", event.mono_ns);
     key(out, "reason");
-    appendString(out, event.reason);
+    appendJsonString(out, event.reason);
     out += '}';
 }
 
@@ -205,15 +113,15 @@ void formatEvent(const FrameEvent& event, std::string& out) {
     begin(out, "FRAME", event.mono_ns);
     frameFields(out, event.frame_id, event.t_ns, event.epoch);
     key(out, "health");
-    appendString(out, event.health);
+    appendJsonString(out, event.health);
     key(out, "features");
-    appendInt(out, event.features);
+    appendJsonInt(out, event.features);
     key(out, "tracked");
-    appendInt(out, event.tracked);
+    appendJsonInt(out, event.tracked);
     key(out, "ms");
-    appendNumber(out, event.ms, 5);
+    appendJsonNumber(out, event.ms, 5);
     key(out, "dropped");
-    appendInt(out, event.dropped);
+    appendJsonInt(out, event.dropped);
     out += '}';
 }
 
@@ -221,25 +129,25 @@ void formatEvent(const DetectionEvent& event, std::string& out) {
     begin(out, "DETECTION", event.mono_ns);
     frameFields(out, event.frame_id, event.t_ns, event.epoch);
     key(out, "latency_ms");
-    appendNumber(out, event.latency_ms, 5);
+    appendJsonNumber(out, event.latency_ms, 5);
     key(out, "boxes");
     out += '[';
     bool first = true;
     for (const LogBox& b : event.boxes) {
         out += first ? "{\"class\":" : ",{\"class\":";
         first = false;
-        appendString(out, b.class_name);
+        appendJsonString(out, b.class_name);
         key(out, "score");
-        appendNumber(out, b.score, 4);
+        appendJsonNumber(out, b.score, 4);
         key(out, "box");
         out += '[';
-        appendNumber(out, b.x0, 6);
+        appendJsonNumber(out, b.x0, 6);
         out += ',';
-        appendNumber(out, b.y0, 6);
+        appendJsonNumber(out, b.y0, 6);
         out += ',';
-        appendNumber(out, b.x1, 6);
+        appendJsonNumber(out, b.x1, 6);
         out += ',';
-        appendNumber(out, b.y1, 6);
+        appendJsonNumber(out, b.y1, 6);
         out += "]}";
     }
     out += "]}";
@@ -249,16 +157,16 @@ void formatEvent(const ScaleEvent& event, std::string& out) {
     begin(out, "SCALE", event.mono_ns);
     frameFields(out, event.frame_id, event.t_ns, event.epoch);
     key(out, "state");
-    appendString(out, toString(event.state));
+    appendJsonString(out, toString(event.state));
     key(out, "scale");
     if (event.has_scale) {
-        appendNumber(out, event.scale);
+        appendJsonNumber(out, event.scale, kLogDigits);
     } else {
         out += "null";
     }
     key(out, "mean");
     if (event.has_scale) {
-        appendNumber(out, event.mean);
+        appendJsonNumber(out, event.mean, kLogDigits);
     } else {
         out += "null";
     }
@@ -267,26 +175,26 @@ void formatEvent(const ScaleEvent& event, std::string& out) {
     key(out, "ci95");
     pair(out, event.has_scale, event.ci95_lo, event.ci95_hi);
     key(out, "observations");
-    appendInt(out, event.observations);
+    appendJsonInt(out, event.observations);
     key(out, "new_observations");
-    appendInt(out, event.new_observations);
+    appendJsonInt(out, event.new_observations);
     key(out, "detections");
-    appendInt(out, event.detections);
+    appendJsonInt(out, event.detections);
     key(out, "obs");
     out += '[';
     const std::size_t n = std::min(event.obs.size(), kMaxLoggedObservations);
     for (std::size_t i = 0; i < n; ++i) {
         const LogObservation& o = event.obs[i];
         out += i == 0 ? "{\"class\":" : ",{\"class\":";
-        appendString(out, o.class_name);
+        appendJsonString(out, o.class_name);
         key(out, "D");
-        appendNumber(out, o.D, 7);
+        appendJsonNumber(out, o.D, 7);
         key(out, "sigma_D");
-        appendNumber(out, o.sigma_D, 5);
+        appendJsonNumber(out, o.sigma_D, 5);
         key(out, "local");
-        appendNumber(out, o.local, 6);
+        appendJsonNumber(out, o.local, 6);
         key(out, "weight");
-        appendNumber(out, o.weight, 4);
+        appendJsonNumber(out, o.weight, 4);
         out += '}';
     }
     out += "]}";
@@ -295,24 +203,24 @@ void formatEvent(const ScaleEvent& event, std::string& out) {
 void formatEvent(const StateEvent& event, std::string& out) {
     begin(out, "STATE", event.mono_ns);
     key(out, "from");
-    appendString(out, toString(event.from));
+    appendJsonString(out, toString(event.from));
     key(out, "to");
-    appendString(out, toString(event.to));
+    appendJsonString(out, toString(event.to));
     key(out, "epoch");
-    appendInt(out, event.epoch);
+    appendJsonInt(out, event.epoch);
     key(out, "frame_id");
-    appendInt(out, event.frame_id);
+    appendJsonInt(out, event.frame_id);
     key(out, "reason");
-    appendString(out, event.reason);
+    appendJsonString(out, event.reason);
     out += '}';
 }
 
 void formatEvent(const ErrorEvent& event, std::string& out) {
     begin(out, "ERROR", event.mono_ns);
     key(out, "where");
-    appendString(out, event.where);
+    appendJsonString(out, event.where);
     key(out, "message");
-    appendString(out, event.message);
+    appendJsonString(out, event.message);
     out += '}';
 }
 

@@ -10,13 +10,6 @@
 namespace scaled::daemon {
 namespace {
 
-template <typename Int>
-void appendInt(std::string& out, Int value) {
-    std::array<char, 24> buf{};
-    const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
-    out.append(buf.data(), res.ptr);
-}
-
 void appendBool(std::string& out, bool value) {
     out += value ? "true" : "false";
 }
@@ -49,46 +42,6 @@ void appendArray(std::string& out, std::span<const double> values) {
         appendJsonNumber(out, values[i]);
     }
     out += ']';
-}
-
-// Length of the valid UTF-8 sequence at s[i] (0 when invalid).
-std::size_t utf8Length(std::string_view s, std::size_t i) {
-    const auto b0 = static_cast<unsigned char>(s[i]);
-    std::size_t n = 0;
-    unsigned min = 0;
-    unsigned cp = 0;
-    if (b0 < 0x80U) {
-        return 1;
-    }
-    if ((b0 & 0xE0U) == 0xC0U) {
-        n = 2;
-        min = 0x80U;
-        cp = b0 & 0x1FU;
-    } else if ((b0 & 0xF0U) == 0xE0U) {
-        n = 3;
-        min = 0x800U;
-        cp = b0 & 0x0FU;
-    } else if ((b0 & 0xF8U) == 0xF0U) {
-        n = 4;
-        min = 0x10000U;
-        cp = b0 & 0x07U;
-    } else {
-        return 0;
-    }
-    if (i + n > s.size()) {
-        return 0;
-    }
-    for (std::size_t k = 1; k < n; ++k) {
-        const auto b = static_cast<unsigned char>(s[i + k]);
-        if ((b & 0xC0U) != 0x80U) {
-            return 0;
-        }
-        cp = (cp << 6U) | (b & 0x3FU);
-    }
-    if (cp < min || cp > 0x10FFFFU || (cp >= 0xD800U && cp <= 0xDFFFU)) {
-        return 0;
-    }
-    return n;
 }
 
 // Euclidean norm without overflow for huge components.
@@ -130,70 +83,13 @@ const char* toString(Command command) {
     return "";
 }
 
-void appendJsonNumber(std::string& out, double value) {
-    if (!std::isfinite(value)) {
-        out += "null";
-        return;
-    }
-    std::array<char, 32> buf{};
-    const auto res = std::to_chars(buf.data(), buf.data() + buf.size(), value);
-    out.append(buf.data(), res.ptr);
-}
-
-void appendJsonString(std::string& out, std::string_view text) {
-    static constexpr std::string_view kHex = "0123456789abcdef";
-    out += '"';
-    std::size_t i = 0;
-    while (i < text.size()) {
-        const auto c = static_cast<unsigned char>(text[i]);
-        if (c >= 0x80U) {
-            const std::size_t n = utf8Length(text, i);
-            if (n == 0) {
-                out += "\xEF\xBF\xBD";  // U+FFFD
-                ++i;
-            } else {
-                out.append(text.substr(i, n));
-                i += n;
-            }
-            continue;
-        }
-        switch (c) {
-            case '"':
-                out += "\\\"";
-                break;
-            case '\\':
-                out += "\\\\";
-                break;
-            case '\n':
-                out += "\\n";
-                break;
-            case '\r':
-                out += "\\r";
-                break;
-            case '\t':
-                out += "\\t";
-                break;
-            default:
-                if (c < 0x20U || c == 0x7FU) {
-                    out += "\\u00";
-                    out += kHex[c >> 4U];
-                    out += kHex[c & 0xFU];
-                } else {
-                    out += static_cast<char>(c);
-                }
-        }
-        ++i;
-    }
-    out += '"';
-}
-
 void appendVersion(std::string& out, std::string_view release) {
     out += R"({"class":"VERSION","release":)";
     appendJsonString(out, release);
     key(out, "proto_major");
-    appendInt(out, kProtoMajor);
+    appendJsonInt(out, kProtoMajor);
     key(out, "proto_minor");
-    appendInt(out, kProtoMinor);
+    appendJsonInt(out, kProtoMinor);
     out += "}\n";
 }
 
@@ -217,13 +113,13 @@ void appendScale(std::string& out, const ScaleReport& r, std::int64_t now_mono_n
     key(out, "state");
     appendJsonString(out, toString(r.state));
     key(out, "epoch");
-    appendInt(out, r.epoch);
+    appendJsonInt(out, r.epoch);
     key(out, "observations");
-    appendInt(out, r.observations);
+    appendJsonInt(out, r.observations);
     key(out, "frame_id");
-    appendInt(out, r.frame_id);
+    appendJsonInt(out, r.frame_id);
     key(out, "t_ns");
-    appendInt(out, r.t_ns);
+    appendJsonInt(out, r.t_ns);
     key(out, "time");
     appendJsonNumber(out, static_cast<double>(r.t_ns) * 1e-9);
     key(out, "age_s");
@@ -248,21 +144,21 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     key(out, "fps");
     appendJsonNumber(out, s.fps);
     key(out, "frame_id");
-    appendInt(out, s.frame_id);
+    appendJsonInt(out, s.frame_id);
     key(out, "frames_total");
-    appendInt(out, s.frames_total);
+    appendJsonInt(out, s.frames_total);
     key(out, "source_finished");
     appendBool(out, s.source_finished);
     out += R"(,"frames":{"captured":)";
-    appendInt(out, s.frames_captured);
+    appendJsonInt(out, s.frames_captured);
     key(out, "tracked");
-    appendInt(out, s.frames_tracked);
+    appendJsonInt(out, s.frames_tracked);
     key(out, "dropped");
-    appendInt(out, s.frames_dropped);
+    appendJsonInt(out, s.frames_dropped);
     out += R"(},"detector":{"runs":)";
-    appendInt(out, s.detections_run);
+    appendJsonInt(out, s.detections_run);
     key(out, "skipped");
-    appendInt(out, s.detections_skipped);
+    appendJsonInt(out, s.detections_skipped);
     out += R"(,"latency_ms":{"last":)";
     appendJsonNumber(out, s.detector_latency_ms_last);
     key(out, "mean");
@@ -273,32 +169,32 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     key(out, "tracking_ms_mean");
     appendJsonNumber(out, s.tracking_ms_mean);
     out += R"(,"features":{"in_map":)";
-    appendInt(out, s.features_in_map);
+    appendJsonInt(out, s.features_in_map);
     key(out, "tracked");
-    appendInt(out, s.features_tracked);
+    appendJsonInt(out, s.features_tracked);
     out += '}';
     key(out, "scale_updates");
-    appendInt(out, s.scale_updates);
+    appendJsonInt(out, s.scale_updates);
     key(out, "epoch");
-    appendInt(out, s.epoch);
+    appendJsonInt(out, s.epoch);
     out += R"(,"clients":{"connected":)";
-    appendInt(out, clients.connected);
+    appendJsonInt(out, clients.connected);
     key(out, "max");
-    appendInt(out, clients.max);
+    appendJsonInt(out, clients.max);
     key(out, "accepted");
-    appendInt(out, clients.accepted);
+    appendJsonInt(out, clients.accepted);
     key(out, "rejected");
-    appendInt(out, clients.rejected);
+    appendJsonInt(out, clients.rejected);
     key(out, "detached");
-    appendInt(out, clients.detached);
+    appendJsonInt(out, clients.detached);
     out += R"(},"log":{"state":)";
     appendJsonString(out, toString(log.state));
     key(out, "lines");
-    appendInt(out, log.lines_written);
+    appendJsonInt(out, log.lines_written);
     key(out, "dropped");
-    appendInt(out, log.lines_dropped);
+    appendJsonInt(out, log.lines_dropped);
     key(out, "bytes");
-    appendInt(out, log.bytes_written);
+    appendJsonInt(out, log.bytes_written);
     if (!log.error.empty()) {
         key(out, "error");
         appendJsonString(out, log.error);
@@ -308,11 +204,11 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
 
 void appendPosterior(std::string& out, const PosteriorSnapshot& p) {
     out += R"({"class":"POSTERIOR","epoch":)";
-    appendInt(out, p.epoch);
+    appendJsonInt(out, p.epoch);
     key(out, "frame_id");
-    appendInt(out, p.frame_id);
+    appendJsonInt(out, p.frame_id);
     key(out, "observations");
-    appendInt(out, p.observations);
+    appendJsonInt(out, p.observations);
     const std::size_t n = std::min(p.d.size(), p.log_p.size());
     key(out, "d");
     appendArray(out, std::span<const double>(p.d.data(), n));

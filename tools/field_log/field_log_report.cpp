@@ -11,6 +11,7 @@
 #include <set>
 #include <utility>
 
+#include "files.h"
 #include "json.h"
 
 namespace scaled::tools {
@@ -69,7 +70,7 @@ bool interval(const json& j, const char* key, double& lo, double& hi) {
 }
 
 std::string field(std::optional<double> v, int digits = 7) {
-    return v ? jsonNumber(*v, digits) : std::string();
+    return jsonNumberOr(v, digits, "");
 }
 
 std::string intField(std::optional<std::int64_t> v) {
@@ -288,7 +289,7 @@ private:
 };
 
 std::string num(std::optional<double> v, int digits = 7) {
-    return v ? jsonNumber(*v, digits) : "null";
+    return jsonNumberOr(v, digits, "null");
 }
 
 }  // namespace
@@ -402,13 +403,10 @@ std::string toText(const FieldLogAnalysis& a) {
 }
 
 Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir) {
-    const std::filesystem::path dir(out_dir);
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec) {
-        return makeError(ErrorCode::kIo,
-                         out_dir + ": cannot create the output directory: " + ec.message());
+    if (auto ok = createOutputDir(out_dir); !ok) {
+        return ok;
     }
+    const std::filesystem::path dir(out_dir);
     const auto write = [&](const char* name, const char* header,
                            const std::vector<std::string>& rows) -> Result<bool> {
         const std::filesystem::path path = dir / name;

@@ -8,18 +8,14 @@
 // write --out, 74 the log cannot be read.
 
 #include <cstdio>
-#include <cstdlib>
-#include <filesystem>
-#include <spawn.h>
 #include <string>
 #include <string_view>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <vector>
 
 #include <scaled/drivers/field_log.h>
 
 #include "field_log_report.h"
+#include "plot.h"
 #include "sysexits.h"
 
 namespace {
@@ -41,42 +37,6 @@ void usage(std::FILE* to) {
         "  --title TEXT    appended to the figure titles\n"
         "Exit codes: 64 usage, 65 no readable line, 66 log not found, 69 figures not drawn\n"
         "(CSV files kept), 73 cannot write --out, 74 cannot read the log.\n");
-}
-
-// Runs the plotting script; its exit code (or 69 when it cannot start).
-int drawFigures(const std::string& out_dir, const std::string& title) {
-    const std::string script = std::string(SCALED_SOURCE_DIR) + "/tools/scale_eval_plot.py";
-    std::string python =
-        std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-    if (const char* env = std::getenv("SCALED_PYTHON"); env != nullptr && *env != '\0') {
-        python = env;
-    }
-    std::vector<std::string> args = {python, script, out_dir, "--no-curves"};
-    if (!title.empty()) {
-        args.emplace_back("--title");
-        args.push_back(title);
-    }
-    std::vector<char*> argv;
-    argv.reserve(args.size() + 1);
-    for (auto& a : args) {
-        argv.push_back(a.data());
-    }
-    argv.push_back(nullptr);
-    // The script's messages go to stderr: stdout may carry --json.
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_adddup2(&actions, STDERR_FILENO, STDOUT_FILENO);
-    pid_t pid = 0;
-    const int spawned = posix_spawnp(&pid, python.c_str(), &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (spawned != 0) {
-        return kExUnavailable;
-    }
-    int status = 0;
-    if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status)) {
-        return kExSoftware;
-    }
-    return WEXITSTATUS(status);
 }
 
 }  // namespace
@@ -160,17 +120,13 @@ int main(int argc, char** argv) {
             return kExCantCreat;
         }
         if (plots) {
-            const int rc = drawFigures(out_dir, title);
-            if (rc != 0) {
-                std::fprintf(stderr,
-                             "field-log: figures not drawn (tools/scale_eval_plot.py exit %d%s); "
-                             "the CSV files are in %s\n",
-                             rc,
-                             rc == kExUnavailable ? ": python3 with matplotlib and numpy is needed "
-                                                    "(apt install python3-matplotlib python3-numpy)"
-                                                  : "",
-                             out_dir.c_str());
-                return kExUnavailable;
+            std::vector<std::string> extra = {"--no-curves"};
+            if (!title.empty()) {
+                extra.emplace_back("--title");
+                extra.push_back(title);
+            }
+            if (const int rc = drawFigures("field-log", out_dir, extra); rc != 0) {
+                return rc;
             }
         }
     }

@@ -14,10 +14,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
-#include <spawn.h>
 #include <string>
 #include <string_view>
-#include <sys/wait.h>
 #include <unistd.h>
 #include <vector>
 
@@ -26,6 +24,7 @@
 #include <scaled/drivers/priors_toml.h>
 
 #include "args.h"
+#include "plot.h"
 #include "scale_eval.h"
 #include "sysexits.h"
 
@@ -57,40 +56,6 @@ void usage(std::FILE* out) {
         "The model defaults to $SCALED_SHARED_DIR/models/yolox_nano.onnx (../shared), the\n"
         "priors to config/priors.toml of the source tree.\n",
         out);
-}
-
-// Runs the plotting script; its exit code (or 69 when it cannot start).
-int drawFigures(const std::string& out_dir) {
-    const std::string script = std::string(SCALED_SOURCE_DIR) + "/tools/scale_eval_plot.py";
-    // Debian's interpreter is where python3-matplotlib installs; a python3
-    // earlier on PATH (pyenv, a venv) may not have it. SCALED_PYTHON wins.
-    std::string python =
-        std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-    if (const char* env = std::getenv("SCALED_PYTHON"); env != nullptr && *env != '\0') {
-        python = env;
-    }
-    std::vector<std::string> args = {python, script, out_dir};
-    std::vector<char*> argv;
-    argv.reserve(args.size() + 1);
-    for (auto& a : args) {
-        argv.push_back(a.data());
-    }
-    argv.push_back(nullptr);
-    // The script's messages go to stderr: stdout may carry --json.
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_adddup2(&actions, STDERR_FILENO, STDOUT_FILENO);
-    pid_t pid = 0;
-    const int spawned = posix_spawnp(&pid, python.c_str(), &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (spawned != 0) {
-        return kExUnavailable;
-    }
-    int status = 0;
-    if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status)) {
-        return kExSoftware;
-    }
-    return WEXITSTATUS(status);
 }
 
 void printText(const EvalResult& r, const std::string& json) {
@@ -277,17 +242,8 @@ int main(int argc, char** argv) {
             return kExCantCreat;
         }
         if (plots) {
-            const int rc = drawFigures(out_dir);
-            if (rc != 0) {
-                std::fprintf(stderr,
-                             "scale-eval: figures not drawn (tools/scale_eval_plot.py exit %d%s); "
-                             "the CSV files are in %s\n",
-                             rc,
-                             rc == kExUnavailable ? ": python3 with matplotlib and numpy is needed "
-                                                    "(apt install python3-matplotlib python3-numpy)"
-                                                  : "",
-                             out_dir.c_str());
-                return kExUnavailable;
+            if (const int rc = drawFigures("scale-eval", out_dir); rc != 0) {
+                return rc;
             }
         }
     }

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "files.h"
 #include "json.h"
 #include "scale_eval.h"
 
@@ -23,7 +24,7 @@ using core::Result;
 namespace {
 
 std::string num(std::optional<double> v, int digits = 6) {
-    return v ? jsonNumber(*v, digits) : "null";
+    return jsonNumberOr(v, digits, "null");
 }
 
 std::string stats(const ErrorStats& s) {
@@ -77,7 +78,7 @@ std::optional<double> lastTruth(const EvalResult& r, bool window) {
 }
 
 std::string field(std::optional<double> v, int digits = 7) {
-    return v ? jsonNumber(*v, digits) : std::string();
+    return jsonNumberOr(v, digits, "");
 }
 
 class CsvFile {
@@ -190,13 +191,10 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
 
 Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
                           const std::string& out_dir) {
-    const std::filesystem::path dir(out_dir);
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec) {
-        return makeError(ErrorCode::kIo,
-                         out_dir + ": cannot create the output directory: " + ec.message());
+    if (auto ok = createOutputDir(out_dir); !ok) {
+        return ok;
     }
+    const std::filesystem::path dir(out_dir);
     // A deque keeps the files where they are as more are opened (open() hands
     // out pointers).
     std::deque<CsvFile> files;

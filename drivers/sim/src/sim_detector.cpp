@@ -35,7 +35,7 @@ public:
           camera_(camera),
           scene_(std::move(scene)),
           objects_(simObjects(config)),
-          noise_seed_(detail::combineSeed(config.seed, 0x646574ULL)) {
+          noise_seed_(synth::combineSeed(config.seed, 0x646574ULL)) {
         for (const auto& o : objects_) {
             if (std::find(names_.begin(), names_.end(), o.class_name) == names_.end()) {
                 names_.push_back(o.class_name);
@@ -72,14 +72,14 @@ public:
         out.detections.clear();
         const core::CameraPose pose = trajectory_.poseAt(static_cast<double>(t_ns) * 1e-9);
         const std::uint64_t frame_seed =
-            detail::combineSeed(noise_seed_, static_cast<std::uint64_t>(frame_id));
+            synth::combineSeed(noise_seed_, static_cast<std::uint64_t>(frame_id));
         for (std::size_t k = 0; k < objects_.size(); ++k) {
             // Draws in a fixed order per object, whatever is visible.
-            detail::Rng rng(detail::combineSeed(frame_seed, k));
+            synth::SplitMix64 rng(synth::combineSeed(frame_seed, k));
             const bool miss = rng.uniform() < config_.miss_probability;
             std::array<double, 4> jitter{};
             for (auto& j : jitter) {
-                j = config_.box_jitter_px * rng.gaussian();
+                j = config_.box_jitter_px * rng.gaussianUnpaired();
             }
             core::BoundingBox box;
             if (miss || !seen(k, pose, box)) {
@@ -224,22 +224,14 @@ private:
 }  // namespace
 
 core::Result<std::unique_ptr<detector::ObjectDetector>> createSimDetector(const SimConfig& config) {
-    auto trajectory = detail::makeTrajectory(config);
-    if (!trajectory) {
-        return trajectory.error();
-    }
-    auto camera = core::PinholeRadialCamera::create(simIntrinsics(config));
-    if (!camera) {
-        return camera.error();
-    }
     synth::SceneConfig scene_config = simSceneConfig(config);
     scene_config.texel_m = kDetectorTexelM;
-    auto scene = synth::Scene::create(scene_config);
-    if (!scene) {
-        return scene.error();
+    auto rig = detail::makeSimRig(config, scene_config);
+    if (!rig) {
+        return rig.error();
     }
-    return std::unique_ptr<detector::ObjectDetector>(
-        std::make_unique<SimDetector>(config, std::move(*trajectory), *camera, std::move(*scene)));
+    return std::unique_ptr<detector::ObjectDetector>(std::make_unique<SimDetector>(
+        config, std::move(rig->trajectory), rig->camera, std::move(rig->scene)));
 }
 
 }  // namespace scaled::sim

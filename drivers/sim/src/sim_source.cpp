@@ -76,7 +76,7 @@ private:
         synth::RenderOptions o;
         o.antialias = config.antialias;
         o.noise_sigma = config.pixel_noise;
-        o.noise_seed = detail::combineSeed(config.seed, 0x72656e64ULL);
+        o.noise_seed = synth::combineSeed(config.seed, 0x72656e64ULL);
         return o;
     }
     [[nodiscard]] bool bounded() const { return info_.frame_count > 0; }
@@ -93,21 +93,13 @@ private:
 }  // namespace
 
 core::Result<std::unique_ptr<drivers::FrameSource>> openSimSource(const SimConfig& config) {
-    auto trajectory = detail::makeTrajectory(config);
-    if (!trajectory) {
-        return trajectory.error();
-    }
-    auto camera = core::PinholeRadialCamera::create(simIntrinsics(config));
-    if (!camera) {
-        return camera.error();
-    }
-    auto scene = synth::Scene::create(simSceneConfig(config));
-    if (!scene) {
-        return scene.error();
+    auto rig = detail::makeSimRig(config, simSceneConfig(config));
+    if (!rig) {
+        return rig.error();
     }
     return std::unique_ptr<drivers::FrameSource>(
-        std::make_unique<SimSource>(config, std::move(*trajectory), *camera,
-                                    std::make_unique<synth::Scene>(std::move(*scene))));
+        std::make_unique<SimSource>(config, std::move(rig->trajectory), rig->camera,
+                                    std::make_unique<synth::Scene>(std::move(rig->scene))));
 }
 
 }  // namespace scaled::sim

@@ -3,6 +3,7 @@
 #include <numbers>
 #include <sstream>
 #include <string>
+#include <utility>
 
 #include <scaled/sim/sim_source.h>
 
@@ -152,6 +153,22 @@ core::Result<synth::Trajectory> makeTrajectory(const SimConfig& config) {
     // Only frameCount() reads the duration; poses are defined for any time.
     t.duration_s = config.duration_s > 0.0 ? config.duration_s : 60.0;
     return synth::Trajectory::create(t);
+}
+
+core::Result<SimRig> makeSimRig(const SimConfig& config, const synth::SceneConfig& scene_config) {
+    auto trajectory = makeTrajectory(config);
+    if (!trajectory) {
+        return trajectory.error();
+    }
+    auto camera = core::PinholeRadialCamera::create(simIntrinsics(config));
+    if (!camera) {
+        return camera.error();
+    }
+    auto scene = synth::Scene::create(scene_config);
+    if (!scene) {
+        return scene.error();
+    }
+    return SimRig{std::move(*trajectory), *camera, std::move(*scene)};
 }
 
 std::int64_t frameTimeNs(std::int64_t index, double fps) {

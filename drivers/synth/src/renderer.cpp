@@ -7,9 +7,9 @@
 #include <Eigen/Core>
 
 #include <scaled/synth/renderer.h>
+#include <scaled/synth/rng.h>
 
 #include "raycast.h"
-#include "rng.h"
 
 namespace scaled::synth {
 
@@ -317,7 +317,7 @@ void Renderer::render(const core::PinholeRadialCamera& cam, const core::CameraPo
     out_gray.create(h, w, CV_8UC1);
     const FrameData frame = makeFrame(*scene_, pose, ray_bounds_);
     const bool noisy = options_.noise_sigma > 0.0;
-    detail::SplitMix64 rng(detail::combineSeed(options_.noise_seed, noise_stream));
+    SplitMix64 rng(combineSeed(options_.noise_seed, noise_stream));
     const auto noisyGrey = [&](float v) {
         double x = static_cast<double>(v);
         if (noisy) {

@@ -2,10 +2,10 @@
 #include <cstddef>
 #include <string>
 
+#include <scaled/synth/rng.h>
 #include <scaled/synth/scene.h>
 
 #include "raycast.h"
-#include "rng.h"
 #include "texture.h"
 
 namespace scaled::synth {
@@ -91,7 +91,7 @@ core::Result<Scene> Scene::create(const SceneConfig& config) {
         for (int a = 0; a < 3; ++a) {
             for (int side = 0; side < 2; ++side) {
                 scene.faces_.push_back(
-                    makeFace(box, a, texel_m, detail::combineSeed(config.seed, face_index)));
+                    makeFace(box, a, texel_m, combineSeed(config.seed, face_index)));
                 ++face_index;
             }
         }

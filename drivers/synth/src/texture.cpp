@@ -7,7 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-#include "rng.h"
+#include <scaled/synth/rng.h>
 
 namespace scaled::synth::detail {
 

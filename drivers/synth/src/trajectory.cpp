@@ -4,9 +4,8 @@
 
 #include <Eigen/Geometry>
 
+#include <scaled/synth/rng.h>
 #include <scaled/synth/trajectory.h>
-
-#include "rng.h"
 
 namespace scaled::synth {
 
@@ -55,7 +54,7 @@ core::Result<Trajectory> Trajectory::create(const TrajectoryConfig& config) {
 }
 
 Trajectory::Trajectory(const TrajectoryConfig& config) : config_(config) {
-    detail::SplitMix64 rng(detail::combineSeed(config.seed, 0x7472616aULL));
+    SplitMix64 rng(combineSeed(config.seed, 0x7472616aULL));
     theta0_ = rng.uniform(0.0, kTwoPi);
     omega_ = kOmega * rng.uniform(0.95, 1.05);
     bulge_phase_ = rng.uniform(0.0, kTwoPi);

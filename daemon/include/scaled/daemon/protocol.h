@@ -13,6 +13,7 @@
 #include <string>
 #include <string_view>
 
+#include <scaled/daemon/json_write.h>
 #include <scaled/daemon/report.h>
 
 namespace scaled::daemon {
@@ -41,12 +42,7 @@ void appendAck(std::string& out, std::string_view cmd);
 // ERROR; `cmd` is included when non-empty.
 void appendError(std::string& out, std::string_view message, std::string_view cmd = {});
 
-// Appends `text` as a JSON string literal (quotes included). Invalid UTF-8
-// becomes U+FFFD, control characters are escaped.
-void appendJsonString(std::string& out, std::string_view text);
-// Appends a number in the shortest form that reads back exactly; non-finite
-// values become null.
-void appendJsonNumber(std::string& out, double value);
+// appendJsonString, appendJsonNumber: <scaled/daemon/json_write.h>.
 
 enum class Command : std::uint8_t {
     kInvalid,  // see Request::error

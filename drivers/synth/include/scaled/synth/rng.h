@@ -2,13 +2,14 @@
 
 // A small, fully specified random generator (SplitMix64). The standard
 // library's distributions differ between implementations; these do not, so a
-// seed gives the same scene, trajectory and noise everywhere.
+// seed gives the same scene, trajectory and noise everywhere. Used by the
+// renderer and by the daemon's sim source and detector (drivers/sim).
 
 #include <cmath>
 #include <cstdint>
 #include <numbers>
 
-namespace scaled::synth::detail {
+namespace scaled::synth {
 
 // Bijective 64-bit mix (the SplitMix64 finaliser).
 inline std::uint64_t mix64(std::uint64_t z) {
@@ -45,22 +46,38 @@ public:
             has_spare_ = false;
             return spare_;
         }
-        double u1 = uniform();
-        while (u1 <= 0.0) {
-            u1 = uniform();
-        }
-        const double u2 = uniform();
-        const double r = std::sqrt(-2.0 * std::log(u1));
-        const double a = 2.0 * std::numbers::pi * u2;
+        const auto [r, a] = boxMuller();
         spare_ = r * std::sin(a);
         has_spare_ = true;
         return r * std::cos(a);
     }
 
+    // Standard normal by Box-Muller from a fresh pair of uniforms on every call
+    // (the pair's second value is dropped), so the stream does not depend on
+    // how many values were drawn before.
+    double gaussianUnpaired() {
+        const auto [r, a] = boxMuller();
+        return r * std::cos(a);
+    }
+
 private:
+    struct Polar {
+        double r;
+        double a;
+    };
+    // Radius and angle of a Box-Muller pair.
+    Polar boxMuller() {
+        double u1 = uniform();
+        while (u1 <= 0.0) {
+            u1 = uniform();
+        }
+        const double u2 = uniform();
+        return {std::sqrt(-2.0 * std::log(u1)), 2.0 * std::numbers::pi * u2};
+    }
+
     std::uint64_t state_;
     double spare_ = 0.0;
     bool has_spare_ = false;
 };
 
-}  // namespace scaled::synth::detail
+}  // namespace scaled::synth
