@@ -97,7 +97,8 @@ void BM_Summary(benchmark::State& state) {
 BENCHMARK(BM_Summary)->Arg(512)->Arg(1024)->Arg(2048);
 
 void BM_SimExperiment(benchmark::State& state) {
-    const auto specs = scaled::papersim::paperExperiments(1, scaled::papersim::defaultSimEstimatorConfig());
+    const auto specs =
+        scaled::papersim::paperExperiments(1, scaled::papersim::defaultSimEstimatorConfig());
     for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
         benchmark::DoNotOptimize(scaled::papersim::runExperiment(specs[0]));
     }
