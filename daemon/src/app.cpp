@@ -436,7 +436,7 @@ int runMain(int argc, const char* const* argv) {
             std::fputs(parsed.output.c_str(), stdout);
         }
         if (!parsed.error.empty()) {
-            std::fprintf(stderr, "scaled: %s\n", parsed.error.c_str());
+            std::fputs(parsed.error.c_str(), stderr);  // prefixed and terminated already
         }
         return parsed.exit_code;
     }
