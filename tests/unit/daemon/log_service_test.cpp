@@ -387,7 +387,9 @@ TEST(LogService, ConcurrentAppendersLoseNothingTheyWereToldWasQueued) {
     for (int t = 0; t < kThreads; ++t) {
         threads.emplace_back([&, t] {
             for (int i = 0; i < kLines; ++i) {
-                ErrorEvent e{.where = "thread", .message = std::to_string(t * kLines + i)};
+                // The event holds views: the text must outlive the call.
+                const std::string message = std::to_string(t * kLines + i);
+                ErrorEvent e{.where = "thread", .message = message};
                 if (log->errorEvent(e)) {
                     accepted.fetch_add(1);
                 }
@@ -429,7 +431,8 @@ TEST(LogService, SigkillLeavesOnlyWholeLinesButTheLast) {
         log.start();
         const std::string pad(200, 'z');
         for (std::int64_t i = 0;; ++i) {
-            ErrorEvent e{.where = pad, .message = std::to_string(i)};
+            const std::string message = std::to_string(i);  // outlives the call
+            ErrorEvent e{.where = pad, .message = message};
             if (!log.errorEvent(e)) {
                 ::_exit(3);  // a drop would leave a gap the parent reports
             }
