@@ -118,4 +118,32 @@ void appendJsonString(std::string& out, std::string_view text) {
     out += '"';
 }
 
+void appendJsonKey(std::string& out, std::string_view name) {
+    out += ",\"";
+    out += name;
+    out += "\":";
+}
+
+void appendJsonNumberOr(std::string& out, bool present, double value, int digits) {
+    if (!present) {
+        out += "null";
+    } else if (digits == 0) {
+        appendJsonNumber(out, value);
+    } else {
+        appendJsonNumber(out, value, digits);
+    }
+}
+
+void appendJsonInterval(std::string& out, bool present, double lo, double hi, int digits) {
+    if (!present) {
+        out += "null";
+        return;
+    }
+    out += '[';
+    appendJsonNumberOr(out, true, lo, digits);
+    out += ',';
+    appendJsonNumberOr(out, true, hi, digits);
+    out += ']';
+}
+
 }  // namespace scaled::daemon

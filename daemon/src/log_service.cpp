@@ -26,9 +26,7 @@ namespace {
 constexpr int kLogDigits = 9;
 
 void key(std::string& out, const char* name) {
-    out += ",\"";
-    out += name;
-    out += "\":";
+    appendJsonKey(out, name);
 }
 
 void begin(std::string& out, const char* cls, std::int64_t mono_ns) {
@@ -46,18 +44,6 @@ void frameFields(std::string& out, std::int64_t frame_id, std::int64_t t_ns, std
     appendJsonInt(out, t_ns);
     key(out, "epoch");
     appendJsonInt(out, epoch);
-}
-
-void pair(std::string& out, bool has, double lo, double hi) {
-    if (!has) {
-        out += "null";
-        return;
-    }
-    out += '[';
-    appendJsonNumber(out, lo, kLogDigits);
-    out += ',';
-    appendJsonNumber(out, hi, kLogDigits);
-    out += ']';
 }
 
 // The buffer the *Event() members format into (one per thread, reused).
@@ -159,21 +145,13 @@ void formatEvent(const ScaleEvent& event, std::string& out) {
     key(out, "state");
     appendJsonString(out, toString(event.state));
     key(out, "scale");
-    if (event.has_scale) {
-        appendJsonNumber(out, event.scale, kLogDigits);
-    } else {
-        out += "null";
-    }
+    appendJsonNumberOr(out, event.has_scale, event.scale, kLogDigits);
     key(out, "mean");
-    if (event.has_scale) {
-        appendJsonNumber(out, event.mean, kLogDigits);
-    } else {
-        out += "null";
-    }
+    appendJsonNumberOr(out, event.has_scale, event.mean, kLogDigits);
     key(out, "ci68");
-    pair(out, event.has_scale, event.ci68_lo, event.ci68_hi);
+    appendJsonInterval(out, event.has_scale, event.ci68_lo, event.ci68_hi, kLogDigits);
     key(out, "ci95");
-    pair(out, event.has_scale, event.ci95_lo, event.ci95_hi);
+    appendJsonInterval(out, event.has_scale, event.ci95_lo, event.ci95_hi, kLogDigits);
     key(out, "observations");
     appendJsonInt(out, event.observations);
     key(out, "new_observations");

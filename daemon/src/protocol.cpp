@@ -16,21 +16,7 @@ void appendBool(std::string& out, bool value) {
 
 // `,"name":` (or `{"name":` style is written by the caller).
 void key(std::string& out, std::string_view name) {
-    out += ",\"";
-    out += name;
-    out += "\":";
-}
-
-void appendInterval(std::string& out, bool present, double lo, double hi) {
-    if (!present) {
-        out += "null";
-        return;
-    }
-    out += '[';
-    appendJsonNumber(out, lo);
-    out += ',';
-    appendJsonNumber(out, hi);
-    out += ']';
+    appendJsonKey(out, name);
 }
 
 void appendArray(std::string& out, std::span<const double> values) {
@@ -95,21 +81,13 @@ void appendVersion(std::string& out, std::string_view release) {
 
 void appendScale(std::string& out, const ScaleReport& r, std::int64_t now_mono_ns) {
     out += R"({"class":"SCALE","scale":)";
-    if (r.has_scale) {
-        appendJsonNumber(out, r.scale);
-    } else {
-        out += "null";
-    }
+    appendJsonNumberOr(out, r.has_scale, r.scale);
     key(out, "mean");
-    if (r.has_scale) {
-        appendJsonNumber(out, r.mean);
-    } else {
-        out += "null";
-    }
+    appendJsonNumberOr(out, r.has_scale, r.mean);
     key(out, "ci68");
-    appendInterval(out, r.has_scale, r.ci68_lo, r.ci68_hi);
+    appendJsonInterval(out, r.has_scale, r.ci68_lo, r.ci68_hi);
     key(out, "ci95");
-    appendInterval(out, r.has_scale, r.ci95_lo, r.ci95_hi);
+    appendJsonInterval(out, r.has_scale, r.ci95_lo, r.ci95_hi);
     key(out, "state");
     appendJsonString(out, toString(r.state));
     key(out, "epoch");

@@ -23,6 +23,17 @@ void appendJsonNumber(std::string& out, double value);
 // non-finite values become null.
 void appendJsonNumber(std::string& out, double value, int digits);
 
+// Appends `,"name":` (a member after the first of an object).
+void appendJsonKey(std::string& out, std::string_view name);
+
+// Appends `value` (digits == 0: the shortest exact form, else up to `digits`
+// significant digits), or null when `present` is false.
+void appendJsonNumberOr(std::string& out, bool present, double value, int digits = 0);
+
+// Appends `[lo,hi]` (digits as above), or null when `present` is false: the
+// credible intervals of the protocol and the field log.
+void appendJsonInterval(std::string& out, bool present, double lo, double hi, int digits = 0);
+
 // Appends an integer.
 template <typename Int>
 void appendJsonInt(std::string& out, Int value) {
