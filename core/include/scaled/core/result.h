@@ -15,6 +15,7 @@ enum class ErrorCode {
     kIo,               // a file could not be read or written
     kNotFound,         // a named thing does not exist
     kDegenerate,       // geometry gives no usable answer (not a bug, just no data)
+    kUnavailable,      // a device or service is gone, busy or silent; trying again later may work
 };
 
 struct Error {
