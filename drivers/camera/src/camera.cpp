@@ -1,0 +1,56 @@
+#include <cctype>
+#include <cstddef>
+#include <string>
+
+#include <scaled/drivers/camera.h>
+
+namespace scaled::drivers {
+
+const char* toString(PixelFormat f) {
+    switch (f) {
+        case PixelFormat::kAuto:
+            return "auto";
+        case PixelFormat::kYuyv:
+            return "YUYV";
+        case PixelFormat::kMjpeg:
+            return "MJPEG";
+        case PixelFormat::kGrey:
+            return "GREY";
+        case PixelFormat::kNv12:
+            return "NV12";
+    }
+    return "?";
+}
+
+bool parsePixelFormat(const std::string& text, PixelFormat& out) {
+    std::string upper;
+    upper.reserve(text.size());
+    for (const char c : text) {
+        upper.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
+    }
+    for (const PixelFormat f : {PixelFormat::kAuto, PixelFormat::kYuyv, PixelFormat::kMjpeg,
+                                PixelFormat::kGrey, PixelFormat::kNv12}) {
+        std::string name = toString(f);
+        for (char& c : name) {
+            c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+        }
+        if (upper == name) {
+            out = f;
+            return true;
+        }
+    }
+    // V4L2's fourcc (what v4l2-ctl --list-formats prints) for the same thing.
+    if (upper == "MJPG") {
+        out = PixelFormat::kMjpeg;
+        return true;
+    }
+    return false;
+}
+
+core::Result<bool> LiveCamera::seek(std::size_t index) {
+    return core::makeError(
+        core::ErrorCode::kInvalidArgument,
+        describe() + ": a live camera cannot seek (to frame " + std::to_string(index) + ")");
+}
+
+}  // namespace scaled::drivers

@@ -1,0 +1,311 @@
+// Camera buffers to gray + BGR (pixel_convert.h): strides larger than a row,
+// buffer re-use, MJPEG decode and its errors. The references are OpenCV's own
+// conversions of the same pixels packed without padding.
+
+#include <allocation_counter.h>
+#include <cstddef>
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <scaled/core/result.h>
+#include <scaled/drivers/camera.h>
+#include <scaled/drivers/pixel_convert.h>
+
+namespace scaled::drivers {
+namespace {
+
+using core::ErrorCode;
+
+constexpr std::uint8_t kPadding = 0xEE;  // what a stride-blind conversion would read
+const std::string kSource = "/dev/video7 (test): buffer 3";
+
+// Copies `packed` (rows of `row` bytes) into a buffer with `stride` bytes per
+// row, the gap filled with kPadding.
+std::vector<std::uint8_t> withStride(const std::vector<std::uint8_t>& packed, std::size_t row,
+                                     std::size_t stride) {
+    const std::size_t rows = packed.size() / row;
+    std::vector<std::uint8_t> out(rows * stride, kPadding);
+    for (std::size_t r = 0; r < rows; ++r) {
+        std::copy_n(packed.begin() + static_cast<std::ptrdiff_t>(r * row), row,
+                    out.begin() + static_cast<std::ptrdiff_t>(r * stride));
+    }
+    return out;
+}
+
+// A YUYV image with varying luma and chroma: colour matters in the check.
+std::vector<std::uint8_t> yuyvPixels(int w, int h) {
+    std::vector<std::uint8_t> p;
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; x += 2) {
+            p.push_back(static_cast<std::uint8_t>(20 + 7 * x + 11 * y));      // Y0
+            p.push_back(static_cast<std::uint8_t>(60 + 13 * x));              // U
+            p.push_back(static_cast<std::uint8_t>(25 + 7 * x + 11 * y + 3));  // Y1
+            p.push_back(static_cast<std::uint8_t>(200 - 9 * y));              // V
+        }
+    }
+    return p;
+}
+
+double maxDiff(const cv::Mat& a, const cv::Mat& b) {
+    if (a.size() != b.size() || a.type() != b.type()) {
+        return 1e9;
+    }
+    return cv::norm(a, b, cv::NORM_INF);
+}
+
+RawImage raw(PixelFormat f, int w, int h, std::size_t stride, const std::vector<std::uint8_t>& d) {
+    RawImage r;
+    r.format = f;
+    r.width_px = w;
+    r.height_px = h;
+    r.stride_bytes = stride;
+    r.data = d.data();
+    r.size_bytes = d.size();
+    return r;
+}
+
+TEST(PixelConvert, YuyvHonoursTheStride) {
+    const int w = 8;
+    const int h = 6;
+    const std::vector<std::uint8_t> packed = yuyvPixels(w, h);
+    const std::size_t row = 2 * static_cast<std::size_t>(w);
+    const std::vector<std::uint8_t> padded = withStride(packed, row, row + 12);
+    cv::Mat gray;
+    cv::Mat color;
+    auto ok =
+        convertRawImage(raw(PixelFormat::kYuyv, w, h, row + 12, padded), kSource, gray, color);
+    ASSERT_TRUE(ok) << ok.error().message;
+
+    // NOLINTNEXTLINE(cppcoreguidelines-pro-type-const-cast)
+    const cv::Mat ref_yuyv(h, w, CV_8UC2, const_cast<std::uint8_t*>(packed.data()));
+    cv::Mat ref_color;
+    cv::cvtColor(ref_yuyv, ref_color, cv::COLOR_YUV2BGR_YUYV);
+    EXPECT_EQ(maxDiff(color, ref_color), 0.0);
+    ASSERT_EQ(gray.type(), CV_8UC1);
+    ASSERT_EQ(gray.size(), cv::Size(w, h));
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+            EXPECT_EQ(gray.at<std::uint8_t>(y, x),
+                      packed[static_cast<std::size_t>(y * 2 * w + 2 * x)])
+                << "at " << x << "," << y;
+        }
+    }
+    // The chroma is not neutral: the colour image is not gray.
+    std::vector<cv::Mat> ch;
+    cv::split(color, ch);
+    EXPECT_GT(cv::norm(ch[0], ch[2], cv::NORM_INF), 20.0);
+}
+
+TEST(PixelConvert, Nv12HonoursTheStride) {
+    const int w = 8;
+    const int h = 4;
+    std::vector<std::uint8_t> packed;
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+            packed.push_back(static_cast<std::uint8_t>(30 + 20 * x + 5 * y));
+        }
+    }
+    for (int y = 0; y < h / 2; ++y) {
+        for (int x = 0; x < w / 2; ++x) {
+            packed.push_back(static_cast<std::uint8_t>(70 + 30 * x));   // Cb
+            packed.push_back(static_cast<std::uint8_t>(190 - 40 * y));  // Cr
+        }
+    }
+    const std::size_t stride = 16;
+    const std::vector<std::uint8_t> padded = withStride(packed, w, stride);
+    cv::Mat gray;
+    cv::Mat color;
+    // The last row need not be padded: trim the final gap.
+    std::vector<std::uint8_t> trimmed(padded.begin(), padded.end() - (stride - w));
+    ASSERT_EQ(trimmed.size(), rawImageBytes(PixelFormat::kNv12, w, h, stride));
+    auto ok = convertRawImage(raw(PixelFormat::kNv12, w, h, stride, trimmed), kSource, gray, color);
+    ASSERT_TRUE(ok) << ok.error().message;
+
+    // NOLINTNEXTLINE(cppcoreguidelines-pro-type-const-cast)
+    const cv::Mat ref_nv12(h + h / 2, w, CV_8UC1, const_cast<std::uint8_t*>(packed.data()));
+    cv::Mat ref_color;
+    cv::cvtColor(ref_nv12, ref_color, cv::COLOR_YUV2BGR_NV12);
+    EXPECT_EQ(maxDiff(color, ref_color), 0.0);
+    EXPECT_EQ(maxDiff(gray, ref_nv12.rowRange(0, h)), 0.0);
+}
+
+TEST(PixelConvert, GreyHonoursTheStrideAndExpandsToBgr) {
+    const int w = 5;
+    const int h = 3;
+    std::vector<std::uint8_t> packed;
+    packed.reserve(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+    for (int i = 0; i < w * h; ++i) {
+        packed.push_back(static_cast<std::uint8_t>(10 * i));
+    }
+    const std::vector<std::uint8_t> padded = withStride(packed, w, 8);
+    cv::Mat gray;
+    cv::Mat color;
+    auto ok = convertRawImage(raw(PixelFormat::kGrey, w, h, 8, padded), kSource, gray, color);
+    ASSERT_TRUE(ok) << ok.error().message;
+    // NOLINTNEXTLINE(cppcoreguidelines-pro-type-const-cast)
+    const cv::Mat ref(h, w, CV_8UC1, const_cast<std::uint8_t*>(packed.data()));
+    EXPECT_EQ(maxDiff(gray, ref), 0.0);
+    ASSERT_EQ(color.type(), CV_8UC3);
+    std::vector<cv::Mat> ch;
+    cv::split(color, ch);
+    for (const cv::Mat& c : ch) {
+        EXPECT_EQ(maxDiff(c, ref), 0.0);
+    }
+}
+
+// The outputs are written in place: no allocation frame to frame.
+TEST(PixelConvert, ReusesTheOutputBuffers) {
+    const int w = 16;
+    const int h = 8;
+    const std::vector<std::uint8_t> a = yuyvPixels(w, h);
+    std::vector<std::uint8_t> b = a;
+    for (auto& v : b) {
+        v = static_cast<std::uint8_t>(255 - v);
+    }
+    for (const PixelFormat f : {PixelFormat::kYuyv, PixelFormat::kGrey, PixelFormat::kNv12}) {
+        cv::Mat gray;
+        cv::Mat color;
+        ASSERT_TRUE(convertRawImage(raw(f, w, h, 0, a), kSource, gray, color));
+        const cv::Mat first_gray = gray.clone();
+        const std::uint8_t* gray_data = gray.data;
+        const std::uint8_t* color_data = color.data;
+        ASSERT_TRUE(convertRawImage(raw(f, w, h, 0, b), kSource, gray, color));
+        EXPECT_EQ(gray.data, gray_data) << toString(f);
+        EXPECT_EQ(color.data, color_data) << toString(f);
+        EXPECT_GT(cv::norm(gray, first_gray, cv::NORM_INF), 0.0) << toString(f);
+    }
+}
+
+// A camera-sized frame, converted again into the same Mats: no operator new
+// (the Mats' pixels are checked by ReusesTheOutputBuffers: cv::Mat allocates
+// with cv::fastMalloc, not operator new).
+TEST(PixelConvert, SteadyStateMakesNoHeapAllocation) {
+    const int w = 640;
+    const int h = 480;
+    const std::vector<std::uint8_t> pixels = yuyvPixels(w, h);
+    const std::string source = kSource;
+    for (const PixelFormat f : {PixelFormat::kYuyv, PixelFormat::kGrey, PixelFormat::kNv12}) {
+        cv::Mat gray;
+        cv::Mat color;
+        const RawImage image = raw(f, w, h, 0, pixels);
+        ASSERT_TRUE(convertRawImage(image, source, gray, color));  // allocates the Mats
+        const std::int64_t before = test::allocationCount();
+        const bool ok = convertRawImage(image, source, gray, color).ok();
+        const std::int64_t after = test::allocationCount();
+        EXPECT_TRUE(ok);
+        EXPECT_EQ(after - before, 0) << toString(f);
+    }
+}
+
+TEST(PixelConvert, ShortBufferIsAnIoErrorNamingTheSource) {
+    const int w = 8;
+    const int h = 6;
+    std::vector<std::uint8_t> d = yuyvPixels(w, h);
+    d.resize(d.size() - 1);
+    cv::Mat gray;
+    cv::Mat color;
+    auto r = convertRawImage(raw(PixelFormat::kYuyv, w, h, 0, d), kSource, gray, color);
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.error().code, ErrorCode::kIo);
+    EXPECT_NE(r.error().message.find(kSource), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find("short"), std::string::npos) << r.error().message;
+}
+
+TEST(PixelConvert, BadDescriptionsAreRejected) {
+    const std::vector<std::uint8_t> d(1024, 128);
+    cv::Mat gray;
+    cv::Mat color;
+    auto odd = convertRawImage(raw(PixelFormat::kYuyv, 7, 4, 0, d), kSource, gray, color);
+    ASSERT_FALSE(odd);
+    EXPECT_EQ(odd.error().code, ErrorCode::kInvalidArgument);
+    auto narrow = convertRawImage(raw(PixelFormat::kYuyv, 8, 4, 10, d), kSource, gray, color);
+    ASSERT_FALSE(narrow);
+    EXPECT_EQ(narrow.error().code, ErrorCode::kInvalidArgument);
+    EXPECT_NE(narrow.error().message.find("stride"), std::string::npos);
+    auto odd_nv12 = convertRawImage(raw(PixelFormat::kNv12, 8, 5, 0, d), kSource, gray, color);
+    ASSERT_FALSE(odd_nv12);
+    auto autofmt = convertRawImage(raw(PixelFormat::kAuto, 8, 4, 0, d), kSource, gray, color);
+    ASSERT_FALSE(autofmt);
+    EXPECT_EQ(autofmt.error().code, ErrorCode::kInvalidArgument);
+}
+
+cv::Mat testPicture(int w, int h) {
+    cv::Mat img(h, w, CV_8UC3);
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+            img.at<cv::Vec3b>(y, x) =
+                cv::Vec3b(static_cast<std::uint8_t>(4 * x), static_cast<std::uint8_t>(5 * y),
+                          static_cast<std::uint8_t>(x < w / 2 ? 220 : 30));
+        }
+    }
+    return img;
+}
+
+TEST(PixelConvert, MjpegDecodes) {
+    const cv::Mat picture = testPicture(64, 48);
+    std::vector<std::uint8_t> jpeg;
+    ASSERT_TRUE(cv::imencode(".jpg", picture, jpeg, {cv::IMWRITE_JPEG_QUALITY, 95}));
+    cv::Mat gray;
+    cv::Mat color;
+    auto ok = convertRawImage(raw(PixelFormat::kMjpeg, 64, 48, 0, jpeg), kSource, gray, color);
+    ASSERT_TRUE(ok) << ok.error().message;
+    ASSERT_EQ(color.type(), CV_8UC3);
+    ASSERT_EQ(color.size(), cv::Size(64, 48));
+    EXPECT_EQ(maxDiff(color, cv::imdecode(jpeg, cv::IMREAD_COLOR)), 0.0);
+    EXPECT_LT(cv::norm(color, picture, cv::NORM_L1) / (64.0 * 48 * 3), 4.0);  // lossy, but close
+    cv::Mat ref_gray;
+    cv::cvtColor(color, ref_gray, cv::COLOR_BGR2GRAY);
+    EXPECT_EQ(maxDiff(gray, ref_gray), 0.0);
+}
+
+TEST(PixelConvert, MjpegOfAnotherSizeIsAnError) {
+    std::vector<std::uint8_t> jpeg;
+    ASSERT_TRUE(cv::imencode(".jpg", testPicture(64, 48), jpeg));
+    cv::Mat gray;
+    cv::Mat color;
+    auto r = convertRawImage(raw(PixelFormat::kMjpeg, 32, 24, 0, jpeg), kSource, gray, color);
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.error().code, ErrorCode::kIo);
+    EXPECT_NE(r.error().message.find("64x48"), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find("32x24"), std::string::npos) << r.error().message;
+}
+
+TEST(PixelConvert, CorruptMjpegIsAnErrorNamingTheDeviceAndBuffer) {
+    std::vector<std::uint8_t> jpeg;
+    ASSERT_TRUE(cv::imencode(".jpg", testPicture(64, 48), jpeg));
+    // No start-of-image marker and a scrambled header: nothing decodes it.
+    for (std::size_t i = 0; i < 64 && i < jpeg.size(); ++i) {
+        jpeg[i] = static_cast<std::uint8_t>(0x5A ^ i);
+    }
+    cv::Mat gray;
+    cv::Mat color;
+    auto r = convertRawImage(raw(PixelFormat::kMjpeg, 64, 48, 0, jpeg), kSource, gray, color);
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.error().code, ErrorCode::kIo);
+    EXPECT_NE(r.error().message.find("/dev/video7 (test): buffer 3"), std::string::npos)
+        << r.error().message;
+    EXPECT_NE(r.error().message.find("MJPEG"), std::string::npos) << r.error().message;
+
+    // The next, good buffer converts: one bad frame is not the end.
+    std::vector<std::uint8_t> good;
+    ASSERT_TRUE(cv::imencode(".jpg", testPicture(64, 48), good));
+    EXPECT_TRUE(convertRawImage(raw(PixelFormat::kMjpeg, 64, 48, 0, good), kSource, gray, color));
+}
+
+TEST(PixelConvert, RawImageBytes) {
+    EXPECT_EQ(rawImageBytes(PixelFormat::kYuyv, 640, 480, 0), 640U * 2 * 480);
+    EXPECT_EQ(rawImageBytes(PixelFormat::kYuyv, 640, 480, 1536), 1536U * 479 + 1280);
+    EXPECT_EQ(rawImageBytes(PixelFormat::kGrey, 640, 480, 0), 640U * 480);
+    EXPECT_EQ(rawImageBytes(PixelFormat::kNv12, 640, 480, 0), 640U * 720);
+    EXPECT_EQ(rawImageBytes(PixelFormat::kMjpeg, 640, 480, 0), 0U);
+    EXPECT_EQ(rawImageBytes(PixelFormat::kYuyv, 0, 480, 0), 0U);
+}
+
+}  // namespace
+}  // namespace scaled::drivers
