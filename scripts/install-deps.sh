@@ -11,8 +11,8 @@ packages=(
   libeigen3-dev
   # config files
   libtomlplusplus-dev
-  # live drivers: libcamera capture
-  libcamera-dev
+  # live drivers: GPIO status LEDs (libgpiod 1.6 on bookworm), libcamera capture
+  libgpiod-dev libcamera-dev
   # image front end, detector, dataset readers (OpenCV 4.6 on bookworm)
   libopencv-dev
   # tests and benchmarks

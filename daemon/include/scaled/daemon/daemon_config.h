@@ -18,6 +18,7 @@
 
 #include <scaled/core/result.h>
 #include <scaled/daemon/pipeline_config.h>
+#include <scaled/drivers/camera.h>
 #include <scaled/drivers/paced_source.h>
 
 namespace scaled::daemon {
@@ -46,6 +47,35 @@ struct SourceConfig {
     double sim_fps = 30.0;
     int sim_width_px = 320;
     int sim_height_px = 240;
+};
+
+// [camera]: the v4l2 and libcamera sources.
+struct CameraConfig {
+    int width_px = 640;
+    int height_px = 480;
+    double fps = 30.0;
+    drivers::PixelFormat pixel_format = drivers::PixelFormat::kAuto;  // v4l2 only
+    int buffers = 4;               // mmap buffers / requests in flight, 2..32
+    double frame_timeout_s = 2.0;  // no frame this long: fault, reopen
+    double retry_initial_s = 0.5;  // first wait before reopening a lost camera
+    double retry_max_s = 5.0;      // the wait doubles up to this
+    // Calibration of the camera at width_px x height_px (pixels). A live source
+    // needs fx_px > 0 (there is no silent guess); k1, k2: radial distortion.
+    double fx_px = 0;
+    double fy_px = 0;
+    double cx_px = 0;
+    double cy_px = 0;
+    double k1 = 0;
+    double k2 = 0;
+};
+
+// [gpio]: the status LEDs (status_lights.h).
+struct GpioConfig {
+    std::string chip;                 // path, name or label; empty: no LEDs
+    int status_line = -1;             // line offset of the status LED; -1: none
+    int heartbeat_line = -1;          // line offset of the heartbeat LED; -1: none
+    bool active_low = false;          // the LEDs light when the line is low
+    std::string consumer = "scaled";  // label shown by gpioinfo
 };
 
 // [socket]
@@ -78,6 +108,8 @@ struct QueueConfig {
 struct DaemonConfig {
     PipelineConfig pipeline = defaultPipelineConfig();
     SourceConfig source;
+    CameraConfig camera;
+    GpioConfig gpio;
     SocketConfig socket;
     LogConfig log;
     QueueConfig queues;
@@ -122,6 +154,7 @@ struct CommandLine {
     bool no_tty = false;                           // --no-tty: no live status line
     bool check_config = false;                     // --check-config [FILE]: validate and exit
     bool version = false;                          // --version
+    bool list_cameras = false;                     // --list-cameras
 };
 
 // Outcome of parsing argv: run, or exit at once with `exit_code` after
