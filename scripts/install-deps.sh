@@ -21,6 +21,12 @@ packages=(
   clang-format clang-tidy
   # plotting scripts in tools/
   python3 python3-matplotlib
+  # real-kernel driver tests (tests/vm, ctest label vm): QEMU, a busybox initramfs,
+  # the kernel source for vimc/gpio-sim/gpio-mockup/irq-sim, libcamera's IPA and
+  # tools, V4L2 and GPIO command-line tools. No kernel is installed on the host:
+  # tests/vm/fetch-kernel.sh unpacks Debian's kernel package into the build tree.
+  qemu-system-x86 busybox-static linux-source-6.1 bc flex bison libelf-dev libssl-dev
+  xz-utils kmod libcamera-ipa libcamera-tools v4l-utils gpiod
 )
 
 missing=()
