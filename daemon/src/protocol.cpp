@@ -155,6 +155,17 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     appendJsonInt(out, s.scale_updates);
     key(out, "epoch");
     appendJsonInt(out, s.epoch);
+    if (s.live) {
+        out += R"(,"camera":{"device":)";
+        appendJsonString(out, s.camera_device);
+        key(out, "mode");
+        appendJsonString(out, s.camera_mode);
+        key(out, "lost");
+        appendBool(out, s.camera_lost);
+        key(out, "reconnects");
+        appendJsonInt(out, s.camera_reconnects);
+        out += '}';
+    }
     out += R"(,"clients":{"connected":)";
     appendJsonInt(out, clients.connected);
     key(out, "max");

@@ -51,7 +51,7 @@ TEST(Protocol, Version) {
     appendVersion(out, "0.1.0");
     EXPECT_EQ(out,
               "{\"class\":\"VERSION\",\"release\":\"0.1.0\",\"proto_major\":1,"
-              "\"proto_minor\":0}\n");
+              "\"proto_minor\":1}\n");
 }
 
 TEST(Protocol, ScaleWithAScale) {

@@ -177,7 +177,7 @@ TEST_F(SocketServiceTest, SendsVersionOnConnect) {
     TestClient c(config_.path);
     const json v = c.readJson();
     EXPECT_EQ(v, json::parse(R"({"class":"VERSION","release":"0.1.0","proto_major":1,
-        "proto_minor":0})"));
+        "proto_minor":1})"));
     EXPECT_EQ(svc->stats().accepted, 1U);
     EXPECT_EQ(svc->stats().connected, 1);
 }

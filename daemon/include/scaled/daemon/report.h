@@ -77,6 +77,12 @@ struct PipelineStatus {
     int features_tracked = 0;  // measured (inliers) in the last frame
     std::uint64_t epoch = 0;
     double uptime_s = 0;
+    // Live cameras only (protocol: the optional "camera" object).
+    bool live = false;
+    bool camera_lost = false;             // waiting for the camera to come back
+    std::uint64_t camera_reconnects = 0;  // times it was lost and came back
+    std::string camera_device;            // "/dev/video0 (vivid)"
+    std::string camera_mode;              // "YUYV 640x480 @ 30"; empty while lost
 };
 
 // Field-log health, published by the log service.
