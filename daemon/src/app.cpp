@@ -10,6 +10,7 @@
 #include <sysexits.h>
 #include <unistd.h>
 #include <utility>
+#include <vector>
 
 #include <scaled/daemon/app.h>
 #include <scaled/daemon/daemon_config.h>
@@ -18,12 +19,16 @@
 #include <scaled/daemon/report.h>
 #include <scaled/daemon/sd_notify.h>
 #include <scaled/daemon/socket_service.h>
+#include <scaled/daemon/status_lights.h>
 #include <scaled/daemon/version.h>
 #include <scaled/detector/dnn_detector.h>
+#include <scaled/drivers/libcamera_camera.h>
 #include <scaled/drivers/paced_source.h>
 #include <scaled/drivers/priors_toml.h>
+#include <scaled/drivers/v4l2_camera.h>
 #include <scaled/sim/sim_source.h>
 
+#include "live_source.h"
 #include "log_events.h"
 
 namespace scaled::daemon {
@@ -112,6 +117,8 @@ Result<core::PriorTable> openPriors(const DaemonConfig& config) {
     return drivers::loadPriorsFile(config.pipeline.priors_path);
 }
 
+std::optional<Failure> openDetectorAndPriors(const DaemonConfig& config, PipelineParts& parts);
+
 // The source, paced as configured, and what goes with it.
 std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& parts) {
     const auto& s = config.source;
@@ -136,11 +143,31 @@ std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& part
             break;
         }
         case SourceKind::kV4l2:
-        case SourceKind::kLibcamera:
-            // The seam for the live drivers (issue 7): a FrameSource like the others.
-            return Failure{EX_UNAVAILABLE, "source " + parts.source_name +
-                                               ": live cameras are not in this build yet "
-                                               "(use --source sim or replay:DIR)"};
+        case SourceKind::kLibcamera: {
+            std::string missing;
+            auto live = openLive(config, missing);
+            if (!live) {
+                const auto code = live.error().code;
+                return Failure{code == ErrorCode::kInvalidArgument ? EX_CONFIG
+                               : code == ErrorCode::kUnavailable   ? EX_UNAVAILABLE
+                                                                   : EX_NOINPUT,
+                               "source " + parts.source_name + ": " + live.error().message};
+            }
+            if (!missing.empty()) {
+                printInfo("source " + parts.source_name + ": not available yet (" + missing +
+                          "); running in the fault state and retrying");
+            } else {
+                printInfo("source " + parts.source_name + ": " + (*live)->describe() + ", " +
+                          (*live)->mode());
+                for (const auto& note : (*live)->info().notes) {
+                    printInfo("source " + parts.source_name + ": " + note);
+                }
+            }
+            parts.live = live->get();
+            parts.source = std::move(*live);
+            parts.lossless = false;  // a camera does not wait: late frames are dropped
+            return openDetectorAndPriors(config, parts);
+        }
     }
     parts.lossless = s.pacing == drivers::PacingMode::kAsFastAsPossible;
     if (s.pacing == drivers::PacingMode::kRealTime) {
@@ -155,6 +182,10 @@ std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& part
         source = std::move(*paced);
     }
     parts.source = std::move(source);
+    return openDetectorAndPriors(config, parts);
+}
+
+std::optional<Failure> openDetectorAndPriors(const DaemonConfig& config, PipelineParts& parts) {
     auto det = openDetector(config);
     if (!det) {
         return Failure{exitCodeFor(det.error(), EX_UNAVAILABLE), det.error().message};
@@ -213,6 +244,7 @@ private:
     void reload();
     void tick(std::int64_t now_ns);
     void teardown(const char* reason);
+    void openLights();
 
     CommandLine cli_;
     DaemonConfig config_;
@@ -220,13 +252,16 @@ private:
     std::unique_ptr<ReportHub> hub_;
     std::unique_ptr<LogService> log_;
     std::unique_ptr<LogEvents> events_;
+    std::unique_ptr<StatusLights> lights_;
     std::unique_ptr<SocketService> socket_;
     std::unique_ptr<Pipeline> pipeline_;
     bool tty_ = false;
+    std::int64_t last_beat_ns_ = 0;
     std::int64_t last_status_ns_ = 0;
     std::int64_t last_line_ns_ = 0;
     std::int64_t last_watchdog_ns_ = 0;
     std::uint64_t last_heartbeat_ = 0;
+    std::uint64_t last_light_heartbeat_ = 0;
     std::string last_log_fault_;
 };
 
@@ -261,6 +296,9 @@ int Daemon::run() {
     log_->start();
     events_ = std::make_unique<LogEvents>(*log_);
     events_->start(version(), sourceName(config_.source), toToml(config_));
+
+    // 2b. The status LEDs. Without them the daemon runs on: one line says why.
+    openLights();
 
     // 3. Source, detector, priors.
     PipelineParts parts;
@@ -334,9 +372,43 @@ int Daemon::run() {
     return exit_code;
 }
 
+void Daemon::openLights() {
+    auto lights = StatusLights::open(config_.gpio);
+    if (!lights) {
+        const std::string msg =
+            "gpio: " + lights.error().message + " (running without status LEDs)";
+        printError(msg);
+        events_->onError("gpio", lights.error().message);
+        return;
+    }
+    if (!*lights) {
+        printInfo("gpio: no chip configured (gpio.chip), no status LEDs");
+        return;
+    }
+    lights_ = std::move(*lights);
+    lights_->setPattern(LightPattern::kStarting);
+    lights_->start();
+    printInfo("gpio: status LEDs on " + lights_->describe());
+}
+
 void Daemon::tick(std::int64_t now_ns) {
     const PipelineStatus st = hub_->status();
     const ScaleReport r = hub_->scale();
+    if (lights_) {
+        lights_->setPattern(patternFor(r.state));
+        // The heartbeat LED blinks while the tracking loop moves (it beats at
+        // least every 200 ms, also when idle): a stuck pipeline freezes it.
+        const std::uint64_t hb = pipeline_->heartbeat();
+        if (hb != last_light_heartbeat_) {
+            last_light_heartbeat_ = hb;
+            last_beat_ns_ = now_ns;
+        }
+        lights_->setAlive(now_ns - last_beat_ns_ < 1'000'000'000);
+        if (auto err = lights_->takeError()) {
+            printError("gpio: " + *err + " (the LEDs may be wrong)");
+            events_->onError("gpio", *err);
+        }
+    }
     // Watchdog: only while the tracking loop moves, so a stuck pipeline gets restarted.
     if (auto wd = notifier_.watchdogTimeout()) {
         const std::int64_t half_ns = wd->count() * 1000 / 2;
@@ -419,12 +491,41 @@ void Daemon::teardown(const char* reason) {
     if (socket_) {
         socket_->stop();
     }
+    lights_.reset();  // lines driven inactive and released
     if (events_) {
         events_->stop(reason);
     }
     if (log_) {
         log_->stop();
     }
+}
+
+// `scaled --list-cameras`: what to put in source.device, and the modes.
+int listCameras() {
+    std::vector<drivers::CameraDescription> all = drivers::listV4l2Cameras();
+    for (auto& c : drivers::listLibcameraCameras()) {
+        all.push_back(std::move(c));
+    }
+    if (all.empty()) {
+        std::printf("no cameras found (V4L2: no capture device in /dev/video*%s)\n",
+                    drivers::libcameraAvailable() ? "; libcamera: none listed"
+                                                  : "; this build has no libcamera support");
+        return EX_OK;
+    }
+    for (const auto& c : all) {
+        std::printf("%s:%s  %s%s%s%s\n", c.backend.c_str(), c.device.c_str(), c.name.c_str(),
+                    c.bus.empty() ? "" : " (", c.bus.c_str(), c.bus.empty() ? "" : ")");
+        if (!c.note.empty()) {
+            std::printf("    %s\n", c.note.c_str());
+        }
+        for (const auto& f : c.formats) {
+            std::printf("    %s\n", f.c_str());
+        }
+    }
+    if (!drivers::libcameraAvailable()) {
+        std::printf("(this build has no libcamera support)\n");
+    }
+    return EX_OK;
 }
 
 }  // namespace
@@ -439,6 +540,9 @@ int runMain(int argc, const char* const* argv) {
             std::fputs(parsed.error.c_str(), stderr);  // prefixed and terminated already
         }
         return parsed.exit_code;
+    }
+    if (parsed.cli.list_cameras) {
+        return listCameras();
     }
     const std::filesystem::path default_file =
         std::filesystem::path(SCALED_SYSCONFDIR) / "scaled" / "scaled.toml";

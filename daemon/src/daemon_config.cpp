@@ -118,10 +118,36 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
     for (auto& f : config_detail::pipelineFields(c.pipeline)) {
         out.push_back(std::move(f));
     }
+    auto& m = c.camera;
+    auto& g = c.gpio;
     auto& q = c.queues;
     auto& k = c.socket;
     auto& l = c.log;
     std::vector<Field> rest = {
+        integer("camera", "width_px", &m.width_px, 16, 8192),
+        integer("camera", "height_px", &m.height_px, 16, 8192),
+        real("camera", "fps", &m.fps, 0, 1000, Bound::kOpen),
+        choice("camera", "pixel_format", &m.pixel_format,
+               {{"auto", drivers::PixelFormat::kAuto},
+                {"YUYV", drivers::PixelFormat::kYuyv},
+                {"MJPEG", drivers::PixelFormat::kMjpeg},
+                {"GREY", drivers::PixelFormat::kGrey},
+                {"NV12", drivers::PixelFormat::kNv12}}),
+        integer("camera", "buffers", &m.buffers, 2, 32),
+        real("camera", "frame_timeout_s", &m.frame_timeout_s, 0, 3600, Bound::kOpen),
+        real("camera", "retry_initial_s", &m.retry_initial_s, 0, 3600, Bound::kOpen),
+        real("camera", "retry_max_s", &m.retry_max_s, 0, 3600, Bound::kOpen),
+        real("camera", "fx_px", &m.fx_px, 0, 1e6),
+        real("camera", "fy_px", &m.fy_px, 0, 1e6),
+        real("camera", "cx_px", &m.cx_px, 0, 1e6),
+        real("camera", "cy_px", &m.cy_px, 0, 1e6),
+        real("camera", "k1", &m.k1, -10, 10),
+        real("camera", "k2", &m.k2, -10, 10),
+        text("gpio", "chip", &g.chip),
+        integer("gpio", "status_line", &g.status_line, -1, 4095),
+        integer("gpio", "heartbeat_line", &g.heartbeat_line, -1, 4095),
+        boolean("gpio", "active_low", &g.active_low),
+        text("gpio", "consumer", &g.consumer),
         integer("pipeline", "capture_queue_frames", &q.capture_queue_frames, 1, 1000),
         integer("pipeline", "status_interval_ms", &q.status_interval_ms, 100, 60000),
         path("socket", "path", &k.path),
@@ -164,6 +190,38 @@ Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where) {
         return checkError(where, {"source.device", "source.kind"},
                           "required when source.kind = \"libcamera\" (a camera index such as "
                           "\"0\" or a libcamera id) (got \"\")");
+    }
+    const bool live = s.kind == SourceKind::kV4l2 || s.kind == SourceKind::kLibcamera;
+    const auto& m = c.camera;
+    if (live && (m.fx_px <= 0 || m.fy_px <= 0 || m.cx_px <= 0 || m.cy_px <= 0)) {
+        return checkError(where, {"camera.fx_px", "source.kind"},
+                          std::string("a live source (source.kind = \"") + toString(s.kind) +
+                              "\") needs the camera's calibration: camera.fx_px, fy_px, cx_px "
+                              "and cy_px must all be > 0 (got fx_px = " +
+                              drivers::toml_detail::num(m.fx_px) + ")");
+    }
+    if (m.retry_max_s < m.retry_initial_s) {
+        return checkError(
+            where, {"camera.retry_max_s", "camera.retry_initial_s"},
+            "must be >= camera.retry_initial_s = " + drivers::toml_detail::num(m.retry_initial_s) +
+                " (got " + drivers::toml_detail::num(m.retry_max_s) + ")");
+    }
+    const auto& g = c.gpio;
+    if (!g.chip.empty() && g.status_line < 0 && g.heartbeat_line < 0) {
+        return checkError(where, {"gpio.status_line", "gpio.chip"},
+                          "gpio.chip is set (\"" + g.chip +
+                              "\") but no line is: set gpio.status_line and/or "
+                              "gpio.heartbeat_line (got -1)");
+    }
+    if (g.status_line >= 0 && g.status_line == g.heartbeat_line) {
+        return checkError(where, {"gpio.heartbeat_line", "gpio.status_line"},
+                          "must differ from gpio.status_line (got " +
+                              std::to_string(g.heartbeat_line) + " for both)");
+    }
+    if (g.chip.empty() && (g.status_line >= 0 || g.heartbeat_line >= 0)) {
+        return checkError(where, {"gpio.chip", "gpio.status_line", "gpio.heartbeat_line"},
+                          "required when gpio.status_line or gpio.heartbeat_line is set "
+                          "(a path, name or label) (got \"\")");
     }
     const std::string socket_path = c.socket.path.string();
     if (socket_path.empty() || socket_path.size() > kMaxSocketPathBytes) {
@@ -376,6 +434,8 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
                               ->type_name("[FILE]")
                               ->expected(0, 1);
         app.add_flag("--version", out.cli.version, "print the version and exit");
+        app.add_flag("--list-cameras", out.cli.list_cameras,
+                     "list the V4L2 and libcamera cameras with their formats and exit");
         try {
             app.parse(argc, argv);
         } catch (const CLI::ParseError& e) {
@@ -391,6 +451,9 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
             out.exit_now = true;
             out.output = std::string("scaled ") + version() + "\n";
             return out;
+        }
+        if (out.cli.list_cameras) {
+            return out;  // runMain lists them (the drivers are not part of parsing)
         }
         if (config_opt->count() > 0) {
             out.cli.config = std::filesystem::path(config);

@@ -81,12 +81,18 @@ Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& h
       hub_(hub),
       events_(events),
       source_(std::move(parts.source)),
+      live_(parts.live),
       source_name_(std::move(parts.source_name)),
       detector_(std::move(parts.detector)),
       schedule_(config.pipeline.detection),
       lossless_(parts.lossless) {
     status_.source = source_name_;
     status_.frames_total = static_cast<std::int64_t>(source_->info().frame_count);
+    if (live_ != nullptr) {
+        status_.live = true;
+        status_.camera_device = live_->describe();
+        status_.camera_mode = live_->mode();
+    }
     report_.fault.reserve(256);
 }
 
@@ -112,7 +118,14 @@ Result<bool> Pipeline::start() {
 }
 
 void Pipeline::stop() {
-    stop_.store(true);
+    {
+        const std::lock_guard lock(stop_mutex_);
+        stop_.store(true);
+    }
+    stop_cv_.notify_all();
+    if (live_ != nullptr) {
+        live_->stop();  // a capture blocked in the camera's poll returns at once
+    }
     ring_not_empty_.notify_all();
     ring_not_full_.notify_all();
     job_ready_.notify_all();
@@ -223,6 +236,13 @@ void Pipeline::captureLoop() {
             break;
         }
         auto got = source_->next(item.frame);
+        if (!got && live_ != nullptr && got.error().code == ErrorCode::kUnavailable) {
+            if (!recoverCamera(got.error())) {
+                break;
+            }
+            restart = true;  // the map cannot continue across the gap: a new epoch
+            continue;
+        }
         if (!got) {
             // An unreadable frame: logged, skipped (the reader moved past it).
             if (events_ != nullptr) {
@@ -275,6 +295,63 @@ void Pipeline::captureLoop() {
         capture_done_ = true;
     }
     ring_not_empty_.notify_all();
+}
+
+void Pipeline::setSourceFault(const std::string& fault) {
+    const std::lock_guard lock(report_mutex_);
+    source_fault_ = fault;
+    status_.camera_lost = !fault.empty();
+    if (live_ != nullptr && fault.empty()) {
+        status_.camera_device = live_->describe();
+        status_.camera_mode = live_->mode();
+    }
+    // STATUS shows it at once (the counters in it are as of the last publish).
+    hub_.publishStatus(status_);
+    const DaemonState before = published_state_;
+    publishLocked({}, {});
+    if (events_ != nullptr && before != published_state_) {
+        events_->onState(before, published_state_, report_.epoch, report_.frame_id,
+                         fault.empty() ? "camera back" : "camera lost");
+    }
+}
+
+bool Pipeline::recoverCamera(const core::Error& error) {
+    if (events_ != nullptr) {
+        events_->onError("camera", error.message);
+    }
+    setSourceFault("camera: " + error.message);
+    const auto& c = config_.camera;
+    double wait_s = c.retry_initial_s;
+    std::string last_message = error.message;
+    while (!stop_.load()) {
+        {
+            std::unique_lock lock(stop_mutex_);
+            stop_cv_.wait_for(lock, std::chrono::duration<double>(wait_s),
+                              [&] { return stop_.load(); });
+        }
+        if (stop_.load()) {
+            return false;
+        }
+        auto reopened = live_->reopen();
+        if (reopened && *reopened) {
+            {
+                const std::lock_guard lock(report_mutex_);
+                ++status_.camera_reconnects;
+            }
+            setSourceFault({});
+            return true;
+        }
+        if (!reopened && reopened.error().message != last_message) {
+            // Logged when the reason changes, not at every attempt.
+            last_message = reopened.error().message;
+            if (events_ != nullptr) {
+                events_->onError("camera", last_message);
+            }
+            setSourceFault("camera: " + last_message);
+        }
+        wait_s = std::min(wait_s * 2, c.retry_max_s);
+    }
+    return false;
 }
 
 // --- tracking ---------------------------------------------------------------
@@ -347,8 +424,8 @@ void Pipeline::trackingLoop() {
             tracker.reset();
             need_gravity = true;
             frames_in_map = 0;
-            setSlamState(DaemonState::kInitialising, frame.id, frame.t_ns, "replay restarted",
-                         false);
+            setSlamState(DaemonState::kInitialising, frame.id, frame.t_ns,
+                         live_ != nullptr ? "camera reconnected" : "replay restarted", false);
         }
         have_last = true;
         last_t_ns = frame.t_ns;
@@ -459,7 +536,7 @@ void Pipeline::trackingLoop() {
 // --- detection and scale ----------------------------------------------------
 
 DaemonState Pipeline::deriveState() const {
-    if (failure_) {
+    if (failure_ || !source_fault_.empty()) {
         return DaemonState::kFault;
     }
     if (slam_state_ != DaemonState::kTracking) {
@@ -483,6 +560,8 @@ void Pipeline::publishLocked(std::span<const double> d, std::span<const double> 
     if (failure_) {
         report_.fault.assign("source: ");
         report_.fault.append(failure_->message);
+    } else if (!source_fault_.empty()) {
+        report_.fault.assign(source_fault_);
     } else if (!detector_fault_.empty()) {
         report_.fault.assign(detector_fault_);
     } else {

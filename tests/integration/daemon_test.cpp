@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 
 #include "daemon_harness.h"
+#include "shared_dir.h"
 #include "temp_dir.h"
 
 namespace scaled::test {
@@ -625,9 +626,20 @@ TEST_F(DaemonTest, StartupFailuresExitWithSysexitsCodes) {
         runCommand(SCALED_BIN, with({"--source", "replay:" + (tmp_.path() / "none").string()}),
                    tmp_.path(), Millis(30'000));
     EXPECT_EQ(missing.exit_code, 66) << missing.err;
+    // A live camera without its calibration is a configuration error.
     const auto v4l2 = runCommand(SCALED_BIN, with({"--source", "v4l2:/dev/video99"}), tmp_.path(),
                                  Millis(30'000));
-    EXPECT_EQ(v4l2.exit_code, 69) << v4l2.err;
+    EXPECT_EQ(v4l2.exit_code, 78) << v4l2.err;
+    EXPECT_NE(v4l2.err.find("camera.fx_px"), std::string::npos) << v4l2.err;
+    // A path that is not a camera at all: the device answers, wrongly (not a
+    // missing camera to wait for).
+    const auto not_camera = runCommand(
+        SCALED_BIN,
+        with({"--source", "v4l2:/dev/null", "--set", "camera.fx_px=500", "--set",
+              "camera.fy_px=500", "--set", "camera.cx_px=320", "--set", "camera.cy_px=240"}),
+        tmp_.path(), Millis(30'000));
+    EXPECT_NE(not_camera.exit_code, 0) << not_camera.err;
+    EXPECT_NE(not_camera.err.find("/dev/null"), std::string::npos) << not_camera.err;
     const auto bad =
         runCommand(SCALED_BIN, with({"--source", "sim", "--set", "socket.max_clients=0"}),
                    tmp_.path(), Millis(30'000));
@@ -687,6 +699,59 @@ TEST_F(DaemonTest, UnwritableLogDirIsAFaultNotAStop) {
     ASSERT_TRUE(st.has_value());
     EXPECT_EQ(str((*st)["log"], "state"), "fault") << st->dump();
     EXPECT_TRUE((*st)["log"]["error"].is_string()) << st->dump();
+}
+
+// 12b. A camera that is not there (yet): the daemon starts, serves SCALE with
+// state "fault" naming the device, STATUS says the camera is lost, and it
+// stops cleanly. (Its return is tested with a real device in the VM.)
+TEST_F(DaemonTest, AMissingCameraIsAFaultAndTheDaemonRunsOn) {
+    // The detector is the real network for a camera source.
+    const fs::path model = sharedModel("yolox_nano.onnx");
+    if (!fs::exists(model)) {
+        GTEST_SKIP() << model.string() << " is missing (set SCALED_SHARED_DIR)";
+    }
+    writeFile(paths().config, daemonConfigText(paths(), kPriors));
+    const fs::path device = tmp_.path() / "video-unplugged";
+    DaemonOptions opt;
+    opt.args = {"--source", "v4l2:" + device.string(), "--set", "camera.fx_px=500",
+                "--set",    "camera.fy_px=500",        "--set", "camera.cx_px=320",
+                "--set",    "camera.cy_px=240",        "--set", "camera.retry_initial_s=0.05",
+                "--set",    "camera.retry_max_s=0.2",  "--set", "detector.model=" + model.string()};
+    ASSERT_TRUE(daemon_.start(opt));
+    Client c = client();
+    ASSERT_TRUE(enableWatch(c, true));
+    Json last;
+    const auto p = watchUntil(c, Millis(20'000), [&](const Json& j) {
+        last = j;
+        return str(j, "state") == "fault";
+    });
+    ASSERT_TRUE(p.has_value()) << "no SCALE in state fault within 20 s; last: " << last.dump();
+    ASSERT_TRUE(enableWatch(c, false));
+    EXPECT_TRUE(checkScaleLine(*p));
+    EXPECT_NE(str(*p, "fault").find(device.string()), std::string::npos) << p->dump();
+    EXPECT_EQ(str(*p, "fault").rfind("camera: ", 0), 0U) << p->dump();
+    const auto st = status(c);
+    ASSERT_TRUE(st.has_value());
+    ASSERT_TRUE((*st)["camera"].is_object()) << st->dump();
+    EXPECT_TRUE((*st)["camera"]["lost"].get<bool>()) << st->dump();
+    EXPECT_EQ((*st)["camera"]["reconnects"].get<int>(), 0) << st->dump();
+    EXPECT_NE(daemon_.stderrText().find("not available yet"), std::string::npos)
+        << daemon_.stderrText();
+    const auto code = stop();
+    ASSERT_TRUE(code.has_value());
+    EXPECT_EQ(*code, 0);
+}
+
+// 12c. --list-cameras lists what there is (on a machine without cameras, says
+// so) and exits 0 without reading a configuration.
+TEST_F(DaemonTest, ListCamerasExitsZero) {
+    const auto r = runCommand(SCALED_BIN, {"--list-cameras", "--config", "/nonexistent.toml"},
+                              tmp_.path(), Millis(30'000));
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    const bool none = r.out.rfind("no cameras found", 0) == 0;
+    const bool some =
+        r.out.find("v4l2:") != std::string::npos || r.out.find("libcamera:") != std::string::npos;
+    EXPECT_TRUE(none || some) << r.out;
 }
 
 // 13. scalectl against the running daemon.

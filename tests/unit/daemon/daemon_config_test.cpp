@@ -124,6 +124,25 @@ TEST(DaemonConfig, KeysAreThePipelinesAndTheDaemons) {
                           "log.queue_bytes",
                           "pipeline.capture_queue_frames",
                           "pipeline.status_interval_ms",
+                          "camera.width_px",
+                          "camera.height_px",
+                          "camera.fps",
+                          "camera.pixel_format",
+                          "camera.buffers",
+                          "camera.frame_timeout_s",
+                          "camera.retry_initial_s",
+                          "camera.retry_max_s",
+                          "camera.fx_px",
+                          "camera.fy_px",
+                          "camera.cx_px",
+                          "camera.cy_px",
+                          "camera.k1",
+                          "camera.k2",
+                          "gpio.chip",
+                          "gpio.status_line",
+                          "gpio.heartbeat_line",
+                          "gpio.active_low",
+                          "gpio.consumer",
                           "detection.period_s"}) {
         EXPECT_EQ(unique.count(k), 1U) << k;
     }
@@ -179,10 +198,54 @@ period_s = 0.5
 
     ASSERT_TRUE(applyDaemonToml("[socket]\nmode = \"600\"\n", "s", "/", c).ok());
     EXPECT_EQ(c.socket.mode, 0600U);
-    ASSERT_TRUE(
-        applyDaemonToml("[source]\nkind = \"v4l2\"\ndevice = \"/dev/video2\"\n", "s", "/", c).ok());
+    const std::string live = R"([source]
+kind = "v4l2"
+device = "/dev/video2"
+[camera]
+width_px = 1280
+height_px = 720
+fps = 60
+pixel_format = "MJPEG"
+buffers = 6
+frame_timeout_s = 1.5
+retry_initial_s = 0.25
+retry_max_s = 8
+fx_px = 910.5
+fy_px = 911
+cx_px = 640.2
+cy_px = 359.8
+k1 = -0.12
+k2 = 0.03
+[gpio]
+chip = "pinctrl-bcm2711"
+status_line = 17
+heartbeat_line = 27
+active_low = true
+consumer = "scaled-leds"
+)";
+    auto ok = applyDaemonToml(live, "s", "/", c);
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
     EXPECT_EQ(c.source.kind, SourceKind::kV4l2);
     EXPECT_EQ(c.source.device, "/dev/video2");
+    EXPECT_EQ(c.camera.width_px, 1280);
+    EXPECT_EQ(c.camera.height_px, 720);
+    EXPECT_DOUBLE_EQ(c.camera.fps, 60);
+    EXPECT_EQ(c.camera.pixel_format, drivers::PixelFormat::kMjpeg);
+    EXPECT_EQ(c.camera.buffers, 6);
+    EXPECT_DOUBLE_EQ(c.camera.frame_timeout_s, 1.5);
+    EXPECT_DOUBLE_EQ(c.camera.retry_initial_s, 0.25);
+    EXPECT_DOUBLE_EQ(c.camera.retry_max_s, 8);
+    EXPECT_DOUBLE_EQ(c.camera.fx_px, 910.5);
+    EXPECT_DOUBLE_EQ(c.camera.fy_px, 911);
+    EXPECT_DOUBLE_EQ(c.camera.cx_px, 640.2);
+    EXPECT_DOUBLE_EQ(c.camera.cy_px, 359.8);
+    EXPECT_DOUBLE_EQ(c.camera.k1, -0.12);
+    EXPECT_DOUBLE_EQ(c.camera.k2, 0.03);
+    EXPECT_EQ(c.gpio.chip, "pinctrl-bcm2711");
+    EXPECT_EQ(c.gpio.status_line, 17);
+    EXPECT_EQ(c.gpio.heartbeat_line, 27);
+    EXPECT_TRUE(c.gpio.active_low);
+    EXPECT_EQ(c.gpio.consumer, "scaled-leds");
 }
 
 TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
@@ -203,7 +266,7 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
          "speed, at_end, max_frames, sim_seed, sim_fps, sim_width_px, sim_height_px)"},
         {"\n\n[sorce]\n",
          "3: sorce: unknown section (allowed: source, tracker, detector, detection, estimator, "
-         "pipeline, socket, log)"},
+         "camera, gpio, pipeline, socket, log)"},
         {"[source]\nkind = \"usb\"\n",
          "2: source.kind: must be one of \"sim\", \"replay\", \"v4l2\", \"libcamera\" (got "
          "\"usb\")"},
@@ -248,6 +311,32 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
         {"[socket]\npath = \"" + long_path + "\"\n",
          "2: socket.path: must be a path of 1 to 107 bytes (a Unix socket) (got \"" + long_path +
              "\")"},
+        // The live camera and the LEDs.
+        {"[camera]\npixel_format = \"RGB3\"\n",
+         "2: camera.pixel_format: must be one of \"auto\", \"YUYV\", \"MJPEG\", \"GREY\", "
+         "\"NV12\" (got \"RGB3\")"},
+        {"[camera]\nbuffers = 1\n", "2: camera.buffers: must be an integer in [2, 32] (got 1)"},
+        {"[camera]\nframe_timeout_s = 0\n",
+         "2: camera.frame_timeout_s: must be a number in (0, 3600] (got 0)"},
+        {"[camera]\nk1 = nan\n", "2: camera.k1: must be a number in [-10, 10] (got nan)"},
+        {"[source]\nkind = \"v4l2\"\ndevice = \"vivid\"\n[camera]\nfx_px = 500\n",
+         "5: camera.fx_px: a live source (source.kind = \"v4l2\") needs the camera's "
+         "calibration: camera.fx_px, fy_px, cx_px and cy_px must all be > 0 (got fx_px = 500)"},
+        {"[source]\nkind = \"libcamera\"\ndevice = \"0\"\n",
+         "2: camera.fx_px: a live source (source.kind = \"libcamera\") needs the camera's "
+         "calibration: camera.fx_px, fy_px, cx_px and cy_px must all be > 0 (got fx_px = 0)"},
+        {"[camera]\nretry_initial_s = 10\nretry_max_s = 2\n",
+         "3: camera.retry_max_s: must be >= camera.retry_initial_s = 10 (got 2)"},
+        {"[gpio]\nchip = \"gpiochip0\"\n",
+         "2: gpio.status_line: gpio.chip is set (\"gpiochip0\") but no line is: set "
+         "gpio.status_line and/or gpio.heartbeat_line (got -1)"},
+        {"[gpio]\nchip = \"leds\"\nstatus_line = 3\nheartbeat_line = 3\n",
+         "4: gpio.heartbeat_line: must differ from gpio.status_line (got 3 for both)"},
+        {"[gpio]\nheartbeat_line = 2\n",
+         "2: gpio.chip: required when gpio.status_line or gpio.heartbeat_line is set (a path, "
+         "name or label) (got \"\")"},
+        {"[gpio]\nstatus_line = 4096\n",
+         "2: gpio.status_line: must be an integer in [-1, 4095] (got 4096)"},
         // The pipeline's cross-field checks have lines too.
         {"[estimator]\ngrid_d_min = 5\ngrid_d_max = 2\n",
          "3: estimator.grid_d_max: must be greater than estimator.grid_d_min = 5 (got 2)"},
@@ -332,6 +421,12 @@ TEST(DaemonConfig, ToTomlRoundTrips) {
     DaemonConfig a = defaultDaemonConfig();
     a.source.kind = SourceKind::kLibcamera;
     a.source.device = "0";
+    a.camera.fx_px = a.camera.fy_px = 500;
+    a.camera.cx_px = 320;
+    a.camera.cy_px = 240;
+    a.camera.pixel_format = drivers::PixelFormat::kNv12;
+    a.gpio.chip = "gpiochip4";
+    a.gpio.heartbeat_line = 3;
     a.source.at_end = AtEnd::kLoop;
     a.socket.mode = 0640;
     a.socket.group = "robot";
@@ -514,7 +609,9 @@ TEST(DaemonLoad, FileThenSetThenDedicatedOptions) {
     // --config instead of it; --set over the file; dedicated options over --set.
     CommandLine cli;
     cli.config = other;
-    cli.sets = {"socket.max_clients=7", "log.dir=/set/logs", "source.pacing=realtime"};
+    cli.sets = {"socket.max_clients=7", "log.dir=/set/logs", "source.pacing=realtime",
+                "camera.fx_px=500",     "camera.fy_px=500",  "camera.cx_px=320",
+                "camera.cy_px=240"};
     cli.log_dir = "/cli/logs";
     cli.socket = "/cli/s.sock";
     cli.pacing = "fast";

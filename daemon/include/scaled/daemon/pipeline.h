@@ -45,6 +45,7 @@
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/report.h>
 #include <scaled/detector/object_detector.h>
+#include <scaled/drivers/camera.h>
 #include <scaled/drivers/frame_source.h>
 #include <scaled/vision/mono_tracker.h>
 
@@ -96,6 +97,11 @@ struct PipelineParts {
     std::unique_ptr<detector::ObjectDetector> detector;
     core::PriorTable priors;
     std::string source_name;  // for STATUS ("sim", "replay:/data/redkitchen")
+    // Set when `source` is a live camera (it points into `source`): a
+    // kUnavailable error of next() (device lost, no frame in time) is then a
+    // fault the capture thread recovers from by calling reopen() with a
+    // backoff (camera.retry_initial_s doubling to retry_max_s), not a failure.
+    drivers::LiveCamera* live = nullptr;
     // Fast replay: capture waits for tracking and tracking for the detector
     // (nothing dropped, deterministic). Else frames are dropped when late.
     bool lossless = false;
@@ -142,7 +148,7 @@ private:
 
     struct QueuedFrame {
         drivers::Frame frame;
-        bool restart = false;  // first frame after a loop: a discontinuity
+        bool restart = false;  // first frame after a loop or a reconnect: a discontinuity
     };
     struct DetectionJob {
         core::slam::SlamSnapshot snapshot;
@@ -151,6 +157,10 @@ private:
     };
 
     void captureLoop();
+    // The live camera stopped (kUnavailable): fault, reopen with backoff.
+    // false when stopping.
+    bool recoverCamera(const core::Error& error);
+    void setSourceFault(const std::string& fault);
     void trackingLoop();
     void detectionLoop();
 
@@ -175,7 +185,11 @@ private:
     ReportHub& hub_;
     PipelineEvents* events_;
     std::unique_ptr<drivers::FrameSource> source_;
+    drivers::LiveCamera* live_ = nullptr;  // source_ when it is a live camera
     std::string source_name_;
+    // Wakes the capture thread's reconnect backoff at stop().
+    std::mutex stop_mutex_;
+    std::condition_variable stop_cv_;
     std::optional<vision::MonoTracker> tracker_;
     std::optional<core::ScaleEstimator> estimator_;
     std::unique_ptr<detector::ObjectDetector> detector_;
@@ -207,6 +221,7 @@ private:
     std::optional<core::Error> failure_;
     std::string external_fault_;
     std::string detector_fault_;
+    std::string source_fault_;  // the live camera is lost; cleared when it is back
 
     // Status counters (report_mutex_ for the few the detection thread writes).
     PipelineStatus status_;
