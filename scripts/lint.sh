@@ -30,13 +30,21 @@ fi
 [[ $mode == format ]] && exit 0
 
 [[ -f $db/compile_commands.json ]] || { echo "lint: no $db/compile_commands.json: configure first (cmake --preset release)" >&2; exit 66; }
-mapfile -t sources < <(printf '%s\n' "${files[@]}" | grep '\.cpp$')
+mapfile -t sources < <(printf '%s\n' "${files[@]}" | grep '\.cpp$' | grep -v '^tests/')
+mapfile -t test_sources < <(printf '%s\n' "${files[@]}" | grep '\.cpp$' | grep '^tests/')
 log=$db/clang-tidy.log
 # compile_commands.json holds GCC-only flags (-Wno-restrict): clang must not trip on them.
-if ! run-clang-tidy -quiet -p "$db" -j "$(nproc)" -extra-arg=-Wno-unknown-warning-option \
-    "${sources[@]}" >"$log" 2>&1; then
+# The product's code gets every check of .clang-tidy. The tests get all but the
+# clang static analyzer (clang-analyzer-*), which is four fifths of the time on
+# a gtest file and finds little there: it keeps CI on 2 cores within budget.
+status=0
+run-clang-tidy -quiet -p "$db" -j "$(nproc)" -extra-arg=-Wno-unknown-warning-option \
+  "${sources[@]}" >"$log" 2>&1 || status=1
+run-clang-tidy -quiet -p "$db" -j "$(nproc)" -extra-arg=-Wno-unknown-warning-option \
+  -checks='-clang-analyzer-*' "${test_sources[@]}" >>"$log" 2>&1 || status=1
+if ((status != 0)); then
   grep -E 'warning:|error:' -A3 "$log" >&2 || cat "$log" >&2
   echo "clang-tidy: findings above (full log: $log)" >&2
   exit 1
 fi
-echo "clang-tidy: ${#sources[@]} files clean"
+echo "clang-tidy: ${#sources[@]} files clean, ${#test_sources[@]} test files clean (without clang-analyzer)"
