@@ -11,7 +11,6 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <poll.h>
 #include <string>
 #include <utility>
 #include <vector>
@@ -23,11 +22,13 @@
 #include <scaled/sim/sim_source.h>
 
 #include "../../../daemon/src/live_source.h"
+#include "hub_wait.h"
 
 namespace scaled::daemon {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using test::waitUntil;
+
 using core::ErrorCode;
 using core::makeError;
 
@@ -103,21 +104,6 @@ private:
     bool lost_once_ = false;
     std::atomic<bool> stopped_{false};
 };
-
-bool waitUntil(const ReportHub& hub, const std::function<bool()>& pred,
-               std::chrono::seconds timeout) {
-    const auto deadline = Clock::now() + timeout;
-    while (!pred()) {
-        if (Clock::now() >= deadline) {
-            return false;
-        }
-        pollfd p{hub.wakeFd(), POLLIN, 0};
-        if (poll(&p, 1, 100) > 0) {
-            hub.consumeWake();
-        }
-    }
-    return true;
-}
 
 // The errors and state changes the pipeline reports (the field log's view).
 class Events final : public PipelineEvents {

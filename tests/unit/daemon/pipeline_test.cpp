@@ -9,7 +9,6 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <poll.h>
 #include <string>
 #include <utility>
 #include <vector>
@@ -20,10 +19,12 @@
 #include <scaled/drivers/priors_toml.h>
 #include <scaled/sim/sim_source.h>
 
+#include "hub_wait.h"
+
 namespace scaled::daemon {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using test::waitUntil;
 
 // Every published SCALE report, in order (ReportHub keeps only the latest).
 class Recorder final : public PipelineEvents {
@@ -141,22 +142,6 @@ PipelineParts parts(double duration_s, bool lossless) {
     p.source_name = "sim";
     p.lossless = lossless;
     return p;
-}
-
-// Waits on the hub's eventfd until pred() holds or the timeout passes.
-bool waitUntil(const ReportHub& hub, const std::function<bool()>& pred,
-               std::chrono::seconds timeout) {
-    const auto deadline = Clock::now() + timeout;
-    while (!pred()) {
-        if (Clock::now() >= deadline) {
-            return false;
-        }
-        pollfd p{hub.wakeFd(), POLLIN, 0};
-        if (poll(&p, 1, 100) > 0) {
-            hub.consumeWake();
-        }
-    }
-    return true;
 }
 
 TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
