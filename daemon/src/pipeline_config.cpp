@@ -207,6 +207,9 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         real("estimator", "converged_rel_width", &e.posterior.converged_rel_width, 0, 10,
              Bound::kOpen),
         real("estimator", "drift_sigma_log", &e.posterior.drift_sigma_log, 0, 1),
+        choice("estimator", "posterior_arithmetic", &e.posterior.arithmetic,
+               {{"floating", core::PosteriorArithmetic::kFloating},
+                {"fixed", core::PosteriorArithmetic::kFixed}}),
     };
 }
 
@@ -248,6 +251,13 @@ Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where) {
         return checkError(where, {"estimator.grid_d_max", "estimator.grid_d_min"},
                           "must be greater than estimator.grid_d_min = " + num(g.d_min) + " (got " +
                               num(g.d_max) + ")");
+    }
+    if (c.estimator.posterior.arithmetic == core::PosteriorArithmetic::kFixed &&
+        !(c.estimator.likelihood.min_sigma_m >= core::Scalar(1e-5))) {
+        // Below 10 um the fixed-point likelihood's Q32-metre residuals lose precision.
+        return checkError(where, {"estimator.min_sigma_m", "estimator.posterior_arithmetic"},
+                          "must be >= 1e-05 with estimator.posterior_arithmetic = \"fixed\" (got " +
+                              num(c.estimator.likelihood.min_sigma_m) + ")");
     }
     const auto& s = c.tracker.slam;
     if (s.ransac_max_hypotheses < s.ransac_min_hypotheses) {

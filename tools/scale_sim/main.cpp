@@ -2,7 +2,7 @@
 //
 //   scale-sim [--json] [--seed N] [--variance paper|propagated]
 //             [--weighting feature|box] [--roll-compensation on|off]
-//             [--robust] [--drift SIGMA]
+//             [--robust] [--drift SIGMA] [--arithmetic floating|fixed]
 //
 // Exit codes (sysexits): 0 ok, 64 bad usage, 70 an experiment could not run.
 
@@ -24,10 +24,11 @@ void usage(std::FILE* out) {
     std::fputs(
         "usage: scale-sim [--json] [--seed N] [--variance paper|propagated]\n"
         "                 [--weighting feature|box] [--roll-compensation on|off]\n"
-        "                 [--robust] [--drift SIGMA_LOG]\n"
+        "                 [--robust] [--drift SIGMA_LOG] [--arithmetic floating|fixed]\n"
         "Runs the paper's three experiments (four equal bottles, a microwave, four\n"
         "bottles of four heights) in simulation and reports the relative error of\n"
-        "the scale estimate after convergence.\n",
+        "the scale estimate after convergence. --arithmetic fixed runs the posterior\n"
+        "and likelihood in integer fixed point (docs/numerics.md).\n",
         out);
 }
 
@@ -115,6 +116,17 @@ int main(int argc, char** argv) {
                 return kExUsage;
             }
             config.posterior.drift_sigma_log = static_cast<scaled::core::Scalar>(s);
+        } else if (a == "--arithmetic") {
+            const auto v = next();
+            if (v == "floating" || v == "fixed") {
+                config.posterior.arithmetic = v == "fixed"
+                                                  ? scaled::core::PosteriorArithmetic::kFixed
+                                                  : scaled::core::PosteriorArithmetic::kFloating;
+            } else {
+                std::cerr << "scale-sim: --arithmetic: expected floating or fixed, got '" << v
+                          << "'\n";
+                return kExUsage;
+            }
         } else {
             std::cerr << "scale-sim: unknown argument '" << a << "'\n";
             usage(stderr);
@@ -140,9 +152,11 @@ int main(int argc, char** argv) {
     if (json) {
         std::printf(
             "{\"config\":{\"seed\":%u,\"variance\":\"%s\",\"weighting\":\"%s\","
-            "\"roll_compensation\":\"%s\",\"robust\":%s,\"drift_sigma_log\":%.6g},",
+            "\"roll_compensation\":\"%s\",\"robust\":%s,\"drift_sigma_log\":%.6g,"
+            "\"arithmetic\":\"%s\"},",
             seed, variance, weighting, roll, config.likelihood.robust ? "true" : "false",
-            static_cast<double>(config.posterior.drift_sigma_log));
+            static_cast<double>(config.posterior.drift_sigma_log),
+            scaled::core::toString(config.posterior.arithmetic));
         std::printf("\"experiments\":[");
         for (std::size_t i = 0; i < results.size(); ++i) {
             const auto& r = results[i];
@@ -161,9 +175,12 @@ int main(int argc, char** argv) {
         std::printf("]}\n");
         return status;
     }
-    std::printf("seed %u, variance %s, weighting %s, roll compensation %s, robust %s, drift %g\n",
-                seed, variance, weighting, roll, config.likelihood.robust ? "on" : "off",
-                static_cast<double>(config.posterior.drift_sigma_log));
+    std::printf(
+        "seed %u, variance %s, weighting %s, roll compensation %s, robust %s, drift %g, "
+        "arithmetic %s\n",
+        seed, variance, weighting, roll, config.likelihood.robust ? "on" : "off",
+        static_cast<double>(config.posterior.drift_sigma_log),
+        scaled::core::toString(config.posterior.arithmetic));
     std::printf("%-28s %7s %10s %12s %12s %9s %10s\n", "experiment", "updates", "converged",
                 "median_err", "std_err", "ci95_cov", "final_d");
     for (const auto& r : results) {

@@ -34,18 +34,52 @@ Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, Pri
     if (!posterior) {
         return posterior.error();
     }
-    return ScaleEstimator(config, std::move(priors), camera, std::move(posterior.value()));
+    std::optional<FixedLikelihood> fixed_likelihood;
+    if (config.posterior.arithmetic == PosteriorArithmetic::kFixed) {
+        auto f = FixedLikelihood::create(posterior->grid(), lc);
+        if (!f) {
+            return f.error();
+        }
+        fixed_likelihood.emplace(std::move(f.value()));
+    }
+    return ScaleEstimator(config, std::move(priors), camera, std::move(posterior.value()),
+                          std::move(fixed_likelihood));
 }
 
 ScaleEstimator::ScaleEstimator(const EstimatorConfig& config, PriorTable priors,
-                               const PinholeRadialCamera& camera, ScalePosterior posterior)
+                               const PinholeRadialCamera& camera, ScalePosterior posterior,
+                               std::optional<FixedLikelihood> fixed_likelihood)
     : config_(config),
       priors_(std::move(priors)),
       camera_(camera),
       posterior_(std::move(posterior)),
-      log_l_(posterior_.grid().size(), 0),
+      log_l_(fixed_likelihood ? 0 : posterior_.grid().size(), 0),
+      fixed_likelihood_(std::move(fixed_likelihood)),
+      fixed_log_l_(fixed_likelihood_ ? posterior_.grid().size() : 0, 0),
       extents_(static_cast<std::size_t>(config.max_features_per_box)),
       extent_features_(static_cast<std::size_t>(config.max_features_per_box), -1) {}
+
+bool ScaleEstimator::addObservation(const VerticalExtent& extent, const HeightPrior& prior,
+                                    Scalar weight, Scalar* local_estimate) {
+    if (fixed_likelihood_) {
+        if (!fixed_likelihood_->evaluate(extent, prior, fixed_log_l_) ||
+            !posterior_.addFixedLogLikelihood(fixed_log_l_, weight)) {
+            return false;
+        }
+        if (local_estimate != nullptr) {
+            *local_estimate = gridModeFixed(posterior_.grid(), fixed_log_l_);
+        }
+        return true;
+    }
+    if (!evaluateLogLikelihood(extent, prior, posterior_.grid(), config_.likelihood, log_l_) ||
+        !posterior_.addLogLikelihood(log_l_, weight)) {
+        return false;
+    }
+    if (local_estimate != nullptr) {
+        *local_estimate = gridMode(posterior_.grid(), log_l_);
+    }
+    return true;
+}
 
 UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
                                    std::span<const Detection> detections,
@@ -80,9 +114,10 @@ UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
                                   : Scalar(1);
         int used = 0;
         for (std::size_t k = 0; k < n; ++k) {
-            if (!evaluateLogLikelihood(extents_[k], *prior, posterior_.grid(), config_.likelihood,
-                                       log_l_) ||
-                !posterior_.addLogLikelihood(log_l_, weight)) {
+            // The local mode costs a pass over the grid: only for a record.
+            Scalar local_estimate = 0;
+            const bool record = static_cast<std::size_t>(stats.records_written) < records.size();
+            if (!addObservation(extents_[k], *prior, weight, record ? &local_estimate : nullptr)) {
                 ++stats.rejected[static_cast<std::size_t>(ExtentStatus::kUnstable)];
                 continue;
             }
@@ -96,7 +131,7 @@ UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
                 rec.sigma_D_paper = extents_[k].sigma_D_paper;
                 rec.sigma_D_feature = extents_[k].sigma_D_feature;
                 rec.sigma_D_box = extents_[k].sigma_D_box;
-                rec.local_estimate = gridMode(posterior_.grid(), log_l_);
+                rec.local_estimate = local_estimate;
                 rec.weight = weight;
                 ++stats.records_written;
             }

@@ -19,6 +19,16 @@ const char* toString(ScaleState state) {
     return "unknown";
 }
 
+const char* toString(PosteriorArithmetic arithmetic) {
+    switch (arithmetic) {
+        case PosteriorArithmetic::kFloating:
+            return "floating";
+        case PosteriorArithmetic::kFixed:
+            return "fixed";
+    }
+    return "unknown";
+}
+
 Result<ScalePosterior> ScalePosterior::create(const PosteriorConfig& config) {
     auto grid = ScaleGrid::create(config.grid);
     if (!grid) {
@@ -35,18 +45,37 @@ Result<ScalePosterior> ScalePosterior::create(const PosteriorConfig& config) {
     if (!(config.drift_sigma_log >= 0) || !std::isfinite(config.drift_sigma_log)) {
         return makeError(ErrorCode::kInvalidArgument, "posterior: drift_sigma_log must be >= 0");
     }
-    return ScalePosterior(config, std::move(grid.value()));
+    std::optional<FixedPosterior> fixed;
+    if (config.arithmetic == PosteriorArithmetic::kFixed) {
+        auto f = FixedPosterior::create(config);
+        if (!f) {
+            return f.error();
+        }
+        fixed.emplace(std::move(f.value()));
+    } else if (config.arithmetic != PosteriorArithmetic::kFloating) {
+        return makeError(ErrorCode::kInvalidArgument, "posterior: unknown arithmetic");
+    }
+    return ScalePosterior(config, std::move(grid.value()), std::move(fixed));
 }
 
-ScalePosterior::ScalePosterior(const PosteriorConfig& config, ScaleGrid grid)
+ScalePosterior::ScalePosterior(const PosteriorConfig& config, ScaleGrid grid,
+                               std::optional<FixedPosterior> fixed)
     : config_(config),
       grid_(std::move(grid)),
-      log_p_(grid_.size(), 0),
-      work_(grid_.size(), 0),
-      work2_(grid_.size(), 0),
-      kernel_(2 * kMaxKernelHalfWidth + 1, 0) {}
+      // Under fixed arithmetic the floating buffers are unused; fixed_in_ holds
+      // addLogLikelihood's conversion.
+      log_p_(fixed ? 0 : grid_.size(), 0),
+      work_(fixed ? 0 : grid_.size(), 0),
+      work2_(fixed ? 0 : grid_.size(), 0),
+      kernel_(fixed ? 0 : 2 * kMaxKernelHalfWidth + 1, 0),
+      fixed_(std::move(fixed)),
+      fixed_in_(fixed_ ? grid_.size() : 0, 0) {}
 
 void ScalePosterior::reset() {
+    if (fixed_) {
+        fixed_->reset();
+        return;
+    }
     std::fill(log_p_.begin(), log_p_.end(), Scalar(0));
     observations_ = 0;
 }
@@ -59,13 +88,23 @@ void ScalePosterior::normalise() {
 }
 
 bool ScalePosterior::addLogLikelihood(std::span<const Scalar> log_l, Scalar weight) {
-    if (log_l.size() != log_p_.size() || !(weight > 0 && weight <= 1)) {
+    if (log_l.size() != grid_.size() || !(weight > 0 && weight <= 1)) {
         return false;
     }
     for (const Scalar v : log_l) {
         if (!std::isfinite(v)) {
             return false;
         }
+    }
+    if (fixed_) {
+        // Conversion at the boundary: shift to a maximum of 0, Q16, saturate.
+        const Scalar mx = *std::max_element(log_l.begin(), log_l.end());
+        for (std::size_t j = 0; j < log_l.size(); ++j) {
+            const double q = std::ldexp(static_cast<double>(log_l[j] - mx), fixed::kLogFracBits);
+            fixed_in_[j] = static_cast<LogQ16>(
+                std::llround(std::max(q, static_cast<double>(kFixedLogLikelihoodMin))));
+        }
+        return fixed_->addLogLikelihood(fixed_in_, weight);
     }
     for (std::size_t j = 0; j < log_p_.size(); ++j) {
         log_p_[j] += weight * log_l[j];
@@ -78,7 +117,26 @@ bool ScalePosterior::addLogLikelihood(std::span<const Scalar> log_l, Scalar weig
     return true;
 }
 
+bool ScalePosterior::addFixedLogLikelihood(std::span<const LogQ16> log_l, Scalar weight) {
+    if (fixed_) {
+        return fixed_->addLogLikelihood(log_l, weight);
+    }
+    if (log_l.size() != grid_.size()) {
+        return false;
+    }
+    for (std::size_t j = 0; j < log_l.size(); ++j) {
+        work_[j] =
+            static_cast<Scalar>(std::ldexp(static_cast<double>(log_l[j]), -fixed::kLogFracBits));
+    }
+    // work_ is scratch: addLogLikelihood reads it all before diffuse() reuses it.
+    return addLogLikelihood(work_, weight);
+}
+
 void ScalePosterior::diffuse(Scalar sigma_log) {
+    if (fixed_) {
+        fixed_->diffuse(sigma_log);
+        return;
+    }
     if (!(sigma_log > 0) || !std::isfinite(sigma_log)) {
         return;
     }
@@ -131,6 +189,9 @@ Scalar ScalePosterior::quantile(std::span<const Scalar> cdf, Scalar q) const {
 }
 
 ScaleSummary ScalePosterior::summary() const {
+    if (fixed_) {
+        return fixed_->summary();
+    }
     ScaleSummary s;
     s.observations = observations_;
     Scalar total = 0;

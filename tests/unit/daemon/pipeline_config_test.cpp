@@ -28,6 +28,27 @@ TEST(PipelineConfig, DefaultsAreTheChosenOnes) {
     EXPECT_TRUE(c.estimator.likelihood.robust);
     EXPECT_TRUE(c.estimator.likelihood.partial_visibility);
     EXPECT_TRUE(c.estimator.extent.compensate_roll);
+    EXPECT_EQ(c.estimator.posterior.arithmetic, core::PosteriorArithmetic::kFloating);
+}
+
+TEST(PipelineConfig, PosteriorArithmeticIsCheckedLikeEveryKey) {
+    PipelineConfig c = defaultPipelineConfig();
+    auto r = applyPipelineToml("[estimator]\nposterior_arithmetic = \"fixed\"\n", "test.toml",
+                               "/base", c);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(c.estimator.posterior.arithmetic, core::PosteriorArithmetic::kFixed);
+    ASSERT_TRUE(applyPipelineOverrides({"estimator.posterior_arithmetic=floating"}, c).ok());
+    EXPECT_EQ(c.estimator.posterior.arithmetic, core::PosteriorArithmetic::kFloating);
+    EXPECT_EQ(applyError("[estimator]\n\nposterior_arithmetic = \"integer\"\n", c),
+              "test.toml:3: estimator.posterior_arithmetic: must be one of \"floating\", "
+              "\"fixed\" (got \"integer\")");
+    EXPECT_EQ(applyError("[estimator]\nposterior_arithmetic = 1\n", c),
+              "test.toml:2: estimator.posterior_arithmetic: must be one of \"floating\", "
+              "\"fixed\" (got 1)");
+    // The fixed formats need min_sigma_m >= 10 um.
+    EXPECT_EQ(applyError("[estimator]\nposterior_arithmetic = \"fixed\"\nmin_sigma_m = 0\n", c),
+              "test.toml:3: estimator.min_sigma_m: must be >= 1e-05 with "
+              "estimator.posterior_arithmetic = \"fixed\" (got 0)");
 }
 
 TEST(PipelineConfig, AppliesKeysAndKeepsTheRest) {
@@ -76,7 +97,7 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
               "partial_weight, min_sigma_m, weighting, use_non_upright, min_detection_score, "
               "max_features_per_box, compensate_roll, propagate_variance, box_edge_sigma_px, "
               "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
-              "converged_rel_width, drift_sigma_log)");
+              "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
     EXPECT_EQ(applyError("\n[estimatr]\n", c),
               "test.toml:2: estimatr: unknown section (allowed: source, tracker, detector, "
               "detection, estimator, camera, gpio, pipeline, socket, log)");

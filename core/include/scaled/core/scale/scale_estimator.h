@@ -6,9 +6,13 @@
 // multiplies the grid posterior (scale_posterior.h).
 //
 // Buffers are sized at construction; update() does not allocate.
+// config.posterior.arithmetic = kFixed evaluates each likelihood with
+// FixedLikelihood and accumulates it in the fixed-point posterior
+// (fixed_posterior.h): no floating point in any per-bin loop.
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string_view>
 #include <utility>
@@ -16,6 +20,7 @@
 
 #include <scaled/core/camera/pinhole_radial.h>
 #include <scaled/core/result.h>
+#include <scaled/core/scale/fixed_posterior.h>
 #include <scaled/core/scale/height_prior.h>
 #include <scaled/core/scale/likelihood.h>
 #include <scaled/core/scale/scale_posterior.h>
@@ -96,13 +101,20 @@ public:
 
 private:
     ScaleEstimator(const EstimatorConfig& config, PriorTable priors,
-                   const PinholeRadialCamera& camera, ScalePosterior posterior);
+                   const PinholeRadialCamera& camera, ScalePosterior posterior,
+                   std::optional<FixedLikelihood> fixed_likelihood);
+    // One observation's likelihood into the posterior; its local mode (when
+    // local_estimate is not null) on success.
+    bool addObservation(const VerticalExtent& extent, const HeightPrior& prior, Scalar weight,
+                        Scalar* local_estimate);
 
     EstimatorConfig config_;
     PriorTable priors_;
     PinholeRadialCamera camera_;
     ScalePosterior posterior_;
     std::vector<Scalar> log_l_;
+    std::optional<FixedLikelihood> fixed_likelihood_;  // fixed arithmetic only
+    std::vector<LogQ16> fixed_log_l_;
     std::vector<VerticalExtent> extents_;
     std::vector<int> extent_features_;
 };

@@ -6,10 +6,12 @@
 // for const calls: summary() uses the object's scratch buffer.
 
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
 #include <scaled/core/result.h>
+#include <scaled/core/scale/fixed_posterior.h>
 #include <scaled/core/scale/scale_grid.h>
 
 namespace scaled::core {
@@ -32,17 +34,28 @@ struct ScaleSummary {
     ScaleState state = ScaleState::kNoData;
 };
 
+// How the posterior (and ScaleEstimator's likelihood) is computed: in Scalar
+// floating point, or in integer fixed point (fixed_posterior.h: Q16 nats and
+// table exp/log, no floating point in any per-bin loop; for boards without a
+// fast FPU). See docs/numerics.md for the agreement between the two.
+enum class PosteriorArithmetic : std::uint8_t { kFloating, kFixed };
+const char* toString(PosteriorArithmetic arithmetic);
+
 struct PosteriorConfig {
     GridConfig grid;
+    PosteriorArithmetic arithmetic = PosteriorArithmetic::kFloating;
     // Converged when the 95% interval is narrower than this fraction of the MAP.
     Scalar converged_rel_width = Scalar(0.10);
     // Floor of the normalised log posterior (max = 0). Keeps every bin finite so
-    // the posterior can never underflow, whatever the evidence.
+    // the posterior can never underflow, whatever the evidence. Fixed
+    // arithmetic needs it in [-16000, 0).
     Scalar log_floor = -1000;
     // Diffusion of log d per update (scale drift). 0 = off.
     Scalar drift_sigma_log = 0;
 };
 
+// With config.arithmetic = kFixed every call is forwarded to a FixedPosterior
+// (fixed_posterior.h); the interface is the same for both.
 class ScalePosterior {
 public:
     static constexpr int kMaxKernelHalfWidth = 256;
@@ -53,8 +66,14 @@ public:
 
     // Adds one observation's log-likelihood (size grid().size()), tempered by
     // weight in (0, 1]. Non-finite entries are rejected as a whole: returns
-    // false and changes nothing.
+    // false and changes nothing. Fixed arithmetic: the values are converted to
+    // Q16 nats first (floating point per bin: ScaleEstimator does not use this
+    // path, it evaluates the likelihood in fixed point).
     bool addLogLikelihood(std::span<const Scalar> log_l, Scalar weight = 1);
+
+    // Adds a fixed-point log-likelihood (FixedLikelihood's output: Q16 nats in
+    // [kFixedLogLikelihoodMin, 0]). Floating arithmetic: converted to Scalar.
+    bool addFixedLogLikelihood(std::span<const LogQ16> log_l, Scalar weight = 1);
 
     // Convolves the posterior with a Gaussian of std sigma_log in log d.
     void diffuse(Scalar sigma_log);
@@ -62,12 +81,24 @@ public:
     [[nodiscard]] ScaleSummary summary() const;
     [[nodiscard]] const ScaleGrid& grid() const { return grid_; }
     [[nodiscard]] const PosteriorConfig& config() const { return config_; }
-    // Normalised log density (maximum 0) on the grid.
-    [[nodiscard]] std::span<const Scalar> logDensity() const { return log_p_; }
-    [[nodiscard]] int observations() const { return observations_; }
+    [[nodiscard]] PosteriorArithmetic arithmetic() const { return config_.arithmetic; }
+    // Normalised log density (maximum 0) on the grid, in Scalar nats (fixed
+    // arithmetic: converted into a buffer sized at create, valid until the
+    // next non-const call).
+    [[nodiscard]] std::span<const Scalar> logDensity() const {
+        return fixed_ ? fixed_->logDensity() : std::span<const Scalar>(log_p_);
+    }
+    // The fixed-point posterior (nullptr under floating arithmetic).
+    [[nodiscard]] const FixedPosterior* fixedPosterior() const {
+        return fixed_ ? &*fixed_ : nullptr;
+    }
+    [[nodiscard]] int observations() const {
+        return fixed_ ? fixed_->observations() : observations_;
+    }
 
 private:
-    ScalePosterior(const PosteriorConfig& config, ScaleGrid grid);
+    ScalePosterior(const PosteriorConfig& config, ScaleGrid grid,
+                   std::optional<FixedPosterior> fixed);
     void normalise();
     [[nodiscard]] Scalar quantile(std::span<const Scalar> cdf, Scalar q) const;
 
@@ -78,6 +109,8 @@ private:
     std::vector<Scalar> work2_;
     std::vector<Scalar> kernel_;
     int observations_ = 0;
+    std::optional<FixedPosterior> fixed_;
+    std::vector<LogQ16> fixed_in_;  // addLogLikelihood's conversion (fixed only)
 };
 
 }  // namespace scaled::core
