@@ -69,7 +69,10 @@ public:
     PointSlamSim(const core::PinholeRadialCamera& cam, const PointSimOptions& opt)
         : cam_(cam), opt_(opt), rng_(opt.seed) {
         // Points on three walls and the floor of a room around the path.
-        std::uniform_real_distribution<Scalar> u(-1, 1);
+        // Drawn in double and rounded: a float build sees the same scene and noise
+        // as a double build, so the two differ only by their arithmetic.
+        std::uniform_real_distribution<double> u01(-1, 1);
+        const auto u = [&](std::mt19937& g) { return static_cast<Scalar>(u01(g)); };
         for (int i = 0; i < 1500; ++i) {
             const int wall = i % 4;
             Vec3 p;
@@ -111,8 +114,10 @@ public:
             const auto preds = slam.predictMeasurements();
             matches_.clear();
             outlier_ids_.clear();
-            std::normal_distribution<Scalar> noise(0, opt_.pixel_noise_px);
-            std::uniform_real_distribution<Scalar> unit(0, 1);
+            std::normal_distribution<double> noise_d(0, static_cast<double>(opt_.pixel_noise_px));
+            std::uniform_real_distribution<double> unit_d(0, 1);
+            const auto noise = [&](std::mt19937& g) { return static_cast<Scalar>(noise_d(g)); };
+            const auto unit = [&](std::mt19937& g) { return static_cast<Scalar>(unit_d(g)); };
             for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
                 const auto it = point_of_.find(preds[static_cast<size_t>(i)].id);
                 if (it == point_of_.end()) {
@@ -187,7 +192,8 @@ private:
                 // inverse depth perturbed by a draw of that sigma.
                 const Scalar rho = 1 / (points_[k] - truth.p_CinW).norm();
                 const Scalar sigma = opt_.known_depth_rel_sigma * rho;
-                std::normal_distribution<Scalar> draw(0, sigma);
+                std::normal_distribution<double> draw_d(0, static_cast<double>(sigma));
+                const auto draw = [&](std::mt19937& g) { return static_cast<Scalar>(draw_d(g)); };
                 id = slam.addFeature(*px, rho + draw(rng_), sigma);
             } else {
                 id = slam.addFeature(*px);

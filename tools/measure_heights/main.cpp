@@ -463,7 +463,8 @@ int main(int argc, char** argv) {
                 y.push_back(p.y());
                 z.push_back(p.z());
             }
-            inst.centroid = Vec3(hx::median(x), hx::median(y), hx::median(z));
+            inst.centroid = Eigen::Vector3d(hx::median(x), hx::median(y), hx::median(z))
+                                .cast<scaled::core::Scalar>();
             inst.median_m = hx::median(inst.heights);
             inst.mad_m = hx::mad(inst.heights);
         }
@@ -516,7 +517,8 @@ int main(int argc, char** argv) {
 
     std::printf("# measure-heights %s: %d frames (every %d), %zu detections, %zu rejected\n",
                 dataset.c_str(), frames_used, every, views.size(), rejected.size());
-    std::printf("# up_W = (%.4f, %.4f, %.4f)\n", up_W.x(), up_W.y(), up_W.z());
+    std::printf("# up_W = (%.4f, %.4f, %.4f)\n", static_cast<double>(up_W.x()),
+                static_cast<double>(up_W.y()), static_cast<double>(up_W.z()));
     if (floor) {
         std::printf("# floor: height %.3f m (MAD %.3f m, %.1f %% of the samples)\n",
                     floor->height_m, floor->mad_m, 100 * floor->fraction);
@@ -531,7 +533,8 @@ int main(int argc, char** argv) {
                 "views", "height", "MAD", "min", "max", "top/fl", "bot/fl");
     for (const Instance& in : instances) {
         std::printf("%-14s %3d (%7.3f,%7.3f,%7.3f) %5zu %8.3f %7.3f %7.3f %7.3f %8.3f %8.3f%s\n",
-                    in.class_name.c_str(), in.id, in.centroid.x(), in.centroid.y(), in.centroid.z(),
+                    in.class_name.c_str(), in.id, static_cast<double>(in.centroid.x()),
+                    static_cast<double>(in.centroid.y()), static_cast<double>(in.centroid.z()),
                     in.heights.size(), in.median_m, in.mad_m,
                     *std::min_element(in.heights.begin(), in.heights.end()),
                     *std::max_element(in.heights.begin(), in.heights.end()), hx::median(in.tops),
@@ -563,9 +566,11 @@ int main(int argc, char** argv) {
                 "%4zu %4lld %-12s %.2f [%4.0f %4.0f %4.0f %4.0f] (%+3d,%+3d %s) %6d %5.2f "
                 "%6.3f %6.3f %3d %s\n",
                 i, static_cast<long long>(v.frame), v.class_name.c_str(),
-                static_cast<double>(v.score), v.box.x_min_px, v.box.y_min_px, v.box.x_max_px,
-                v.box.y_max_px, v.shift.dx, v.shift.dy, v.shift.ok ? "ok" : "--", v.m.pixels,
-                v.m.near_m, v.m.top_m - f, v.m.bottom_m - f, v.instance, v.m.reject.c_str());
+                static_cast<double>(v.score), static_cast<double>(v.box.x_min_px),
+                static_cast<double>(v.box.y_min_px), static_cast<double>(v.box.x_max_px),
+                static_cast<double>(v.box.y_max_px), v.shift.dx, v.shift.dy,
+                v.shift.ok ? "ok" : "--", v.m.pixels, v.m.near_m, v.m.top_m - f, v.m.bottom_m - f,
+                v.instance, v.m.reject.c_str());
         }
     }
     return 0;

@@ -27,7 +27,10 @@ ClassRule classRule(const std::string& class_name) {
 }
 
 core::Vec3 DepthView::world(int u, int v, double z) const {
-    const core::Vec3 p_C((u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z);
+    const core::Vec3 p_C =
+        Eigen::Vector3d((u - static_cast<double>(k.cx)) / static_cast<double>(k.fx) * z,
+                        (v - static_cast<double>(k.cy)) / static_cast<double>(k.fy) * z, z)
+            .cast<core::Scalar>();
     return T_CtoW.R_CtoW * p_C + T_CtoW.p_CinW;
 }
 
@@ -235,19 +238,27 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
     // that the residual misregistration cannot cut the object's top or
     // bottom off (depth segmentation removes the background this adds).
     const double grow = 0.08 * bh + 4;
-    const int x0 = std::clamp(static_cast<int>(std::lround(box.x_min_px - shift.dx)), 0, w - 1);
-    const int x1 = std::clamp(static_cast<int>(std::lround(box.x_max_px - shift.dx)), 0, w - 1);
-    const int y0 =
-        std::clamp(static_cast<int>(std::lround(box.y_min_px - shift.dy - grow)), 0, h - 1);
-    const int y1 =
-        std::clamp(static_cast<int>(std::lround(box.y_max_px - shift.dy + grow)), 0, h - 1);
+    const int x0 = std::clamp(
+        static_cast<int>(std::lround(static_cast<double>(box.x_min_px) - shift.dx)), 0, w - 1);
+    const int x1 = std::clamp(
+        static_cast<int>(std::lround(static_cast<double>(box.x_max_px) - shift.dx)), 0, w - 1);
+    const int y0 = std::clamp(
+        static_cast<int>(std::lround(static_cast<double>(box.y_min_px) - shift.dy - grow)), 0,
+        h - 1);
+    const int y1 = std::clamp(
+        static_cast<int>(std::lround(static_cast<double>(box.y_max_px) - shift.dy + grow)), 0,
+        h - 1);
     m.depth_box = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
 
     // 1. The core (central 50 % x 60 % of the box): its nearest dominant depth mode.
-    const int cx0 = static_cast<int>(std::lround(box.x_min_px - shift.dx + 0.25 * bw));
-    const int cx1 = static_cast<int>(std::lround(box.x_max_px - shift.dx - 0.25 * bw));
-    const int cy0 = static_cast<int>(std::lround(box.y_min_px - shift.dy + 0.2 * bh));
-    const int cy1 = static_cast<int>(std::lround(box.y_max_px - shift.dy - 0.2 * bh));
+    const int cx0 =
+        static_cast<int>(std::lround(static_cast<double>(box.x_min_px) - shift.dx + 0.25 * bw));
+    const int cx1 =
+        static_cast<int>(std::lround(static_cast<double>(box.x_max_px) - shift.dx - 0.25 * bw));
+    const int cy0 =
+        static_cast<int>(std::lround(static_cast<double>(box.y_min_px) - shift.dy + 0.2 * bh));
+    const int cy1 =
+        static_cast<int>(std::lround(static_cast<double>(box.y_max_px) - shift.dy - 0.2 * bh));
     constexpr double kBin = 0.02;
     const int nbins = static_cast<int>((kMaxDepthM - kMinDepthM) / kBin) + 1;
     std::vector<int> hist(static_cast<std::size_t>(nbins), 0);
@@ -301,7 +312,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
     m.near_m = kMinDepthM + run_lo * kBin;
     // The band: the run, at most ~1.2 box widths deep (an object is about as
     // deep as it is wide), plus 3 cm of depth noise on each side.
-    const double width_m = bw * m.near_m / view.k.fx;
+    const double width_m = bw * m.near_m / static_cast<double>(view.k.fx);
     const double band_lo = m.near_m - 0.03;
     const double band_hi =
         std::min(kMinDepthM + (run_hi + 1) * kBin, m.near_m + std::max(0.10, 1.2 * width_m)) + 0.03;
@@ -337,7 +348,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         m.reject = "too few object pixels";
         return m;
     }
-    m.centroid_W = core::Vec3(median(xs), median(ys), median(zs));
+    m.centroid_W = Eigen::Vector3d(median(xs), median(ys), median(zs)).cast<core::Scalar>();
     // 3. Top and bottom: 1st / 99th percentiles (flying pixels and noise).
     m.bottom_m = percentile(heights, 0.01);
     m.top_m = percentile(heights, 0.99);
@@ -366,7 +377,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
             }
         }
         const double top_row = percentile(top_rows, 0.05);
-        if (top_row - (box.y_min_px - shift.dy) > std::max(0.2 * bh, 30.0)) {
+        if (top_row - (static_cast<double>(box.y_min_px) - shift.dy) > std::max(0.2 * bh, 30.0)) {
             m.reject = "object top not at the box top (occluded?)";
             return m;
         }
@@ -401,9 +412,9 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         const int gx = static_cast<int>(30 + 0.2 * bw);
         const int gy = static_cast<int>(30 + 0.2 * bh);
         const cv::Rect win =
-            cv::Rect(static_cast<int>(box.x_min_px - shift.dx) - gx,
-                     static_cast<int>(box.y_min_px - shift.dy) - gy, static_cast<int>(bw) + 2 * gx,
-                     static_cast<int>(bh) + 2 * gy) &
+            cv::Rect(static_cast<int>(static_cast<double>(box.x_min_px) - shift.dx) - gx,
+                     static_cast<int>(static_cast<double>(box.y_min_px) - shift.dy) - gy,
+                     static_cast<int>(bw) + 2 * gx, static_cast<int>(bh) + 2 * gy) &
             cv::Rect(0, 0, w, h);
         // The plane as this frame sees it (the scene plane is pooled over all
         // frames; pose and depth errors move it by ~1 cm between frames): the
@@ -510,7 +521,7 @@ std::vector<int> groupInstances(const std::vector<core::Vec3>& centroids, const 
             y.push_back(p.y());
             z.push_back(p.z());
         }
-        return core::Vec3(median(x), median(y), median(z));
+        return Eigen::Vector3d(median(x), median(y), median(z)).cast<core::Scalar>();
     };
     const auto nearest = [&](const core::Vec3& p) {
         int best = -1;

@@ -75,7 +75,7 @@ std::vector<ExperimentSpec> paperExperiments(std::uint32_t seed, const core::Est
         ExperimentSpec s = base(seed, est);
         s.name = "four_bottles_same_height";
         s.description = "four 0.30 m bottles on a table; prior: exactly 0.30 m";
-        for (const Scalar x : {-0.3, -0.1, 0.1, 0.3}) {
+        for (const Scalar x : {Scalar(-0.3), Scalar(-0.1), Scalar(0.1), Scalar(0.3)}) {
             s.objects.push_back(bottle(x, Scalar(0.30)));
         }
         const std::array<Scalar, 1> h{Scalar(0.30)};

@@ -60,8 +60,12 @@ struct SimFeature {
 };
 
 std::vector<SimFeature> makeFeatures(const ExperimentSpec& spec, std::mt19937& rng) {
-    std::uniform_real_distribution<Scalar> u01(0, 1);
-    std::normal_distribution<Scalar> n01(0, 1);
+    // Drawn in double and rounded to Scalar: a float build of core sees the
+    // same scene and noise as a double build (docs/numerics.md compares them).
+    std::uniform_real_distribution<double> u01_d(0, 1);
+    std::normal_distribution<double> n01_d(0, 1);
+    const auto u01 = [&](std::mt19937& g) { return static_cast<Scalar>(u01_d(g)); };
+    const auto n01 = [&](std::mt19937& g) { return static_cast<Scalar>(n01_d(g)); };
     std::vector<SimFeature> out;
     for (std::size_t oi = 0; oi < spec.objects.size(); ++oi) {
         const SimObject& o = spec.objects[oi];
@@ -99,9 +103,9 @@ std::vector<Vec3> silhouette(const SimObject& o) {
             pts.push_back(o.base_W + rim + Vec3(0, 0, o.height_m));
         }
     } else {
-        for (const Scalar sx : {-0.5, 0.5}) {
-            for (const Scalar sy : {-0.5, 0.5}) {
-                for (const Scalar sz : {0.0, 1.0}) {
+        for (const Scalar sx : {Scalar(-0.5), Scalar(0.5)}) {
+            for (const Scalar sy : {Scalar(-0.5), Scalar(0.5)}) {
+                for (const Scalar sz : {Scalar(0), Scalar(1)}) {
                     pts.push_back(o.base_W + Vec3(sx * o.width_m, sy * o.depth_m, sz * o.height_m));
                 }
             }
@@ -128,7 +132,8 @@ std::optional<BoundingBox> detect(const PinholeRadialCamera& cam, const CameraPo
         b.x_max_px = std::max(b.x_max_px, px->x());
         b.y_max_px = std::max(b.y_max_px, px->y());
     }
-    std::normal_distribution<Scalar> noise(0, sigma_px);
+    std::normal_distribution<double> noise_d(0, static_cast<double>(sigma_px));
+    const auto noise = [&](std::mt19937& g) { return static_cast<Scalar>(noise_d(g)); };
     b.x_min_px = std::clamp(b.x_min_px + noise(rng), Scalar(0), w);
     b.y_min_px = std::clamp(b.y_min_px + noise(rng), Scalar(0), h);
     b.x_max_px = std::clamp(b.x_max_px + noise(rng), Scalar(0), w);
@@ -177,9 +182,10 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
     }
 
     // SLAM frame: p_S = R0 p_W / d + t0, an arbitrary similarity of the world.
-    const Mat3 R0 =
-        Eigen::AngleAxis<Scalar>(Scalar(0.7), Vec3(0.3, 0.5, 0.8).normalized()).toRotationMatrix();
-    const Vec3 t0(0.4, -1.2, 2.0);
+    const Mat3 R0 = Eigen::AngleAxis<Scalar>(
+                        Scalar(0.7), Vec3(Scalar(0.3), Scalar(0.5), Scalar(0.8)).normalized())
+                        .toRotationMatrix();
+    const Vec3 t0(Scalar(0.4), Scalar(-1.2), Scalar(2.0));
     const Scalar d = spec.d_true;
     const auto toSlam = [&](const Vec3& p_W) -> Vec3 { return R0 * p_W / d + t0; };
 
@@ -196,8 +202,8 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
             const Vec3 p_C = R_WtoC * (sf.p_W - pose_W.p_CinW);
             const auto px = cam->project(p_C);
             const bool visible = sf.normal_W.dot(to_cam) > 0 && px && px->x() >= 0 &&
-                                 px->y() >= 0 && px->x() <= cam->width() - 1 &&
-                                 px->y() <= cam->height() - 1;
+                                 px->y() >= 0 && px->x() <= Scalar(cam->width() - 1) &&
+                                 px->y() <= Scalar(cam->height() - 1);
             if (!visible) {
                 continue;
             }

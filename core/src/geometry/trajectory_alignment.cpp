@@ -19,42 +19,47 @@ Result<Sim3Alignment> alignTrajectories(std::span<const Vec3> est, std::span<con
         return makeError(ErrorCode::kDegenerate,
                          "alignment: needs at least 3 positions, got " + std::to_string(n));
     }
-    Eigen::Matrix<Scalar, 3, Eigen::Dynamic> A(3, n);
-    Eigen::Matrix<Scalar, 3, Eigen::Dynamic> B(3, n);
+    // The alignment is an evaluation metric, computed in double whatever core's
+    // Scalar is: a float build's trajectories are then judged by the same
+    // yardstick as a double build's (docs/numerics.md).
+    Eigen::Matrix3Xd A(3, n);
+    Eigen::Matrix3Xd B(3, n);
     for (Eigen::Index i = 0; i < n; ++i) {
-        A.col(i) = est[static_cast<size_t>(i)];
-        B.col(i) = gt[static_cast<size_t>(i)];
+        A.col(i) = est[static_cast<size_t>(i)].cast<double>();
+        B.col(i) = gt[static_cast<size_t>(i)].cast<double>();
     }
     if (!A.allFinite() || !B.allFinite()) {
         return makeError(ErrorCode::kInvalidArgument, "alignment: non-finite position");
     }
     // Degenerate when the estimate has (almost) no extent.
-    const Vec3 mean = A.rowwise().mean();
-    const Scalar spread = (A.colwise() - mean).squaredNorm() / Scalar(n);
-    if (!(spread > Scalar(1e-12))) {
+    const Eigen::Vector3d mean = A.rowwise().mean();
+    const double spread = (A.colwise() - mean).squaredNorm() / static_cast<double>(n);
+    if (!(spread > 1e-12)) {
         return makeError(ErrorCode::kDegenerate, "alignment: estimated positions do not move");
     }
-    const Eigen::Matrix<Scalar, 4, 4> T = Eigen::umeyama(A, B, with_scale);
-    Sim3Alignment out;
-    const Mat3 sR = T.topLeftCorner<3, 3>();
-    out.scale = std::cbrt(sR.determinant());
-    out.R = sR / out.scale;
-    out.t = T.topRightCorner<3, 1>();
-    Scalar sq = 0;
+    const Eigen::Matrix4d T = Eigen::umeyama(A, B, with_scale);
+    const Eigen::Matrix3d sR = T.topLeftCorner<3, 3>();
+    const double scale = std::cbrt(sR.determinant());
+    const Eigen::Vector3d t = T.topRightCorner<3, 1>();
+    double sq = 0;
     for (Eigen::Index i = 0; i < n; ++i) {
-        sq += (B.col(i) - (sR * A.col(i) + out.t)).squaredNorm();
+        sq += (B.col(i) - (sR * A.col(i) + t)).squaredNorm();
     }
-    out.ate_rmse = std::sqrt(sq / Scalar(n));
+    Sim3Alignment out;
+    out.scale = static_cast<Scalar>(scale);
+    out.R = (sR / scale).cast<Scalar>();
+    out.t = t.cast<Scalar>();
+    out.ate_rmse = static_cast<Scalar>(std::sqrt(sq / static_cast<double>(n)));
     out.count = static_cast<int>(n);
     return out;
 }
 
 Scalar pathLength(std::span<const Vec3> positions) {
-    Scalar len = 0;
+    double len = 0;  // summed in double: thousands of short segments
     for (size_t i = 1; i < positions.size(); ++i) {
-        len += (positions[i] - positions[i - 1]).norm();
+        len += (positions[i] - positions[i - 1]).cast<double>().norm();
     }
-    return len;
+    return static_cast<Scalar>(len);
 }
 
 Result<Scalar> scaleDriftBetweenThirds(std::span<const Vec3> est, std::span<const Vec3> gt) {

@@ -365,6 +365,16 @@ ExtentResult measureVerticalExtent(const PinholeRadialCamera& camera, const Came
     // Full propagation by central differences (D is a composition of projection,
     // box intersection and line-line closest points; a numeric Jacobian is exact
     // enough and keeps one source of truth for the geometry).
+    //
+    // The step is the usual cbrt(eps) times the quantity's scale, capped at
+    // kMaxRelativeStep of the feature's distance and kMaxPixelStep pixels: in a
+    // float build cbrt(eps) is 5e-3, which would move a box edge by ~2 px (as
+    // much as the edge noise itself) and the feature by ~2.5 px in the image,
+    // often across an edge of the box, so that perturbed evaluations fail
+    // (kUnstable) where the double build's tiny steps do not. In a double build
+    // the caps are never reached (cbrt(eps) = 6e-6).
+    constexpr Scalar kMaxRelativeStep = Scalar(2e-4);
+    constexpr Scalar kMaxPixelStep = Scalar(0.1);
     const Scalar eps_cbrt = std::cbrt(std::numeric_limits<Scalar>::epsilon());
     const auto evalD = [&](const Vec3& p, const BoundingBox& b, Scalar* D) {
         VerticalExtent tmp;
@@ -374,7 +384,8 @@ ExtentResult measureVerticalExtent(const PinholeRadialCamera& camera, const Came
         *D = tmp.D;
         return true;
     };
-    const Scalar h_p = eps_cbrt * std::max(Scalar(1), (feature.p_FinW - pose.p_CinW).norm());
+    const Scalar h_p = std::min(eps_cbrt, kMaxRelativeStep) *
+                       std::max(Scalar(1), (feature.p_FinW - pose.p_CinW).norm());
     RowVec3 g;
     for (int i = 0; i < 3; ++i) {
         Vec3 p_plus = feature.p_FinW;
@@ -392,7 +403,7 @@ ExtentResult measureVerticalExtent(const PinholeRadialCamera& camera, const Came
     e.sigma_D_feature = std::sqrt(std::max(Scalar(0), (g * feature.P_FinW * g.transpose())(0)));
 
     Scalar var_box = 0;
-    const Scalar h_px = eps_cbrt * std::max(Scalar(1), box.x_max_px);
+    const Scalar h_px = std::min(eps_cbrt * std::max(Scalar(1), box.x_max_px), kMaxPixelStep);
     for (Scalar BoundingBox::*edge : {&BoundingBox::x_min_px, &BoundingBox::y_min_px,
                                       &BoundingBox::x_max_px, &BoundingBox::y_max_px}) {
         BoundingBox b_plus = box;

@@ -3,6 +3,7 @@
 #include <scaled/core/camera/pinhole_radial.h>
 
 #include "numeric_jacobian.h"
+#include "scalar_tolerance.h"
 #include "scene.h"
 
 namespace scaled::core {
@@ -48,8 +49,8 @@ TEST(Camera, DistortsByHand) {
     const auto cam = make(-0.2, 0.05);
     // r^2 = 0.25: factor 1 - 0.2*0.25 + 0.05*0.0625 = 0.953125
     const Vec2 xd = cam.distort(Vec2(0.3, 0.4));
-    EXPECT_NEAR(xd.x(), 0.3 * 0.953125, 1e-15);
-    EXPECT_NEAR(xd.y(), 0.4 * 0.953125, 1e-15);
+    EXPECT_NEAR(xd.x(), 0.3 * 0.953125, test::tolerance(1e-15, 4e-7));  // float: 1e-6 relative
+    EXPECT_NEAR(xd.y(), 0.4 * 0.953125, test::tolerance(1e-15, 4e-7));
 }
 
 TEST(Camera, UndistortInvertsDistort) {
@@ -58,14 +59,17 @@ TEST(Camera, UndistortInvertsDistort) {
         for (const Vec2& x : {Vec2(0.0, 0.0), Vec2(0.3, -0.2), Vec2(-0.5, 0.35), Vec2(0.6, 0.1)}) {
             const auto back = cam.undistort(cam.distort(x));
             ASSERT_TRUE(back) << k1 << " " << x.transpose();
-            EXPECT_LT((*back - x).norm(), 1e-12);
+            // Float: undistort's stopping residual, through a distortion derivative
+            // of at least 0.7 on these cases.
+            EXPECT_LT((*back - x).norm(),
+                      test::tolerance(1e-12, 2 * test::kFloatUndistortResidual));
         }
     }
 }
 
 TEST(Camera, UndistortFailsBeyondTheFold) {
     const auto cam = make(-0.4, 0.0);  // monotonic for r < sqrt(1/1.2) = 0.913
-    EXPECT_NEAR(cam.maxUndistortedRadius(), std::sqrt(1 / 1.2), 1e-12);
+    EXPECT_NEAR(cam.maxUndistortedRadius(), std::sqrt(1 / 1.2), test::tolerance(1e-12, 1e-6));
     EXPECT_FALSE(cam.undistort(Vec2(2.0, 0.0)));
     EXPECT_FALSE(cam.project(Vec3(1.0, 0, 1)));  // r = 1 > 0.913
 }
@@ -111,7 +115,8 @@ TEST(Camera, UnprojectionJacobianMatchesNumeric) {
     // Round trip.
     const auto px2 = cam.project(*ray * 3.0);
     ASSERT_TRUE(px2);
-    EXPECT_LT((*px2 - px).norm(), 1e-9);
+    // Float: undistort's stopping residual at f = 585 (about 9e-3 px).
+    EXPECT_LT((*px2 - px).norm(), test::tolerance(1e-9, test::kFloatUndistortResidual * 585));
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <scaled/core/slam/quaternion.h>
 
 #include "point_slam_sim.h"
+#include "scalar_tolerance.h"
 #include "scene.h"
 
 namespace scaled::core::slam {
@@ -160,7 +161,9 @@ TEST(EkfSlam, MapPointsCarryConsistentCovariances) {
             const auto px =
                 cam.project(slam->pose().R_CtoW.transpose() * (p.p_FinW - slam->pose().p_CinW));
             ASSERT_TRUE(px.has_value());
-            EXPECT_LE((*px - p.px).norm(), 1e-6);
+            // Float: two projections (f = 500) in different orders, ~1e-6
+            // relative each; the pixel spacing near 640 px is 6e-5.
+            EXPECT_LE((*px - p.px).norm(), test::tolerance(1e-6, 5e-4));
         }
     }
     EXPECT_GT(in_view, 10);
