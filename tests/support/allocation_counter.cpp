@@ -16,6 +16,8 @@
 namespace {
 
 std::atomic<std::int64_t> g_allocations{0};
+// Constant-initialised, trivially destructible: no allocation of its own.
+thread_local std::int64_t t_allocations = 0;
 
 void* allocate(std::size_t size, std::size_t alignment) noexcept {
     size = std::max<std::size_t>(size, 1);
@@ -28,6 +30,7 @@ void* allocate(std::size_t size, std::size_t alignment) noexcept {
     }
     if (p != nullptr) {
         g_allocations.fetch_add(1, std::memory_order_relaxed);
+        ++t_allocations;
     }
     return p;
 }
@@ -50,6 +53,10 @@ namespace scaled::test {
 
 std::int64_t allocationCount() {
     return g_allocations.load(std::memory_order_relaxed);
+}
+
+std::int64_t allocationCountThisThread() {
+    return t_allocations;
 }
 
 }  // namespace scaled::test

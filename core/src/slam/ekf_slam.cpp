@@ -130,6 +130,7 @@ EkfSlam::EkfSlam(const PinholeRadialCamera& camera, const SlamConfig& config)
       PHt_(MatX::Zero(capacity_, 2 * Eigen::Index{config.max_measured})),
       S_(MatX::Zero(2 * Eigen::Index{config.max_measured}, 2 * Eigen::Index{config.max_measured})),
       nu_(VecX::Zero(2 * Eigen::Index{config.max_measured})),
+      Wt_(MatX::Zero(2 * Eigen::Index{config.max_measured}, capacity_)),
       x_hyp_(VecX::Zero(capacity_)),
       rows_(MatX::Zero(6, capacity_)) {
     features_.reserve(static_cast<size_t>(config.max_features));
@@ -291,28 +292,56 @@ bool EkfSlam::ekfUpdate(int count) {
             c.proj.H_feature.leftCols(d) * PHt.middleRows(f.offset, d);
     }
     S.diagonal().array() += config_.pixel_sigma_px * config_.pixel_sigma_px;
-    Eigen::Ref<MatX> S_ref(S);
-    // Symmetrise before factorising (round-off).
+    // The factorisation, the solves and the covariance downdate are written as
+    // plain loops over contiguous columns: Eigen's blocked LLT, triangular
+    // solve and rankUpdate malloc() their workspace once m reaches its
+    // blocking size (tests/integration/steady_state_alloc_test.cpp counts it).
+    //
+    // In-place Cholesky S = L L^T (lower triangle; S's upper part is not read).
     for (Eigen::Index j = 0; j < m; ++j) {
+        Scalar d = S(j, j);
+        for (Eigen::Index k = 0; k < j; ++k) {
+            d -= S(j, k) * S(j, k);
+        }
+        if (!(d > 0) || !std::isfinite(d)) {
+            return false;
+        }
+        const Scalar l_jj = std::sqrt(d);
+        S(j, j) = l_jj;
         for (Eigen::Index i = j + 1; i < m; ++i) {
-            const Scalar a = Scalar(0.5) * (S_ref(i, j) + S_ref(j, i));
-            S_ref(i, j) = a;
-            S_ref(j, i) = a;
+            Scalar v = Scalar(0.5) * (S(i, j) + S(j, i));  // symmetrise round-off
+            for (Eigen::Index k = 0; k < j; ++k) {
+                v -= S(i, k) * S(j, k);
+            }
+            S(i, j) = v / l_jj;
         }
     }
-    Eigen::LLT<Eigen::Ref<MatX>> llt(S_ref);
-    if (llt.info() != Eigen::Success) {
-        return false;
+    // Wt = L^-1 (P H^T)^T, column r = L^-1 (row r of P H^T): then K nu = Wt^T L^-1 nu
+    // and K S K^T = Wt^T Wt. Forward substitution by columns of L (contiguous).
+    auto Wt = Wt_.topLeftCorner(m, n_);
+    Wt = PHt.transpose();
+    for (Eigen::Index r = 0; r < n_; ++r) {
+        auto w = Wt.col(r);
+        for (Eigen::Index i = 0; i < m; ++i) {
+            w(i) /= S(i, i);
+            w.segment(i + 1, m - i - 1) -= w(i) * S.col(i).segment(i + 1, m - i - 1);
+        }
     }
-    // W = P H^T L^-T, so that K nu = W L^-1 nu and K S K^T = W W^T.
-    llt.matrixU().solveInPlace<Eigen::OnTheRight>(PHt);
-    // L^-1 nu by forward substitution (m <= 2 max_measured).
-    const auto& LL = llt.matrixLLT();
+    // L^-1 nu, the same way.
     for (Eigen::Index i = 0; i < m; ++i) {
-        nu(i) = (nu(i) - LL.row(i).head(i).dot(nu.head(i))) / LL(i, i);
+        nu(i) /= S(i, i);
+        nu.segment(i + 1, m - i - 1) -= nu(i) * S.col(i).segment(i + 1, m - i - 1);
     }
-    x_.head(n_).noalias() += PHt * nu;
-    P_.topLeftCorner(n_, n_).selfadjointView<Eigen::Lower>().rankUpdate(PHt, Scalar(-1));
+    for (Eigen::Index r = 0; r < n_; ++r) {
+        x_(r) += Wt.col(r).dot(nu);
+    }
+    // P -= Wt^T Wt on the lower triangle, mirrored by symmetrize().
+    for (Eigen::Index j = 0; j < n_; ++j) {
+        const auto w_j = Wt.col(j);
+        for (Eigen::Index i = j; i < n_; ++i) {
+            P_(i, j) -= Wt.col(i).dot(w_j);
+        }
+    }
     symmetrize();
     return true;
 }

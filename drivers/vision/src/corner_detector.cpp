@@ -1,6 +1,6 @@
 #include <algorithm>
 #include <cmath>
-#include <opencv2/imgproc.hpp>
+#include <cstdint>
 #include <vector>
 
 #include <scaled/vision/corner_detector.h>
@@ -26,6 +26,123 @@ bool weaker(const Candidate& a, const Candidate& b) {
     return a.y != b.y ? a.y > b.y : a.x > b.x;
 }
 
+// OpenCV's BORDER_REFLECT_101 (its BORDER_DEFAULT): ... 2 1 | 0 1 2 ... n-1 | n-2 ...
+int reflect101(int i, int n) {
+    if (n == 1) {
+        return 0;
+    }
+    while (i < 0 || i >= n) {
+        i = i < 0 ? -i : 2 * n - 2 - i;
+    }
+    return i;
+}
+
+// Per-thread scratch of detectCorners, grown to the largest region seen and
+// never shrunk: after the first call at a given image size, detection does not
+// allocate (the tracker adds features in steady state). cv::cornerMinEigenVal
+// and cv::dilate, which this replaces, allocate their temporaries every call.
+struct CornerScratch {
+    std::vector<float> products;  // dx^2, dx dy, dy^2 of one row (3 x cols)
+    std::vector<float> row_sums;  // products summed along rows over the block (3 x rows x cols)
+    std::vector<float> response;  // rows x cols
+    std::vector<Candidate> candidates;
+    std::vector<cv::Point> picked;
+
+    void reserve(std::size_t rows, std::size_t cols) {
+        const std::size_t n = rows * cols;
+        if (products.size() < 3 * cols) {
+            products.resize(3 * cols);
+        }
+        if (row_sums.size() < 3 * n) {
+            row_sums.resize(3 * n);
+        }
+        if (response.size() < n) {
+            response.resize(n);
+        }
+        // Every pixel may be a (non-strict) local maximum on a plateau: the
+        // bound that keeps push_back from ever growing.
+        if (candidates.capacity() < n) {
+            candidates.reserve(n);
+        }
+    }
+};
+
+// The structure-tensor response of cv::cornerMinEigenVal / cv::cornerHarris
+// (aperture 3) of the region `roi` of `gray`, computed as OpenCV does: Sobel
+// derivatives scaled by 1 / (4 block 255), seeing the image's real pixels
+// around the region (BORDER_REFLECT_101 at the image border), their products
+// summed over block x block windows with BORDER_REFLECT_101 at the region's
+// border, then the smaller eigenvalue (or the Harris measure, k = 0.04) in
+// float. Into s.response, row-major, roi.width per row.
+void structureResponse(const cv::Mat& gray, const cv::Rect& roi, int block_size, bool harris,
+                       CornerScratch& s) {
+    const int rows = roi.height;
+    const int cols = roi.width;
+    const auto ucols = static_cast<std::size_t>(cols);
+    const float scale = static_cast<float>(1.0 / (4.0 * block_size * 255.0));
+    const int anchor = block_size / 2;
+    for (int i = 0; i < rows; ++i) {
+        const int y = roi.y + i;
+        const uchar* up = gray.ptr<uchar>(reflect101(y - 1, gray.rows));
+        const uchar* mid = gray.ptr<uchar>(y);
+        const uchar* down = gray.ptr<uchar>(reflect101(y + 1, gray.rows));
+        float* xx = s.products.data();
+        float* xy = xx + ucols;
+        float* yy = xy + ucols;
+        for (int j = 0; j < cols; ++j) {
+            const int x = roi.x + j;
+            const int l = reflect101(x - 1, gray.cols);
+            const int r = reflect101(x + 1, gray.cols);
+            const int gx = (up[r] - up[l]) + 2 * (mid[r] - mid[l]) + (down[r] - down[l]);
+            const int gy = (down[l] + 2 * down[x] + down[r]) - (up[l] + 2 * up[x] + up[r]);
+            const float dx = static_cast<float>(gx) * scale;
+            const float dy = static_cast<float>(gy) * scale;
+            const auto uj = static_cast<std::size_t>(j);
+            xx[uj] = dx * dx;
+            xy[uj] = dx * dy;
+            yy[uj] = dy * dy;
+        }
+        // Sums along the row over the block.
+        float* out = s.row_sums.data() + 3 * static_cast<std::size_t>(i) * ucols;
+        for (std::size_t c = 0; c < 3; ++c) {
+            const float* src = s.products.data() + c * ucols;
+            float* dst = out + c * ucols;
+            for (int j = 0; j < cols; ++j) {
+                float sum = 0;
+                for (int k = 0; k < block_size; ++k) {
+                    sum += src[reflect101(j - anchor + k, cols)];
+                }
+                dst[static_cast<std::size_t>(j)] = sum;
+            }
+        }
+    }
+    // Sums along the columns, then the response.
+    for (int i = 0; i < rows; ++i) {
+        float* resp = s.response.data() + static_cast<std::size_t>(i) * ucols;
+        for (int j = 0; j < cols; ++j) {
+            const auto uj = static_cast<std::size_t>(j);
+            float a = 0;
+            float b = 0;
+            float c = 0;
+            for (int k = 0; k < block_size; ++k) {
+                const auto row = static_cast<std::size_t>(reflect101(i - anchor + k, rows));
+                const float* sums = s.row_sums.data() + 3 * row * ucols;
+                a += sums[uj];
+                b += sums[ucols + uj];
+                c += sums[2 * ucols + uj];
+            }
+            if (harris) {
+                constexpr float kHarrisK = 0.04F;
+                resp[uj] = a * c - b * b - kHarrisK * (a + c) * (a + c);
+            } else {
+                const float ha = a * 0.5F;
+                const float hc = c * 0.5F;
+                resp[uj] = (ha + hc) - std::sqrt((ha - hc) * (ha - hc) + b * b);
+            }
+        }
+    }
+}
+
 }  // namespace
 
 void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig& cfg,
@@ -44,50 +161,63 @@ void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig&
     const double quality =
         std::isfinite(cfg.quality_level) ? std::clamp(cfg.quality_level, 0.0, 1.0) : 0.01;
     const double min_distance = std::max(cfg.min_distance_px, 0);
-    const int block_size = std::max(cfg.block_size, 1);
+    // Bounded by the image (OpenCV's box filter would reflect a larger block
+    // more than once; no detector setting comes near this).
+    const int block_size = std::clamp(cfg.block_size, 1, std::min(gray.rows, gray.cols));
 
-    // The response is computed on the region inside the border; as a view into the
-    // image, its derivatives still see the real pixels around it. Its outermost
-    // ring only serves the 3x3 local-maximum test.
+    // The response is computed on the region inside the border; its
+    // derivatives still see the real pixels around it. Its outermost ring only
+    // serves the 3x3 local-maximum test.
     const cv::Rect roi(border, border, gray.cols - 2 * border, gray.rows - 2 * border);
-    thread_local cv::Mat response;
-    try {
-        if (cfg.use_harris) {
-            cv::cornerHarris(gray(roi), response, block_size, 3, 0.04);
-        } else {
-            cv::cornerMinEigenVal(gray(roi), response, block_size, 3);
+    thread_local CornerScratch scratch;
+    scratch.reserve(static_cast<std::size_t>(roi.height), static_cast<std::size_t>(roi.width));
+    structureResponse(gray, roi, block_size, cfg.use_harris, scratch);
+    const auto cols = static_cast<std::size_t>(roi.width);
+    const auto at = [&](int y, int x) -> const float* {
+        return scratch.response.data() + static_cast<std::size_t>(y) * cols +
+               static_cast<std::size_t>(x);
+    };
+    const auto mask_row = [&](int y) -> const uchar* {
+        return mask.empty() ? nullptr : mask.ptr<uchar>(y + border) + border;
+    };
+
+    // The strongest response where the mask allows (as cv::minMaxLoc would).
+    float max_response = 0;
+    bool any = false;
+    for (int y = 0; y < roi.height; ++y) {
+        const float* row = at(y, 0);
+        const uchar* m = mask_row(y);
+        for (int x = 0; x < roi.width; ++x) {
+            if (m == nullptr || m[x] != 0) {
+                max_response = any ? std::max(max_response, row[x]) : row[x];
+                any = true;
+            }
         }
-    } catch (const cv::Exception&) {
-        return;  // inputs are validated above; this is a last line of defence
     }
-    const cv::Mat roi_mask = mask.empty() ? cv::Mat() : mask(roi);
-    double max_response = 0;
-    cv::minMaxLoc(response, nullptr, &max_response, nullptr, nullptr, roi_mask);
-    if (!(max_response > 0)) {
+    if (!any || !(max_response > 0)) {
         return;
     }
-    const auto threshold = static_cast<float>(max_response * quality);
+    const auto threshold = static_cast<float>(static_cast<double>(max_response) * quality);
 
     // Local maxima (3x3) above the threshold where the mask allows, as
-    // goodFeaturesToTrack does, then a greedy pick in order of strength that keeps
-    // min_distance_px between corners. Only as many candidates as needed are
-    // taken from the heap, so a rich image does not pay for a full sort.
-    thread_local cv::Mat dilated;
-    thread_local std::vector<Candidate> candidates;
+    // goodFeaturesToTrack does, then a greedy pick in order of strength that
+    // keeps min_distance_px between corners. Only as many candidates as needed
+    // are taken from the heap, so a rich image does not pay for a full sort.
+    std::vector<Candidate>& candidates = scratch.candidates;
     candidates.clear();
-    try {
-        cv::dilate(response, dilated, cv::Mat());  // 3x3 maximum (vectorised)
-    } catch (const cv::Exception&) {
-        return;
-    }
-    for (int y = 1; y < response.rows - 1; ++y) {
-        const auto* row = response.ptr<float>(y);
-        const auto* row_max = dilated.ptr<float>(y);
-        const uchar* m = roi_mask.empty() ? nullptr : roi_mask.ptr<uchar>(y);
-        for (int x = 1; x < response.cols - 1; ++x) {
+    for (int y = 1; y < roi.height - 1; ++y) {
+        const float* above = at(y - 1, 0);
+        const float* row = at(y, 0);
+        const float* below = at(y + 1, 0);
+        const uchar* m = mask_row(y);
+        for (int x = 1; x < roi.width - 1; ++x) {
             const float v = row[x];
-            // Local maxima are rare: test that first, it branches predictably.
-            if (v < row_max[x] || !(v > threshold) || (m != nullptr && m[x] == 0)) {
+            if (!(v > threshold) || (m != nullptr && m[x] == 0)) {
+                continue;
+            }
+            // v equals the maximum of its 3x3 neighbourhood (cv::dilate's test).
+            if (v < row[x - 1] || v < row[x + 1] || v < above[x - 1] || v < above[x] ||
+                v < above[x + 1] || v < below[x - 1] || v < below[x] || v < below[x + 1]) {
                 continue;
             }
             candidates.push_back({v, x, y});
@@ -97,7 +227,9 @@ void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig&
     const double min_d2 = min_distance * min_distance;
     const auto wanted = static_cast<std::size_t>(cfg.max_corners);
     auto heap_end = candidates.end();
-    std::vector<cv::Point> picked;
+    std::vector<cv::Point>& picked = scratch.picked;
+    picked.clear();
+    picked.reserve(std::min(wanted, candidates.capacity()));  // once per size of request
     while (heap_end != candidates.begin() && picked.size() < wanted) {
         std::pop_heap(candidates.begin(), heap_end, weaker);
         --heap_end;
@@ -123,7 +255,11 @@ void makeFreeMask(cv::Size size, std::span<const Vec2> occupied_px, int radius_p
         return;
     }
     mask.create(size, CV_8UC1);
-    mask.setTo(cv::Scalar(255));
+    // Row by row: cv::Mat::setTo allocates a scratch buffer every call.
+    for (int row = 0; row < size.height; ++row) {
+        uchar* dst = mask.ptr<uchar>(row);
+        std::fill(dst, dst + size.width, uchar{255});
+    }
     if (radius_px < 0) {
         return;
     }
@@ -138,8 +274,33 @@ void makeFreeMask(cv::Size size, std::span<const Vec2> occupied_px, int radius_p
             x > size.width + r || y > size.height + r) {
             continue;
         }
-        const cv::Point c(static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)));
-        cv::circle(mask, c, radius, cv::Scalar(0), cv::FILLED, cv::LINE_8);
+        // A filled disc, row by row: the pixels cv::circle(FILLED) zeroes
+        // (d^2 <= r^2), without the outline polygon it allocates every call
+        // (the tracker builds this mask whenever it adds features).
+        const auto cx = static_cast<std::int64_t>(std::lround(x));
+        const auto cy = static_cast<std::int64_t>(std::lround(y));
+        const auto r64 = static_cast<std::int64_t>(radius);
+        const std::int64_t r2 = r64 * r64;
+        const std::int64_t y_first = std::max<std::int64_t>(cy - r64, 0);
+        const std::int64_t y_last = std::min<std::int64_t>(cy + r64, size.height - 1);
+        for (std::int64_t row = y_first; row <= y_last; ++row) {
+            const std::int64_t dy = row - cy;
+            // Largest dx with dx^2 <= r2 - dy^2.
+            auto half = static_cast<std::int64_t>(std::sqrt(static_cast<double>(r2 - dy * dy)));
+            while (half * half > r2 - dy * dy) {
+                --half;
+            }
+            while ((half + 1) * (half + 1) <= r2 - dy * dy) {
+                ++half;
+            }
+            const std::int64_t x_first = std::max<std::int64_t>(cx - half, 0);
+            const std::int64_t x_last = std::min<std::int64_t>(cx + half, size.width - 1);
+            if (x_first > x_last) {
+                continue;
+            }
+            uchar* dst = mask.ptr<uchar>(static_cast<int>(row));
+            std::fill(dst + x_first, dst + x_last + 1, uchar{0});
+        }
     }
 }
 

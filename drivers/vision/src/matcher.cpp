@@ -125,6 +125,23 @@ double parabolaPeak(double fm, double f0, double fp) {
 
 }  // namespace
 
+void Matcher::reserve(int template_size, int max_row_centres) {
+    if (template_size < 1 || max_row_centres < 1) {
+        return;
+    }
+    const auto size = static_cast<std::size_t>(template_size);
+    const auto count = static_cast<std::size_t>(max_row_centres);
+    // The sizes scoreRow() and prepareTemplate() ask for; resize() within the
+    // capacity reserved here does not allocate.
+    const std::size_t width = count + size - 1;
+    tmpl_.reserve(size * size);
+    acc_.reserve(count + kBlock);
+    ncc_.reserve(count + kBlock);
+    col_sum_.reserve(width);
+    col_sq_.reserve(width);
+    window_.reserve(size * (width + kBlock));
+}
+
 bool Matcher::prepareTemplate(const Patch& patch, const MatchConfig& cfg) {
     const cv::Mat& t = patch.templ;
     const int size = patch.size;

@@ -9,16 +9,25 @@ using core::Mat2;
 using core::Vec2;
 
 std::optional<Patch> extractPatch(const cv::Mat& gray, const Vec2& px, int size, int source_size) {
-    if (gray.empty() || gray.type() != CV_8UC1) {
+    Patch patch;
+    if (!extractPatchInto(gray, px, size, source_size, patch)) {
         return std::nullopt;
     }
+    return patch;
+}
+
+bool extractPatchInto(const cv::Mat& gray, const Vec2& px, int size, int source_size,
+                      Patch& patch) {
+    if (gray.empty() || gray.type() != CV_8UC1) {
+        return false;
+    }
     if (size < 1 || size % 2 == 0 || source_size < size || source_size % 2 == 0) {
-        return std::nullopt;
+        return false;
     }
     const double x = static_cast<double>(px.x());
     const double y = static_cast<double>(px.y());
     if (!std::isfinite(x) || !std::isfinite(y)) {
-        return std::nullopt;
+        return false;
     }
     const int half = source_size / 2;
     const double left = x - half;
@@ -32,7 +41,7 @@ std::optional<Patch> extractPatch(const cv::Mat& gray, const Vec2& px, int size,
     const double last_x = x0f + (source_size - 1) + (ax > 0 ? 1 : 0);
     const double last_y = y0f + (source_size - 1) + (ay > 0 ? 1 : 0);
     if (x0f < 0 || y0f < 0 || last_x > gray.cols - 1 || last_y > gray.rows - 1) {
-        return std::nullopt;
+        return false;
     }
     const int x0 = static_cast<int>(x0f);
     const int y0 = static_cast<int>(y0f);
@@ -41,8 +50,12 @@ std::optional<Patch> extractPatch(const cv::Mat& gray, const Vec2& px, int size,
     const auto wx = static_cast<float>(ax);
     const auto wy = static_cast<float>(ay);
 
-    Patch patch;
     patch.size = size;
+    // A template that views the source (a shallow copy) must not alias the
+    // pixels written below; give it its own buffer.
+    if (patch.templ.datastart != nullptr && patch.templ.datastart == patch.source.datastart) {
+        patch.templ.release();
+    }
     patch.source.create(source_size, source_size, CV_32FC1);
     for (int i = 0; i < source_size; ++i) {
         const uchar* r0 = gray.ptr<uchar>(y0 + i) + x0;
@@ -57,8 +70,8 @@ std::optional<Patch> extractPatch(const cv::Mat& gray, const Vec2& px, int size,
         }
     }
     const int off = half - size / 2;
-    patch.templ = patch.source(cv::Rect(off, off, size, size)).clone();
-    return patch;
+    patch.source(cv::Rect(off, off, size, size)).copyTo(patch.templ);
+    return true;
 }
 
 void warpTemplate(Patch& patch, const Mat2& A) {

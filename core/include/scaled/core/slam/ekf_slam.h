@@ -229,6 +229,7 @@ private:
     MatX PHt_;  // capacity x 2 max_measured
     MatX S_;    // 2 max_measured square
     VecX nu_;   // 2 max_measured
+    MatX Wt_;   // 2 max_measured x capacity: L^-1 (P H^T)^T
     VecX x_hyp_;
     MatX rows_;  // 6 x capacity
     Vec3 up_W_ = Vec3(0, -1, 0);

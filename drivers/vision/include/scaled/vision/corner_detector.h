@@ -32,14 +32,18 @@ struct CornerConfig {
 // keeping min_distance_px apart) but pops candidates from a heap instead of sorting
 // them all, which is several times faster on textured images.
 // `out` is cleared first; it stays empty for a non-CV_8UC1 image or a mask of the
-// wrong type or size.
+// wrong type or size. The response is cv::cornerMinEigenVal's (cv::cornerHarris's)
+// with aperture 3, computed into per-thread scratch buffers that keep their size:
+// after the first call at an image size (and the largest max_corners asked for),
+// a call makes no heap allocation, unlike OpenCV's functions.
 void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig& cfg,
                    std::vector<core::Vec2>& out);
 
 // Sets `mask` to a CV_8UC1 image of `size` filled with 255 and zeroes a filled disc
 // of radius_px (at most 2^20) around each occupied point (rounded to the nearest
-// pixel). Points that are not finite or whose disc misses the image are ignored. A
-// non-positive size leaves `mask` empty.
+// pixel): the pixels within radius_px, as cv::circle(FILLED) draws it. Points that
+// are not finite or whose disc misses the image are ignored. A non-positive size
+// leaves `mask` empty. Allocates only when `mask` does not have that size yet.
 void makeFreeMask(cv::Size size, std::span<const core::Vec2> occupied_px, int radius_px,
                   cv::Mat& mask);
 

@@ -34,6 +34,12 @@ struct Match {
 // thread-safe; use one Matcher per thread.
 class Matcher {
 public:
+    // Sizes the scratch for templates up to template_size and ellipse rows of
+    // up to max_row_centres pixels (MatchConfig::max_search_pixels bounds every
+    // row), so that match() never allocates, not even the first time a larger
+    // ellipse comes along.
+    void reserve(int template_size, int max_row_centres);
+
     // The search of matchInEllipse (below) with this matcher's scratch.
     std::optional<Match> match(const cv::Mat& gray, const Patch& patch, const core::Vec2& center_px,
                                const core::Mat2& S, const MatchConfig& cfg);

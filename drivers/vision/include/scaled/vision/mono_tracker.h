@@ -47,6 +47,28 @@ struct TrackStats {
     int features = 0;            // map size after the frame
     int visible = 0;             // predicted in view
     int search_evaluations = 0;  // NCC evaluations (front-end cost)
+
+    // Wall time of each stage of processFrame() on this frame, microseconds
+    // (std::chrono::steady_clock; core stays clock-free, so the tracker times
+    // the calls it makes into it). A stage that did not run on this frame is
+    // 0: a new-map frame has only map_us, a frame whose prediction failed only
+    // predict_us, a frame with no feature to search no match_us. The stages
+    // are consecutive and do not overlap; their sum is the frame's time less
+    // a few hundred nanoseconds (argument checks, the clock reads).
+    double predict_us = 0;  // EkfSlam::predict: motion model, covariance propagation
+    // EkfSlam::predictMeasurements (projections, innovation covariances S)
+    // and, per predicted feature, the active-search setup outside the NCC
+    // matcher: finding its appearance, the predicted patch warp
+    // (predictedWarp) and warping the template (warpTemplate).
+    double search_us = 0;
+    double match_us = 0;   // Matcher::match calls: NCC search inside the chi-square ellipses
+    double update_us = 0;  // EkfSlam::update: 1-point RANSAC and both EKF updates
+    // EkfSlam::manageMap (deletion of bad features, inverse-depth to XYZ
+    // conversion), dropping the deleted features' appearances, and new
+    // features (free-region mask, corner detection, patch extraction,
+    // EkfSlam::addFeature); on a new-map frame, initialise plus the first
+    // features.
+    double map_us = 0;
 };
 
 class MonoTracker {
@@ -89,6 +111,8 @@ private:
     MonoTracker(core::slam::EkfSlam slam, const TrackerConfig& config);
     FeatureAppearance* appearanceOf(std::uint64_t id);
     void dropDeletedAppearances();
+    // Forgets every appearance, keeping the patch buffers for new features.
+    void clearAppearances();
     bool predictedWarp(const core::slam::FeatureInfo& f, const FeatureAppearance& a,
                        const core::Vec2& h_px, core::Mat2& A) const;
     int addFeatures(const cv::Mat& gray, int wanted, bool new_map);
@@ -99,6 +123,10 @@ private:
     core::Vec3 gravity_down_C_ = core::Vec3(0, 1, 0);
     bool has_map_ = false;
     std::vector<FeatureAppearance> appearance_;
+    // Patch buffers not in use, max_features of them allocated at create():
+    // deleted features return theirs, new ones take one, so initialising
+    // features in steady state does not allocate.
+    std::vector<Patch> spare_patches_;
     std::vector<core::slam::FeatureMatch> matches_;
     std::vector<core::Vec2> occupied_;
     std::vector<core::Vec2> corners_;

@@ -27,6 +27,13 @@ struct Patch {
 std::optional<Patch> extractPatch(const cv::Mat& gray, const core::Vec2& px, int size = 11,
                                   int source_size = 41);
 
+// extractPatch into an existing patch, re-using its buffers: no allocation when
+// `patch` already holds a source and template of these sizes (as a recycled
+// patch does). false, with `patch` unchanged, where extractPatch gives nullopt.
+// The buffers are overwritten: do not pass a patch whose pixels are shared.
+bool extractPatchInto(const cv::Mat& gray, const core::Vec2& px, int size, int source_size,
+                      Patch& patch);
+
 // Re-renders patch.templ from patch.source under the local affine map A: the
 // template offset d (pixels in the current image, from the template centre) shows
 // the source at offset A * d from the source centre. A = identity reproduces the
