@@ -9,6 +9,7 @@ scaled_unit_test(libcamera_tests
   SOURCES
     unit/drivers/libcamera/libcamera_camera_test.cpp
     unit/drivers/libcamera/frame_convert_test.cpp
+    support/allocation_counter.cpp
   LIBS scaled::libcamera opencv_core opencv_imgproc
   LABELS unit drivers)
 target_include_directories(libcamera_tests PRIVATE ${PROJECT_SOURCE_DIR}/drivers/libcamera/src)

@@ -18,6 +18,16 @@ const char* toString(PixelFormat f) {
             return "GREY";
         case PixelFormat::kNv12:
             return "NV12";
+        case PixelFormat::kYuv420:
+            return "YUV420";
+        case PixelFormat::kRgb888:
+            return "RGB888";
+        case PixelFormat::kBgr888:
+            return "BGR888";
+        case PixelFormat::kXrgb8888:
+            return "XRGB8888";
+        case PixelFormat::kXbgr8888:
+            return "XBGR8888";
     }
     return "?";
 }
@@ -28,8 +38,10 @@ bool parsePixelFormat(const std::string& text, PixelFormat& out) {
     for (const char c : text) {
         upper.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
     }
-    for (const PixelFormat f : {PixelFormat::kAuto, PixelFormat::kYuyv, PixelFormat::kMjpeg,
-                                PixelFormat::kGrey, PixelFormat::kNv12}) {
+    for (const PixelFormat f :
+         {PixelFormat::kAuto, PixelFormat::kYuyv, PixelFormat::kMjpeg, PixelFormat::kGrey,
+          PixelFormat::kNv12, PixelFormat::kYuv420, PixelFormat::kRgb888, PixelFormat::kBgr888,
+          PixelFormat::kXrgb8888, PixelFormat::kXbgr8888}) {
         std::string name = toString(f);
         for (char& c : name) {
             c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));

@@ -127,6 +127,12 @@ std::vector<std::uint32_t> fourccsOf(PixelFormat f) {
         case PixelFormat::kMjpeg:
             return {V4L2_PIX_FMT_MJPEG, V4L2_PIX_FMT_JPEG};
         case PixelFormat::kAuto:
+        // libcamera's buffer formats: this driver does not negotiate them.
+        case PixelFormat::kYuv420:
+        case PixelFormat::kRgb888:
+        case PixelFormat::kBgr888:
+        case PixelFormat::kXrgb8888:
+        case PixelFormat::kXbgr8888:
             break;
     }
     return {};
@@ -715,6 +721,11 @@ core::Result<std::uint32_t> chooseFourcc(const std::string& who, const CameraOpt
             who + ": none of YUYV, NV12, GREY, MJPEG is offered at " + size +
                 (sizes.empty() ? std::string() : "; sizes of those it offers: " + sizes) +
                 "; the device offers the formats " + formatsText(formats));
+    }
+    if (fourccsOf(opt.pixel_format).empty()) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         who + ": pixel format " + toString(opt.pixel_format) +
+                             " is not supported by the V4L2 driver (YUYV, NV12, GREY, MJPEG)");
     }
     const DeviceFormat* d = find(opt.pixel_format);
     if (d == nullptr) {

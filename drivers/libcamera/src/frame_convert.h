@@ -1,48 +1,30 @@
 #pragma once
 
-// The libcamera driver's pixel work, kept apart from libcamera itself so the
-// host tests can check it without a camera: which formats scaled converts,
-// how a buffer's planes map onto a format's planes, and the conversion to gray
-// + BGR.
+// The libcamera driver's buffer description, kept apart from libcamera itself
+// so that the host tests can check it without a camera: which formats the
+// driver asks libcamera for, and how a FrameBuffer's planes map onto the
+// planes of a format. The conversion to gray + BGR is pixel_convert.h's
+// convertRawImage(), the V4L2 driver's: it writes into the Frame's own Mats
+// and, for every format here, allocates nothing per frame once running.
 //
-// Names and byte orders follow libcamera (which follows DRM): a format name
-// gives the components of a little-endian word from the most significant
-// byte, so libcamera's RGB888 is B, G, R in memory (OpenCV's BGR) and BGR888
-// is R, G, B.
+// Names and byte orders follow libcamera (which follows DRM): camera.h lists
+// them (libcamera's RGB888 is B, G, R in memory, OpenCV's BGR).
 
 #include <cstddef>
 #include <cstdint>
-#include <opencv2/core.hpp>
-#include <string>
-#include <vector>
+#include <span>
 
 #include <scaled/core/result.h>
+#include <scaled/drivers/camera.h>
+#include <scaled/drivers/pixel_convert.h>
 
 namespace scaled::drivers::libcam {
 
-enum class RawFormat : std::uint8_t {
-    kYuyv,      // packed 4:2:2, Y0 U Y1 V
-    kNv12,      // Y plane, then interleaved U V at half resolution
-    kYuv420,    // Y, U, V planes (I420); U and V rows are half the Y stride
-    kRgb888,    // B, G, R
-    kBgr888,    // R, G, B
-    kXrgb8888,  // B, G, R, X
-    kXbgr8888,  // R, G, B, X
-};
-
-// libcamera's name of the format ("YUYV", "NV12", "YUV420", "RGB888", ...).
-const char* formatName(RawFormat format);
-// Every convertible format, in the order the driver prefers them when the
+// Every format the driver converts, in the order it prefers them when the
 // options leave the choice to it: YUV first (gray is the Y plane, no
-// arithmetic), then the RGB layouts.
-const std::vector<RawFormat>& preferredFormats();
-
-// One image plane in mapped memory.
-struct PlaneView {
-    const std::uint8_t* data = nullptr;
-    std::size_t stride_bytes = 0;  // bytes from one row to the next
-    std::size_t size_bytes = 0;    // bytes readable from data
-};
+// arithmetic), then the RGB layouts: YUYV, NV12, YUV420, RGB888, BGR888,
+// XRGB8888, XBGR8888.
+std::span<const PixelFormat> preferredFormats();
 
 // One plane of a libcamera FrameBuffer, already mapped.
 struct BufferPlane {
@@ -50,21 +32,17 @@ struct BufferPlane {
     std::size_t length_bytes = 0;
 };
 
-// The format's planes in a buffer of width x height with the stream's stride
-// (of the first plane). Buffers carry either one plane per format plane, or
-// a single plane holding them one after another (the chroma planes of NV12
-// use the Y stride, those of YUV420 half of it). Errors: a plane count that
-// fits neither layout, a plane shorter than its rows, odd sizes for the
-// subsampled formats.
-core::Result<std::vector<PlaneView>> layoutPlanes(RawFormat format, int width_px, int height_px,
-                                                  std::size_t stride_bytes,
-                                                  const std::vector<BufferPlane>& planes);
-
-// Converts one image to a new CV_8UC1 gray and a new CV_8UC3 BGR image (never
-// writes into memory the caller may still hold from an earlier frame). The
-// planes come from layoutPlanes() (their sizes are checked again here).
-core::Result<bool> convertToGrayBgr(RawFormat format, int width_px, int height_px,
-                                    const std::vector<PlaneView>& planes, cv::Mat& gray,
-                                    cv::Mat& bgr);
+// The image in a buffer of width x height with the stream's stride (of the
+// first plane), for convertRawImage(). Buffers carry either one plane per
+// format plane (the chroma planes then go to RawImage::chroma), or a single
+// plane holding them one after another (the chroma planes of NV12 use the Y
+// stride, those of YUV420 half of it). kInvalidArgument, naming the format,
+// for: a format the driver does not convert, a plane count that fits neither
+// layout, an unmapped plane or one shorter than its rows, a stride shorter
+// than a row, odd sizes for the subsampled formats. Called once per buffer
+// when the buffers are mapped; convertRawImage() checks the sizes again.
+core::Result<RawImage> describeBuffer(PixelFormat format, int width_px, int height_px,
+                                      std::size_t stride_bytes,
+                                      std::span<const BufferPlane> planes);
 
 }  // namespace scaled::drivers::libcam

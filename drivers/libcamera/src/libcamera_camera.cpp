@@ -39,6 +39,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <sys/mman.h>
 #include <system_error>
@@ -54,7 +55,6 @@ namespace {
 
 using core::ErrorCode;
 using core::makeError;
-using libcam::RawFormat;
 
 std::string errnoText(int err) {
     return std::error_code(err, std::generic_category()).message();
@@ -87,31 +87,36 @@ int64_t monotonicNowNs() {
     return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-// scaled's formats and libcamera's constants for them.
-libcamera::PixelFormat libcameraFormat(RawFormat format) {
+// scaled's formats and libcamera's constants for them (an invalid
+// libcamera::PixelFormat for those the driver does not convert).
+libcamera::PixelFormat libcameraFormat(PixelFormat format) {
     switch (format) {
-        case RawFormat::kYuyv:
+        case PixelFormat::kYuyv:
             return libcamera::formats::YUYV;
-        case RawFormat::kNv12:
+        case PixelFormat::kNv12:
             return libcamera::formats::NV12;
-        case RawFormat::kYuv420:
+        case PixelFormat::kYuv420:
             return libcamera::formats::YUV420;
-        case RawFormat::kRgb888:
+        case PixelFormat::kRgb888:
             return libcamera::formats::RGB888;
-        case RawFormat::kBgr888:
+        case PixelFormat::kBgr888:
             return libcamera::formats::BGR888;
-        case RawFormat::kXrgb8888:
+        case PixelFormat::kXrgb8888:
             return libcamera::formats::XRGB8888;
-        case RawFormat::kXbgr8888:
+        case PixelFormat::kXbgr8888:
             return libcamera::formats::XBGR8888;
+        case PixelFormat::kAuto:
+        case PixelFormat::kMjpeg:
+        case PixelFormat::kGrey:
+            break;
     }
     return {};
 }
 
-std::optional<RawFormat> rawFormat(const libcamera::PixelFormat& format) {
-    for (const RawFormat raw : libcam::preferredFormats()) {
-        if (libcameraFormat(raw) == format) {
-            return raw;
+std::optional<PixelFormat> scaledFormat(const libcamera::PixelFormat& format) {
+    for (const PixelFormat f : libcam::preferredFormats()) {
+        if (libcameraFormat(f) == format) {
+            return f;
         }
     }
     return std::nullopt;
@@ -513,7 +518,7 @@ private:
             }
         }
         const std::lock_guard lock(mutex_);
-        mode_ = std::string(libcam::formatName(format_)) + " " + std::to_string(width_px_) + "x" +
+        mode_ = std::string(toString(format_)) + " " + std::to_string(width_px_) + "x" +
                 std::to_string(height_px_) + " @ " +
                 (fps > 0 ? fpsText(fps) : std::string("the camera's rate"));
         return true;
@@ -521,23 +526,28 @@ private:
 
     // Chooses the pixel format and validates the size; configures the camera.
     core::Result<bool> configureStream() {
-        std::vector<RawFormat> wanted;
+        std::vector<PixelFormat> wanted;
         switch (options_.pixel_format) {
-            case PixelFormat::kAuto:
-                wanted = libcam::preferredFormats();
+            case PixelFormat::kAuto: {
+                const auto preferred = libcam::preferredFormats();
+                wanted.assign(preferred.begin(), preferred.end());
                 break;
+            }
             case PixelFormat::kYuyv:
-                wanted = {RawFormat::kYuyv};
-                break;
             case PixelFormat::kNv12:
-                wanted = {RawFormat::kNv12};
+            case PixelFormat::kYuv420:
+            case PixelFormat::kRgb888:
+            case PixelFormat::kBgr888:
+            case PixelFormat::kXrgb8888:
+            case PixelFormat::kXbgr8888:
+                wanted = {options_.pixel_format};
                 break;
             case PixelFormat::kMjpeg:
             case PixelFormat::kGrey:
                 return error(ErrorCode::kInvalidArgument,
                              std::string("pixel format ") + toString(options_.pixel_format) +
-                                 " is not supported by the libcamera driver (use auto, YUYV or "
-                                 "NV12)");
+                                 " is not supported by the libcamera driver (use auto, YUYV, "
+                                 "NV12, YUV420, RGB888, BGR888, XRGB8888 or XBGR8888)");
         }
         auto probe = generateStreamConfiguration(*camera_);
         if (!probe) {
@@ -551,7 +561,7 @@ private:
         const libcamera::Size asked(static_cast<unsigned>(options_.width_px),
                                     static_cast<unsigned>(options_.height_px));
         std::string rejected;
-        for (const RawFormat candidate : wanted) {
+        for (const PixelFormat candidate : wanted) {
             const libcamera::PixelFormat format = libcameraFormat(candidate);
             if (!offered.empty() &&
                 std::find(offered.begin(), offered.end(), format) == offered.end()) {
@@ -567,15 +577,14 @@ private:
             stream.size = asked;
             stream.bufferCount = static_cast<unsigned>(options_.buffers);
             if (config->validate() == libcamera::CameraConfiguration::Invalid) {
-                rejected += std::string(rejected.empty() ? "" : ", ") +
-                            libcam::formatName(candidate) + " (invalid)";
+                rejected +=
+                    std::string(rejected.empty() ? "" : ", ") + toString(candidate) + " (invalid)";
                 continue;
             }
-            const auto raw = rawFormat(stream.pixelFormat);
+            const auto raw = scaledFormat(stream.pixelFormat);
             if (!raw) {
-                rejected += std::string(rejected.empty() ? "" : ", ") +
-                            libcam::formatName(candidate) + " (became " +
-                            stream.pixelFormat.toString() + ")";
+                rejected += std::string(rejected.empty() ? "" : ", ") + toString(candidate) +
+                            " (became " + stream.pixelFormat.toString() + ")";
                 continue;
             }
             if (stream.size != asked) {
@@ -603,9 +612,8 @@ private:
             return true;
         }
         std::string scaled_formats;
-        for (const RawFormat raw : wanted) {
-            scaled_formats +=
-                std::string(scaled_formats.empty() ? "" : ", ") + libcam::formatName(raw);
+        for (const PixelFormat f : wanted) {
+            scaled_formats += std::string(scaled_formats.empty() ? "" : ", ") + toString(f);
         }
         return error(ErrorCode::kInvalidArgument,
                      "no usable pixel format at " + sizeText(asked) + " (the stream offers " +
@@ -632,7 +640,9 @@ private:
             if (!mapped) {
                 return mapped.error();
             }
-            views_.push_back(std::move(*mapped));
+            views_.push_back(*mapped);
+            // Built once: convertRawImage() names the buffer in its errors.
+            buffer_names_.push_back(describe() + ": buffer " + std::to_string(i));
             std::unique_ptr<libcamera::Request> request = camera_->createRequest(i);
             if (!request) {
                 return error(ErrorCode::kIo, "cannot create a request");
@@ -650,7 +660,7 @@ private:
 
     // Maps each dmabuf of `buffer` once (planes of one buffer often share
     // one dmabuf at different offsets) and lays the format's planes out.
-    core::Result<std::vector<libcam::PlaneView>> mapBuffer(const libcamera::FrameBuffer& buffer) {
+    core::Result<RawImage> mapBuffer(const libcamera::FrameBuffer& buffer) {
         std::map<int, std::size_t> extent;  // fd -> bytes the planes use
         for (const auto& plane : buffer.planes()) {
             const int fd = plane.fd.get();
@@ -671,15 +681,24 @@ private:
             mappings_.push_back({address, length});
             base[fd] = static_cast<const std::uint8_t*>(address);
         }
-        std::vector<libcam::BufferPlane> planes;
-        for (const auto& plane : buffer.planes()) {
-            planes.push_back({base[plane.fd.get()] + plane.offset, plane.length});
+        // At most one plane per format plane (three): a fixed array.
+        std::array<libcam::BufferPlane, 3> planes{};
+        const std::size_t count = buffer.planes().size();
+        if (count > planes.size()) {
+            return error(ErrorCode::kInvalidArgument, std::string(toString(format_)) +
+                                                          ": the buffer has " +
+                                                          std::to_string(count) + " planes");
         }
-        auto views = libcam::layoutPlanes(format_, width_px_, height_px_, stride_bytes_, planes);
-        if (!views) {
-            return error(views.error().code, views.error().message);
+        for (std::size_t i = 0; i < count; ++i) {
+            const auto& plane = buffer.planes()[i];
+            planes.at(i) = {base[plane.fd.get()] + plane.offset, plane.length};
         }
-        return views;
+        auto raw = libcam::describeBuffer(format_, width_px_, height_px_, stride_bytes_,
+                                          std::span(planes.data(), count));
+        if (!raw) {
+            return error(raw.error().code, raw.error().message);
+        }
+        return raw;
     }
 
     // FrameDurationLimits = 1 / fps when the camera has the control (clamped
@@ -731,11 +750,10 @@ private:
     core::Result<bool> deliver(libcamera::Request* request, Frame& frame) {
         const bool cancelled = request->status() == libcamera::Request::RequestCancelled;
         core::Result<bool> converted = true;
-        cv::Mat gray;
-        cv::Mat bgr;
         int64_t t_ns = 0;
         if (!cancelled) {
-            converted = convert(*request, gray, bgr, t_ns);
+            // Converted before the buffer goes back to the camera.
+            converted = convert(*request, frame.gray, frame.color, t_ns);
         }
         request->reuse(libcamera::Request::ReuseBuffers);
         const int queued = camera_->queueRequest(request);
@@ -755,12 +773,15 @@ private:
             t_ns = last_t_ns_ + 1;  // keep the contract's strict order
         }
         last_t_ns_ = t_ns;
-        Frame out;
-        out.id = delivered_++;
-        out.t_ns = t_ns;
-        out.gray = gray;
-        out.color = bgr;
-        frame = std::move(out);
+        // The rest of the Frame in place too (a new Frame would drop the Mats
+        // the pixels were just written into).
+        frame.id = delivered_++;
+        frame.t_ns = t_ns;
+        frame.T_CtoW_gt.reset();
+        frame.depth_path.reset();
+        frame.image_path.clear();
+        frame.gravity_down_C.reset();
+        frame.accel_C.reset();
         return true;
     }
 
@@ -776,10 +797,11 @@ private:
             return error(ErrorCode::kIo, "the camera reported a bad frame (sequence " +
                                              std::to_string(metadata.sequence) + ")");
         }
-        auto converted =
-            libcam::convertToGrayBgr(format_, width_px_, height_px_, views_[index], gray, bgr);
+        // Into the caller's Mats, in place: no allocation once they have the
+        // size (the pipeline hands the same Frames back).
+        auto converted = convertRawImage(views_[index], buffer_names_[index], gray, bgr);
         if (!converted) {
-            return error(converted.error().code, converted.error().message);
+            return converted.error();
         }
         // The sensor's start of exposure; the pipelines take it from the
         // V4L2 buffer, CLOCK_MONOTONIC. Fall back to the buffer's own time.
@@ -849,6 +871,7 @@ private:
         }
         mappings_.clear();
         views_.clear();
+        buffer_names_.clear();
         if (leak) {
             bury(std::make_shared<decltype(requests_)>(std::move(requests_)));
             bury(std::shared_ptr<libcamera::FrameBufferAllocator>(std::move(allocator_)));
@@ -880,8 +903,9 @@ private:
     std::unique_ptr<libcamera::FrameBufferAllocator> allocator_;
     std::vector<std::unique_ptr<libcamera::Request>> requests_;
     std::vector<Mapping> mappings_;
-    std::vector<std::vector<libcam::PlaneView>> views_;  // by request cookie
-    RawFormat format_ = RawFormat::kYuyv;
+    std::vector<RawImage> views_;            // the buffers' images, by request cookie
+    std::vector<std::string> buffer_names_;  // "<camera>: buffer <i>", by request cookie
+    PixelFormat format_ = PixelFormat::kYuyv;
     int width_px_ = 0;
     int height_px_ = 0;
     std::size_t stride_bytes_ = 0;
@@ -979,7 +1003,7 @@ std::vector<CameraDescription> listLibcameraCameras() {
             const libcamera::StreamFormats& formats = config->at(0).formats();
             std::string unusable;
             for (const libcamera::PixelFormat& format : formats.pixelformats()) {
-                if (!rawFormat(format)) {
+                if (!scaledFormat(format)) {
                     unusable += (unusable.empty() ? "" : ", ") + format.toString();
                     continue;
                 }

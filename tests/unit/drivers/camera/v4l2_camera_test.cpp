@@ -40,8 +40,10 @@ int videoNodeCount() {
 }
 
 TEST(PixelFormatNames, RoundTrip) {
-    for (const PixelFormat f : {PixelFormat::kAuto, PixelFormat::kYuyv, PixelFormat::kMjpeg,
-                                PixelFormat::kGrey, PixelFormat::kNv12}) {
+    for (const PixelFormat f :
+         {PixelFormat::kAuto, PixelFormat::kYuyv, PixelFormat::kMjpeg, PixelFormat::kGrey,
+          PixelFormat::kNv12, PixelFormat::kYuv420, PixelFormat::kRgb888, PixelFormat::kBgr888,
+          PixelFormat::kXrgb8888, PixelFormat::kXbgr8888}) {
         PixelFormat parsed = PixelFormat::kAuto;
         ASSERT_TRUE(parsePixelFormat(toString(f), parsed)) << toString(f);
         EXPECT_EQ(parsed, f);

@@ -1,19 +1,23 @@
-// The libcamera driver's pixel work (frame_convert.h): plane layouts with
-// padded strides, one plane per format plane or all in one, byte orders, and
-// the colours coming out right (chroma planes not swapped). Built in both the
-// libcamera and the stub build: it needs no camera.
+// The libcamera driver's buffers (frame_convert.h) through the common
+// conversion (pixel_convert.h): plane layouts with padded strides, one plane
+// per format plane or all in one, byte orders, the colours coming out right
+// (chroma planes not swapped), conversion in place without allocation. Built
+// in both the libcamera and the stub build: it needs no camera.
 
 #include "frame_convert.h"
 
+#include <allocation_counter.h>
 #include <cstddef>
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
+#include <scaled/drivers/pixel_convert.h>
 
 namespace scaled::drivers::libcam {
 namespace {
@@ -81,14 +85,17 @@ struct Converted {
     cv::Mat gray, bgr;
 };
 
-Converted convertOk(RawFormat format, const std::vector<BufferPlane>& planes, std::size_t stride) {
-    auto views = layoutPlanes(format, kW, kH, stride, planes);
-    EXPECT_TRUE(views.ok()) << (views.ok() ? "" : views.error().message);
+const std::string kSource = "libcamera camera 0 (test): buffer 1";
+
+Converted convertOk(PixelFormat format, const std::vector<BufferPlane>& planes,
+                    std::size_t stride) {
+    auto raw = describeBuffer(format, kW, kH, stride, planes);
+    EXPECT_TRUE(raw.ok()) << (raw.ok() ? "" : raw.error().message);
     Converted out;
-    if (!views.ok()) {
+    if (!raw.ok()) {
         return out;
     }
-    auto converted = convertToGrayBgr(format, kW, kH, *views, out.gray, out.bgr);
+    auto converted = convertRawImage(*raw, kSource, out.gray, out.bgr);
     EXPECT_TRUE(converted.ok()) << (converted.ok() ? "" : converted.error().message);
     EXPECT_EQ(out.gray.type(), CV_8UC1);
     EXPECT_EQ(out.bgr.type(), CV_8UC3);
@@ -99,7 +106,7 @@ TEST(FrameConvert, Rgb888IsBgrInMemoryWithPaddedStride) {
     const cv::Mat image = testImage();
     const std::size_t stride = kWBytes * 3 + 8;
     const auto buffer = padded(image.data, kHRows, kWBytes * 3, stride);
-    const Converted out = convertOk(RawFormat::kRgb888, {{buffer.data(), buffer.size()}}, stride);
+    const Converted out = convertOk(PixelFormat::kRgb888, {{buffer.data(), buffer.size()}}, stride);
     expectNear(out.bgr, image, 0);
     expectNear(out.gray, grayOf(image), 0);
 }
@@ -110,7 +117,7 @@ TEST(FrameConvert, Bgr888IsRgbInMemory) {
     cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
     const std::size_t stride = kWBytes * 3;
     const auto buffer = padded(rgb.data, kHRows, kWBytes * 3, stride);
-    const Converted out = convertOk(RawFormat::kBgr888, {{buffer.data(), buffer.size()}}, stride);
+    const Converted out = convertOk(PixelFormat::kBgr888, {{buffer.data(), buffer.size()}}, stride);
     expectNear(out.bgr, image, 0);
     expectNear(out.gray, grayOf(image), 0);
 }
@@ -124,8 +131,10 @@ TEST(FrameConvert, Xrgb8888AndXbgr8888) {
     const std::size_t stride = kWBytes * 4 + 16;
     const auto xrgb = padded(bgra.data, kHRows, kWBytes * 4, stride);
     const auto xbgr = padded(rgba.data, kHRows, kWBytes * 4, stride);
-    expectNear(convertOk(RawFormat::kXrgb8888, {{xrgb.data(), xrgb.size()}}, stride).bgr, image, 0);
-    expectNear(convertOk(RawFormat::kXbgr8888, {{xbgr.data(), xbgr.size()}}, stride).bgr, image, 0);
+    expectNear(convertOk(PixelFormat::kXrgb8888, {{xrgb.data(), xrgb.size()}}, stride).bgr, image,
+               0);
+    expectNear(convertOk(PixelFormat::kXbgr8888, {{xbgr.data(), xbgr.size()}}, stride).bgr, image,
+               0);
 }
 
 TEST(FrameConvert, Yuv420ThreePlanesAndOnePlane) {
@@ -136,7 +145,7 @@ TEST(FrameConvert, Yuv420ThreePlanesAndOnePlane) {
     const auto u = padded(yuv.u.data(), kHRows / 2, kWBytes / 2, stride / 2);
     const auto v = padded(yuv.v.data(), kHRows / 2, kWBytes / 2, stride / 2);
     const Converted three =
-        convertOk(RawFormat::kYuv420,
+        convertOk(PixelFormat::kYuv420,
                   {{y.data(), y.size()}, {u.data(), u.size()}, {v.data(), v.size()}}, stride);
     expectNear(three.bgr, image, 6);
     expectNear(three.gray, cv::Mat(kH, kW, CV_8UC1, const_cast<std::uint8_t*>(yuv.y.data())), 0);
@@ -144,7 +153,7 @@ TEST(FrameConvert, Yuv420ThreePlanesAndOnePlane) {
     std::vector<std::uint8_t> one = y;
     one.insert(one.end(), u.begin(), u.end());
     one.insert(one.end(), v.begin(), v.end());
-    const Converted single = convertOk(RawFormat::kYuv420, {{one.data(), one.size()}}, stride);
+    const Converted single = convertOk(PixelFormat::kYuv420, {{one.data(), one.size()}}, stride);
     expectNear(single.bgr, three.bgr, 0);
     expectNear(single.gray, three.gray, 0);
 }
@@ -161,12 +170,12 @@ TEST(FrameConvert, Nv12TwoPlanesAndOnePlane) {
     const auto y = padded(yuv.y.data(), kHRows, kWBytes, stride);
     const auto uvp = padded(uv.data(), kHRows / 2, kWBytes, stride);
     const Converted two =
-        convertOk(RawFormat::kNv12, {{y.data(), y.size()}, {uvp.data(), uvp.size()}}, stride);
+        convertOk(PixelFormat::kNv12, {{y.data(), y.size()}, {uvp.data(), uvp.size()}}, stride);
     expectNear(two.bgr, image, 6);
 
     std::vector<std::uint8_t> one = y;
     one.insert(one.end(), uvp.begin(), uvp.end());
-    const Converted single = convertOk(RawFormat::kNv12, {{one.data(), one.size()}}, stride);
+    const Converted single = convertOk(PixelFormat::kNv12, {{one.data(), one.size()}}, stride);
     expectNear(single.bgr, two.bgr, 0);
     expectNear(single.gray, two.gray, 0);
 }
@@ -184,71 +193,125 @@ TEST(FrameConvert, YuyvWithPaddedStride) {
     }
     const std::size_t stride = kWBytes * 2 + 8;
     const auto buffer = padded(yuyv.data(), kHRows, kWBytes * 2, stride);
-    const Converted out = convertOk(RawFormat::kYuyv, {{buffer.data(), buffer.size()}}, stride);
+    const Converted out = convertOk(PixelFormat::kYuyv, {{buffer.data(), buffer.size()}}, stride);
     expectNear(out.bgr, image, 6);
     expectNear(out.gray, cv::Mat(kH, kW, CV_8UC1, const_cast<std::uint8_t*>(yuv.y.data())), 0);
 }
 
-TEST(FrameConvert, EachFrameGetsNewImages) {
+// The driver hands the Frame's own Mats to the conversion: the next frame
+// lands in the same pixels (the pipeline swaps Frames, so nobody else holds
+// them), as with V4L2.
+TEST(FrameConvert, ConvertsInPlaceIntoTheGivenMats) {
     const cv::Mat image = testImage();
     const std::size_t stride = kWBytes * 3;
     auto buffer = padded(image.data, kHRows, kWBytes * 3, stride);
-    auto views = layoutPlanes(RawFormat::kRgb888, kW, kH, stride, {{buffer.data(), buffer.size()}});
-    ASSERT_TRUE(views.ok());
+    const std::vector<BufferPlane> planes{{buffer.data(), buffer.size()}};
+    auto raw = describeBuffer(PixelFormat::kRgb888, kW, kH, stride, planes);
+    ASSERT_TRUE(raw.ok());
     cv::Mat gray;
     cv::Mat bgr;
-    ASSERT_TRUE(convertToGrayBgr(RawFormat::kRgb888, kW, kH, *views, gray, bgr).ok());
-    const cv::Mat kept_bgr = bgr;  // a caller holding the previous frame
-    const cv::Mat kept_gray = gray;
+    ASSERT_TRUE(convertRawImage(*raw, kSource, gray, bgr).ok());
+    expectNear(bgr, image, 0);
+    const std::uint8_t* gray_data = gray.data;
+    const std::uint8_t* bgr_data = bgr.data;
     std::fill(buffer.begin(), buffer.end(), std::uint8_t{0});
-    ASSERT_TRUE(convertToGrayBgr(RawFormat::kRgb888, kW, kH, *views, gray, bgr).ok());
+    ASSERT_TRUE(convertRawImage(*raw, kSource, gray, bgr).ok());
+    EXPECT_EQ(gray.data, gray_data);
+    EXPECT_EQ(bgr.data, bgr_data);
     EXPECT_EQ(cv::countNonZero(bgr.reshape(1)), 0);
-    expectNear(kept_bgr, image, 0);
-    expectNear(kept_gray, grayOf(image), 0);
+}
+
+// Every format, planes apart and in one buffer, at a camera size with padded
+// strides: once the Mats have the size, a conversion makes no allocation (no
+// per-frame plane list; the packed copy of the planes YUV420 needs is a
+// per-thread scratch image kept between calls).
+TEST(FrameConvert, SteadyStateConversionMakesNoHeapAllocation) {
+    constexpr int w = 640;
+    constexpr int h = 480;
+    const std::size_t stride = 4 * w + 64;  // room for every format's row, padded
+    std::vector<std::uint8_t> y_plane(stride * h, 90);
+    std::vector<std::uint8_t> c1(stride * h / 2, 120);
+    std::vector<std::uint8_t> c2(stride * h / 2, 140);
+    std::vector<std::uint8_t> one(stride * h * 2, 100);
+    for (const PixelFormat f : preferredFormats()) {
+        std::vector<std::vector<BufferPlane>> layouts{{{one.data(), one.size()}}};
+        if (f == PixelFormat::kNv12) {
+            layouts.push_back({{y_plane.data(), y_plane.size()}, {c1.data(), c1.size()}});
+        } else if (f == PixelFormat::kYuv420) {
+            layouts.push_back(
+                {{y_plane.data(), y_plane.size()}, {c1.data(), c1.size()}, {c2.data(), c2.size()}});
+        }
+        for (const auto& planes : layouts) {
+            auto raw = describeBuffer(f, w, h, stride, planes);
+            ASSERT_TRUE(raw.ok()) << toString(f) << ": " << raw.error().message;
+            cv::Mat gray;
+            cv::Mat bgr;
+            ASSERT_TRUE(convertRawImage(*raw, kSource, gray, bgr).ok()) << toString(f);
+            // The calling thread's count: cv::cvtColor runs on OpenCV's
+            // thread pool, whose workers allocate their thread-local data
+            // the first time they take part in a job, whichever call that is.
+            const std::int64_t before = test::allocationCountThisThread();
+            const bool ok = convertRawImage(*raw, kSource, gray, bgr).ok();
+            const std::int64_t after = test::allocationCountThisThread();
+            EXPECT_TRUE(ok) << toString(f);
+            EXPECT_EQ(after - before, 0) << toString(f) << ", " << planes.size() << " plane(s)";
+            EXPECT_EQ(gray.size(), cv::Size(w, h));
+            EXPECT_EQ(bgr.type(), CV_8UC3);
+        }
+    }
 }
 
 TEST(FrameConvert, RejectsShortPlanesOddSizesAndBadStrides) {
     std::vector<std::uint8_t> buffer(kWBytes * kHRows * 4, 0);
     const BufferPlane whole{buffer.data(), buffer.size()};
+    using Planes = std::vector<BufferPlane>;
 
     // One byte short of the last row.
-    auto short_plane = layoutPlanes(RawFormat::kRgb888, kW, kH, kWBytes * 3,
-                                    {{buffer.data(), kWBytes * 3 * kHRows - 1}});
+    auto short_plane = describeBuffer(PixelFormat::kRgb888, kW, kH, kWBytes * 3,
+                                      Planes{{buffer.data(), kWBytes * 3 * kHRows - 1}});
     ASSERT_FALSE(short_plane.ok());
     EXPECT_EQ(short_plane.error().code, ErrorCode::kInvalidArgument);
     EXPECT_NE(short_plane.error().message.find("RGB888"), std::string::npos);
 
-    // NV12 in one plane that ends inside the chroma.
-    auto short_chroma =
-        layoutPlanes(RawFormat::kNv12, kW, kH, kWBytes, {{buffer.data(), kWBytes * kHRows + 8}});
-    EXPECT_FALSE(short_chroma.ok());
+    // NV12 in one plane that ends inside the chroma; in two, a short chroma plane.
+    EXPECT_FALSE(describeBuffer(PixelFormat::kNv12, kW, kH, kWBytes,
+                                Planes{{buffer.data(), kWBytes * kHRows + 8}})
+                     .ok());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kNv12, kW, kH, kWBytes,
+                                Planes{whole, {buffer.data(), kWBytes * (kHRows / 2) - 1}})
+                     .ok());
 
-    auto odd = layoutPlanes(RawFormat::kNv12, kW - 1, kH, kWBytes, {whole});
+    auto odd = describeBuffer(PixelFormat::kNv12, kW - 1, kH, kWBytes, Planes{whole});
     ASSERT_FALSE(odd.ok());
-    EXPECT_NE(odd.error().message.find("odd"), std::string::npos);
+    EXPECT_NE(odd.error().message.find("even"), std::string::npos) << odd.error().message;
+    EXPECT_FALSE(describeBuffer(PixelFormat::kYuv420, kW, kH - 1, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kYuyv, kW, kH, kWBytes, Planes{whole})
+                     .ok());  // stride < 2 * width
     EXPECT_FALSE(
-        layoutPlanes(RawFormat::kYuyv, kW, kH, kWBytes, {whole}).ok());  // stride < 2 * width
-    EXPECT_FALSE(layoutPlanes(RawFormat::kYuyv, kW, kH, kWBytes * 2, {whole, whole}).ok());
-    EXPECT_FALSE(layoutPlanes(RawFormat::kYuv420, kW, kH, kWBytes, {whole, whole}).ok());
-    EXPECT_FALSE(layoutPlanes(RawFormat::kRgb888, 0, kH, kWBytes * 3, {whole}).ok());
-    EXPECT_FALSE(layoutPlanes(RawFormat::kRgb888, kW, kH, kWBytes * 3, {{nullptr, 100000}}).ok());
-
-    cv::Mat gray;
-    cv::Mat bgr;
-    EXPECT_FALSE(convertToGrayBgr(RawFormat::kRgb888, kW, kH, {}, gray, bgr).ok());
+        describeBuffer(PixelFormat::kYuyv, kW, kH, kWBytes * 2, Planes{whole, whole}).ok());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kYuv420, kW, kH, kWBytes, Planes{whole, whole}).ok());
     EXPECT_FALSE(
-        convertToGrayBgr(RawFormat::kRgb888, kW, kH, {{buffer.data(), kWBytes * 3, 10}}, gray, bgr)
+        describeBuffer(PixelFormat::kYuv420, kW, kH, kWBytes, Planes{whole, whole, {nullptr, 100}})
             .ok());
-    EXPECT_TRUE(gray.empty());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kRgb888, 0, kH, kWBytes * 3, Planes{whole}).ok());
+    EXPECT_FALSE(
+        describeBuffer(PixelFormat::kRgb888, kW, kH, kWBytes * 3, Planes{{nullptr, 100000}}).ok());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kYuyv, kW, kH, kWBytes * 2, Planes{}).ok());
+    // Formats the driver does not ask libcamera for.
+    EXPECT_FALSE(describeBuffer(PixelFormat::kGrey, kW, kH, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kMjpeg, kW, kH, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(PixelFormat::kAuto, kW, kH, kWBytes, Planes{whole}).ok());
 }
 
 TEST(FrameConvert, NamesAreLibcamerasAndEveryFormatIsPreferredOnce) {
-    const std::vector<RawFormat>& formats = preferredFormats();
+    const auto formats = preferredFormats();
     ASSERT_EQ(formats.size(), 7U);
-    EXPECT_EQ(formats.front(), RawFormat::kYuyv);
-    EXPECT_STREQ(formatName(RawFormat::kYuv420), "YUV420");
-    EXPECT_STREQ(formatName(RawFormat::kRgb888), "RGB888");
-    EXPECT_STREQ(formatName(RawFormat::kXrgb8888), "XRGB8888");
+    EXPECT_EQ(formats.front(), PixelFormat::kYuyv);
+    EXPECT_STREQ(toString(PixelFormat::kYuv420), "YUV420");
+    EXPECT_STREQ(toString(PixelFormat::kRgb888), "RGB888");
+    EXPECT_STREQ(toString(PixelFormat::kBgr888), "BGR888");
+    EXPECT_STREQ(toString(PixelFormat::kXrgb8888), "XRGB8888");
+    EXPECT_STREQ(toString(PixelFormat::kXbgr8888), "XBGR8888");
     for (std::size_t i = 0; i < formats.size(); ++i) {
         for (std::size_t j = i + 1; j < formats.size(); ++j) {
             EXPECT_NE(formats[i], formats[j]);

@@ -27,11 +27,30 @@
 
 namespace scaled::drivers {
 
-// Pixel formats the drivers can convert to gray + BGR. kAuto picks, in this
-// order, the first the device offers at the requested size: YUYV, NV12, GREY,
-// MJPEG (MJPEG last: decoding costs CPU).
-enum class PixelFormat : std::uint8_t { kAuto, kYuyv, kMjpeg, kGrey, kNv12 };
-const char* toString(PixelFormat f);  // "auto", "YUYV", "MJPEG", "GREY", "NV12"
+// Pixel formats the drivers can convert to gray + BGR (pixel_convert.h). For
+// V4L2, kAuto picks, in this order, the first the device offers at the
+// requested size: YUYV, NV12, GREY, MJPEG (MJPEG last: decoding costs CPU).
+// YUV420 and the RGB layouts are libcamera's (libcamera_camera.h has its
+// order); their names are libcamera's (DRM's), which give the components of a
+// little-endian word from the most significant byte: RGB888 is B, G, R in
+// memory (OpenCV's BGR), BGR888 is R, G, B, XRGB8888 is B, G, R, X and
+// XBGR8888 is R, G, B, X. YUV420 is I420: Y, then U and V planes at half
+// resolution in both directions.
+enum class PixelFormat : std::uint8_t {
+    kAuto,
+    kYuyv,
+    kMjpeg,
+    kGrey,
+    kNv12,
+    kYuv420,
+    kRgb888,
+    kBgr888,
+    kXrgb8888,
+    kXbgr8888,
+};
+// "auto", "YUYV", "MJPEG", "GREY", "NV12", "YUV420", "RGB888", "BGR888",
+// "XRGB8888", "XBGR8888".
+const char* toString(PixelFormat f);
 // Parses the names above (case-insensitive; also "MJPG", V4L2's fourcc, for
 // kMjpeg); false when unknown (out untouched).
 bool parsePixelFormat(const std::string& text, PixelFormat& out);

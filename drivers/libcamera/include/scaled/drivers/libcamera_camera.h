@@ -8,8 +8,11 @@
 // 640x480 becomes 636x480; the adjusted size is used and logged in
 // SequenceInfo::notes), converted to gray and BGR. Pixel formats, in the
 // order kAuto tries those the stream offers: YUYV, NV12, YUV420, RGB888,
-// BGR888, XRGB8888, XBGR8888 (libcamera's names); PixelFormat::kYuyv and
-// kNv12 force one, kMjpeg and kGrey are not supported (kInvalidArgument).
+// BGR888, XRGB8888, XBGR8888 (libcamera's names); any of these PixelFormats
+// forces one, kMjpeg and kGrey are not supported (kInvalidArgument).
+// next() converts (pixel_convert.h) into the Mats of the Frame it is given,
+// in place, as the V4L2 driver does: hand it back the same Frame (or swapped
+// Mats) and the conversion allocates nothing per frame.
 // The frame rate is set through FrameDurationLimits when the camera has that
 // control (clamped to its range, with a note), else the camera runs at its
 // own rate (noted).
