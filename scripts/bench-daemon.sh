@@ -14,7 +14,9 @@
 # Environment: SCALED_SHARED_DIR (default ../shared; redkitchen is skipped with
 # a message when the data or the model is absent), WATCHERS (16),
 # POLL_INTERVAL_MS (20), BENCH_OUT (JSON summaries, default BUILD_DIR/bench-daemon).
-# Prints the machine, each run's markdown table row, and the JSON file names.
+# Prints the machine, each run's markdown table row and per-stage timing table
+# (STATUS.timing: predict, search, match, update, map, tracking, detect_*,
+# scale_*; docs/benchmarks.md "Per-stage timing"), and the JSON file names.
 # Measure on an idle machine: it warns when the 1-minute load average is above 0.5.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -108,7 +108,17 @@ void formatEvent(const FrameEvent& event, std::string& out) {
     appendJsonNumber(out, event.ms, 5);
     key(out, "dropped");
     appendJsonInt(out, event.dropped);
-    out += '}';
+    out += R"(,"stage_us":{"predict":)";
+    appendJsonNumber(out, event.predict_us, 4);
+    key(out, "search");
+    appendJsonNumber(out, event.search_us, 4);
+    key(out, "match");
+    appendJsonNumber(out, event.match_us, 4);
+    key(out, "update");
+    appendJsonNumber(out, event.update_us, 4);
+    key(out, "map");
+    appendJsonNumber(out, event.map_us, 4);
+    out += "}}";
 }
 
 void formatEvent(const DetectionEvent& event, std::string& out) {

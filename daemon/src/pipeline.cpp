@@ -23,6 +23,14 @@ double msBetween(std::int64_t a_ns, std::int64_t b_ns) {
     return static_cast<double>(b_ns - a_ns) * 1e-6;
 }
 
+// A tracker stage's time of one frame; 0 means the stage did not run on that
+// frame (TrackStats) and adds no sample.
+void addStage(StageTiming& stage, double us) {
+    if (us > 0) {
+        stage.add(us * 1e-3);
+    }
+}
+
 }  // namespace
 
 Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, PipelineParts parts,
@@ -396,7 +404,6 @@ void Pipeline::trackingLoop() {
     bool have_last = false;
     std::int64_t last_detection_t_ns = 0;
     std::uint64_t tracked = 0;
-    double tracking_ms_mean = 0;
     auto& tracker = *tracker_;
 
     while (!stop_.load()) {
@@ -443,8 +450,6 @@ void Pipeline::trackingLoop() {
         const vision::TrackStats stats = tracker.processFrame(frame.t_ns, frame.gray);
         const double ms = msBetween(t0, monotonicNowNs());
         ++tracked;
-        tracking_ms_mean +=
-            (ms - tracking_ms_mean) / static_cast<double>(std::min<std::uint64_t>(tracked, 100));
         const bool ok = stats.health == core::slam::SlamHealth::kOk;
         if (ok && stats.new_map) {
             frames_in_map = 0;
@@ -463,7 +468,16 @@ void Pipeline::trackingLoop() {
             status_.frames_tracked = tracked;
             status_.features_in_map = stats.features;
             status_.features_tracked = stats.inliers + stats.rescued;
-            status_.tracking_ms_mean = tracking_ms_mean;
+            // Stage statistics live in status_ itself (a few flops under the
+            // lock taken anyway): publishStatus copies them to the hub.
+            PipelineTiming& timing = status_.timing;
+            addStage(timing.predict, stats.predict_us);
+            addStage(timing.search, stats.search_us);
+            addStage(timing.match, stats.match_us);
+            addStage(timing.update, stats.update_us);
+            addStage(timing.map, stats.map_us);
+            timing.tracking.add(ms);
+            status_.tracking_ms_mean = timing.tracking.mean_ms;
             status_.epoch = epoch;
         }
         ++fps_window_frames_;
@@ -511,6 +525,11 @@ void Pipeline::trackingLoop() {
             e.tracked = stats.inliers + stats.rescued;
             e.ms = ms;
             e.dropped = dropped_.load();
+            e.predict_us = stats.predict_us;
+            e.search_us = stats.search_us;
+            e.match_us = stats.match_us;
+            e.update_us = stats.update_us;
+            e.map_us = stats.map_us;
             events_->onFrame(e);
         }
 
@@ -660,6 +679,13 @@ void Pipeline::detectionLoop() {
             status_.detector_latency_ms_last = latency_ms;
             status_.detector_latency_ms_mean = latency_sum_ms / static_cast<double>(runs);
             status_.detector_latency_ms_max = latency_max_ms;
+            if (det) {
+                // The detector's own split of the call (a detector that does
+                // not measure a part reports 0 for it).
+                status_.timing.detect_pre.add(boxes.timing.pre_ms);
+                status_.timing.detect_forward.add(boxes.timing.forward_ms);
+                status_.timing.detect_post.add(boxes.timing.post_ms);
+            }
             const bool had_fault = !detector_fault_.empty();
             if (!det) {
                 detector_fault_ = "detector: " + det.error().message;
@@ -693,8 +719,10 @@ void Pipeline::detectionLoop() {
             estimator_epoch = job.snapshot.epoch();
         }
         const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+        const std::int64_t update_start_ns = monotonicNowNs();
         const core::UpdateStats u =
             estimator.update(job.snapshot.view(), std::span(dets.data(), n), records);
+        const std::int64_t publish_start_ns = monotonicNowNs();
         const auto log_p = estimator.posterior().logDensity();
         for (std::size_t j = 0; j < log_p.size() && j < log_p_.size(); ++j) {
             log_p_[j] = static_cast<double>(log_p[j]);
@@ -703,6 +731,12 @@ void Pipeline::detectionLoop() {
                       job.snapshot.timestampNs(), u.observations, static_cast<int>(n),
                       std::span(records.data(), static_cast<std::size_t>(u.records_written)),
                       std::span(dets.data(), n));
+        const std::int64_t publish_end_ns = monotonicNowNs();
+        {
+            const std::lock_guard lock(report_mutex_);
+            status_.timing.scale_update.add(msBetween(update_start_ns, publish_start_ns));
+            status_.timing.scale_publish.add(msBetween(publish_start_ns, publish_end_ns));
+        }
     }
     if (!stop_.load() && config_.source.at_end == AtEnd::kExit) {
         // Everything the source gave was tracked and detected: done.

@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstddef>
@@ -40,6 +41,50 @@ double safeNorm(const std::array<double, 3>& v) {
     const double b = v[1] / m;
     const double c = v[2] / m;
     return m * std::sqrt(a * a + b * b + c * c);
+}
+
+// STATUS.timing: the stages in the order clients print them.
+struct NamedStage {
+    const char* name;
+    StageTiming PipelineTiming::*stage;
+};
+constexpr std::array<NamedStage, 11> kStages{{
+    {"predict", &PipelineTiming::predict},
+    {"search", &PipelineTiming::search},
+    {"match", &PipelineTiming::match},
+    {"update", &PipelineTiming::update},
+    {"map", &PipelineTiming::map},
+    {"tracking", &PipelineTiming::tracking},
+    {"detect_pre", &PipelineTiming::detect_pre},
+    {"detect_forward", &PipelineTiming::detect_forward},
+    {"detect_post", &PipelineTiming::detect_post},
+    {"scale_update", &PipelineTiming::scale_update},
+    {"scale_publish", &PipelineTiming::scale_publish},
+}};
+
+// ,"timing":{"predict":{"samples":N,"last_ms":x,"mean_ms":x,"max_ms":x},...}
+// Times with 4 significant digits: plenty for a duration, and 11 stages stay
+// short on a line clients may ask for every second.
+void appendTiming(std::string& out, const PipelineTiming& timing) {
+    constexpr int kDigits = 4;
+    key(out, "timing");
+    char open = '{';
+    for (const NamedStage& s : kStages) {
+        out += open;
+        open = ',';
+        appendJsonString(out, s.name);
+        const StageTiming& t = timing.*s.stage;
+        out += R"(:{"samples":)";
+        appendJsonInt(out, t.samples);
+        key(out, "last_ms");
+        appendJsonNumber(out, t.last_ms, kDigits);
+        key(out, "mean_ms");
+        appendJsonNumber(out, t.mean_ms, kDigits);
+        key(out, "max_ms");
+        appendJsonNumber(out, t.max_ms, kDigits);
+        out += '}';
+    }
+    out += '}';
 }
 
 Request invalid(std::string cmd, std::string message) {
@@ -166,6 +211,7 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         appendJsonInt(out, s.camera_reconnects);
         out += '}';
     }
+    appendTiming(out, s.timing);
     out += R"(,"clients":{"connected":)";
     appendJsonInt(out, clients.connected);
     key(out, "max");

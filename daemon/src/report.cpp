@@ -38,6 +38,13 @@ const char* toString(LogStatus::State state) {
     return "fault";
 }
 
+void StageTiming::add(double ms) {
+    ++samples;
+    last_ms = ms;
+    mean_ms += (ms - mean_ms) / static_cast<double>(std::min(samples, kMeanWindow));
+    max_ms = std::max(max_ms, ms);
+}
+
 std::int64_t monotonicNowNs() {
     timespec ts{};
     clock_gettime(CLOCK_MONOTONIC, &ts);

@@ -7,8 +7,9 @@
 // (source.at_end=exit), when STATUS says the source has finished (then one more
 // STATUS is taken, so the counters are final, and the daemon gets SIGTERM:
 // source.at_end=stay), or after --duration. The sd_notify socket is read all
-// along, as systemd does. Prints a JSON summary on stdout and a markdown table
-// row on stderr. Results: docs/benchmarks.md; runner: scripts/bench-daemon.sh.
+// along, as systemd does. Prints a JSON summary on stdout and on stderr a
+// markdown table row plus the per-stage timing table (STATUS.timing of the
+// final STATUS). Results: docs/benchmarks.md; runner: scripts/bench-daemon.sh.
 // The process and socket helpers are the daemon tests' (daemon_harness.h).
 //
 //   daemon_bench [--scaled PATH] [--watchers N] [--poll-interval-ms MS]
@@ -430,6 +431,35 @@ std::string fmtJson(const Json& v, int decimals) {
     return v.is_number() ? fmt(v.get<double>(), decimals) : std::string("-");
 }
 
+// The final STATUS's per-stage timing (proto_minor 2) as a markdown table on
+// stderr, stages in the daemon's order (docs/protocol.md, "Stage timing").
+void printStageTable(const std::string& label, const Json& timing) {
+    if (!timing.is_object()) {
+        std::fprintf(stderr, "(%s: no STATUS.timing: a daemon older than proto_minor 2)\n",
+                     label.c_str());
+        return;
+    }
+    std::fprintf(stderr,
+                 "\nper-stage timing (%s), final STATUS:\n\n| stage | samples | last ms | "
+                 "mean ms | max ms |\n|---|---|---|---|---|\n",
+                 label.empty() ? "-" : label.c_str());
+    for (const char* name :
+         {"predict", "search", "match", "update", "map", "tracking", "detect_pre", "detect_forward",
+          "detect_post", "scale_update", "scale_publish"}) {
+        const Json stage = timing.contains(name) ? timing[name] : Json(nullptr);
+        const Json samples =
+            stage.is_object() && stage.contains("samples") ? stage["samples"] : Json(nullptr);
+        const auto field = [&](const char* key) {
+            return stage.is_object() && stage.contains(key) ? fmtJson(stage[key], 3)
+                                                            : std::string("-");
+        };
+        std::fprintf(
+            stderr, "| %s | %s | %s | %s | %s |\n", name,
+            samples.is_number() ? std::to_string(samples.get<std::uint64_t>()).c_str() : "-",
+            field("last_ms").c_str(), field("mean_ms").c_str(), field("max_ms").c_str());
+    }
+}
+
 std::string tail(const std::string& text, std::size_t n) {
     return text.size() <= n ? text : "..." + text.substr(text.size() - n);
 }
@@ -721,6 +751,7 @@ int run(const Options& o) {
           {"latency_ms_mean", at(st, {"detector", "latency_ms", "mean"})},
           {"latency_ms_max", at(st, {"detector", "latency_ms", "max"})}}},
         {"tracking_ms_mean", at(st, {"tracking_ms_mean"})},
+        {"timing", at(st, {"timing"})},
         {"cpu_pct_mean", round3(cpu_mean)},
         {"cpu_pct_max_1s", round3(cpu_max)},
         {"cpu_s_total", round3(tv(children.ru_utime) + tv(children.ru_stime))},
@@ -780,6 +811,7 @@ int run(const Options& o) {
         rtt.empty() ? "-" : fmt(rtt.back(), 3).c_str(), rtt.size(),
         static_cast<unsigned long long>(lines), fmtJson(at(sc, {"scale"}), 4).c_str(),
         at(sc, {"state"}).is_string() ? at(sc, {"state"}).get<std::string>().c_str() : "-");
+    printStageTable(o.label, at(st, {"timing"}));
 
     const bool ok = code && *code == 0;
     if (!ok) {

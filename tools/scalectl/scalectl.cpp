@@ -1,5 +1,6 @@
 #include "scalectl.h"
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cmath>
@@ -154,6 +155,45 @@ std::string show(const json& doc, std::initializer_list<const char*> keys, int d
         return v->get<std::string>();
     }
     return v->dump();
+}
+
+// STATUS.timing (proto_minor 2; absent from older daemons: nothing printed):
+// one row per stage, the known stages in pipeline order, then any stage a
+// newer daemon adds.
+void formatTiming(const json& doc, std::ostream& o) {
+    const json* timing = at(doc, {"timing"});
+    if (timing == nullptr || !timing->is_object() || timing->empty()) {
+        return;
+    }
+    static constexpr std::array<const char*, 11> kKnown = {
+        "predict",    "search",         "match",       "update",       "map",          "tracking",
+        "detect_pre", "detect_forward", "detect_post", "scale_update", "scale_publish"};
+    std::array<char, 160> row{};
+    std::snprintf(row.data(), row.size(), "%-15s%-16s%9s%9s%9s%9s\n", "timing (ms)", "", "last",
+                  "mean", "max", "samples");
+    o << row.data();
+    auto print = [&](const std::string& name) {
+        // Milliseconds always with 3 decimals (the daemon writes 4 significant
+        // digits, so 4.0 arrives as the integer 4).
+        const auto ms = [&](const char* field) {
+            const json* v = at(*timing, {name.c_str(), field});
+            return v != nullptr && v->is_number() ? fixed(v->get<double>(), 3) : std::string("-");
+        };
+        std::snprintf(row.data(), row.size(), "%-15s%-16s%9s%9s%9s%9s\n", "", name.c_str(),
+                      ms("last_ms").c_str(), ms("mean_ms").c_str(), ms("max_ms").c_str(),
+                      show(*timing, {name.c_str(), "samples"}).c_str());
+        o << row.data();
+    };
+    for (const char* name : kKnown) {
+        if (timing->contains(name)) {
+            print(name);
+        }
+    }
+    for (const auto& [name, value] : timing->items()) {
+        if (std::find(kKnown.begin(), kKnown.end(), std::string_view(name)) == kKnown.end()) {
+            print(name);
+        }
+    }
 }
 
 core::Result<bool> waitUntil(int fd, short events, int interrupt_fd,
@@ -341,6 +381,7 @@ core::Result<std::string> formatStatus(std::string_view line) {
       << show(j, {"detector", "latency_ms", "max"}) << " ms\n";
     o << "scale          updates " << show(j, {"scale_updates"}) << "  epoch " << show(j, {"epoch"})
       << '\n';
+    formatTiming(j, o);
     o << "clients        connected " << show(j, {"clients", "connected"}) << "/"
       << show(j, {"clients", "max"}) << "  accepted " << show(j, {"clients", "accepted"})
       << "  rejected " << show(j, {"clients", "rejected"}) << "  detached "

@@ -264,7 +264,12 @@ TEST(LogService, EventLinesAreJsonWithTheirFields) {
                            .features = 30,
                            .tracked = 12,
                            .ms = 4.5,
-                           .dropped = 3},
+                           .dropped = 3,
+                           .predict_us = 41.25,
+                           .search_us = 310.5,
+                           .match_us = 1234.5678,
+                           .update_us = 900,
+                           .map_us = 0},
                 out);
     j = parse(out);
     EXPECT_EQ(j["class"], "FRAME");
@@ -276,6 +281,9 @@ TEST(LogService, EventLinesAreJsonWithTheirFields) {
     EXPECT_EQ(j["tracked"], 12);
     EXPECT_DOUBLE_EQ(j["ms"].get<double>(), 4.5);
     EXPECT_EQ(j["dropped"], 3);
+    // The frame's tracker stages, 4 significant digits; 0: did not run.
+    EXPECT_EQ(j["stage_us"], json::parse(R"({"predict":41.25,"search":310.5,"match":1235,
+        "update":900,"map":0})"));
 
     const std::vector<LogBox> boxes = {{"chair", 0.875, 1, 2, 30.5, 40}, {"cup", 0.5, 5, 6, 7, 8}};
     formatEvent(

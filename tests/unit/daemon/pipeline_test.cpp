@@ -5,6 +5,7 @@
 // with a bounded timeout, never a sleep.
 
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <functional>
 #include <memory>
@@ -194,6 +195,70 @@ TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
     EXPECT_EQ(states[0].epoch, 1U);
     EXPECT_EQ(states[1].to, DaemonState::kConverging);
     EXPECT_TRUE(rec.errors().empty());
+}
+
+// STATUS.timing: every stage is reported with finite, non-negative times;
+// after a run the tracker's and the estimator's stages have samples and a
+// positive mean, and the sample counts match the frame and update counters.
+TEST(Pipeline, StatusReportsStageTimes) {
+    DaemonConfig c = config(AtEnd::kExit);
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    auto p = Pipeline::create(c, parts(3.0, true), hub, nullptr);  // 90 frames
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    (*p)->stop();
+    ASSERT_FALSE((*p)->failure().has_value());
+
+    const PipelineStatus st = hub.status();
+    ASSERT_EQ(st.frames_tracked, 90U);
+    ASSERT_EQ(st.epoch, 1U);  // one map: the sample counts below hold exactly
+    ASSERT_GT(st.scale_updates, 0U);
+    const PipelineTiming& t = st.timing;
+    const std::pair<const char*, const StageTiming*> stages[] = {
+        {"predict", &t.predict},
+        {"search", &t.search},
+        {"match", &t.match},
+        {"update", &t.update},
+        {"map", &t.map},
+        {"tracking", &t.tracking},
+        {"detect_pre", &t.detect_pre},
+        {"detect_forward", &t.detect_forward},
+        {"detect_post", &t.detect_post},
+        {"scale_update", &t.scale_update},
+        {"scale_publish", &t.scale_publish},
+    };
+    for (const auto& [name, stage] : stages) {
+        for (const double v : {stage->last_ms, stage->mean_ms, stage->max_ms}) {
+            EXPECT_TRUE(std::isfinite(v)) << name;
+            EXPECT_GE(v, 0.0) << name;
+        }
+        EXPECT_LE(stage->last_ms, stage->max_ms) << name;
+        EXPECT_LE(stage->mean_ms, stage->max_ms) << name;
+    }
+    // Every frame is timed; the first one starts the map (map stage only).
+    EXPECT_EQ(t.tracking.samples, 90U);
+    EXPECT_EQ(t.map.samples, 90U);
+    EXPECT_EQ(t.predict.samples, 89U);
+    EXPECT_EQ(t.update.samples, 89U);
+    EXPECT_EQ(t.detect_forward.samples, st.detections_run);
+    EXPECT_EQ(t.scale_update.samples, st.scale_updates);
+    EXPECT_EQ(t.scale_publish.samples, st.scale_updates);
+    EXPECT_GT(t.predict.mean_ms, 0.0);
+    EXPECT_GT(t.search.mean_ms, 0.0);
+    EXPECT_GT(t.match.mean_ms, 0.0);
+    EXPECT_GT(t.update.mean_ms, 0.0);
+    EXPECT_GT(t.map.mean_ms, 0.0);
+    EXPECT_GT(t.scale_update.mean_ms, 0.0);
+    EXPECT_GT(t.scale_publish.mean_ms, 0.0);
+    // The stages tile the tracker's frame: their means add up to at most the
+    // whole step's mean (which also has the argument checks and clock reads).
+    const double stage_sum =
+        t.predict.mean_ms + t.search.mean_ms + t.match.mean_ms + t.update.mean_ms + t.map.mean_ms;
+    EXPECT_GT(stage_sum, 0.0);
+    EXPECT_LE(stage_sum, t.tracking.mean_ms * 1.05 + 0.01);
+    EXPECT_DOUBLE_EQ(st.tracking_ms_mean, t.tracking.mean_ms);
 }
 
 // A replay that loops: the map cannot continue across the jump, so a new map

@@ -8,6 +8,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -51,7 +52,7 @@ TEST(Protocol, Version) {
     appendVersion(out, "0.1.0");
     EXPECT_EQ(out,
               "{\"class\":\"VERSION\",\"release\":\"0.1.0\",\"proto_major\":1,"
-              "\"proto_minor\":1}\n");
+              "\"proto_minor\":2}\n");
 }
 
 TEST(Protocol, ScaleWithAScale) {
@@ -141,6 +142,79 @@ TEST(Protocol, StatusHasEveryMember) {
     appendStatus(out, PipelineStatus{}, LogStatus{}, ClientCounts{});
     const json empty = parseLine(out);
     EXPECT_EQ(empty["log"], json::parse(R"({"state":"off","lines":0,"dropped":0,"bytes":0})"));
+    // Every stage is always present, zero before its first sample.
+    ASSERT_TRUE(empty["timing"].is_object()) << out;
+    EXPECT_EQ(empty["timing"].size(), 11U);
+    for (const auto& [name, stage] : empty["timing"].items()) {
+        EXPECT_EQ(stage, json::parse(R"({"samples":0,"last_ms":0,"mean_ms":0,"max_ms":0})"))
+            << name;
+    }
+}
+
+// STATUS.timing (proto_minor 2): one object per stage with its sample count
+// and last / mean / max milliseconds (4 significant digits).
+TEST(Protocol, StatusTiming) {
+    PipelineStatus s;
+    StageTiming predict;
+    predict.add(0.25);
+    predict.add(0.75);  // mean of the first samples is exact
+    s.timing.predict = predict;
+    s.timing.search.add(0.0123456);
+    s.timing.match.add(1.5);
+    s.timing.update.add(0.875);
+    s.timing.map.add(2.0);
+    s.timing.tracking.add(4.625);
+    s.timing.detect_pre.add(0.5);
+    s.timing.detect_forward.add(38.25);
+    s.timing.detect_post.add(0.0155);
+    s.timing.scale_update.add(1.25);
+    s.timing.scale_publish.add(0.0625);
+    std::string out;
+    appendStatus(out, s, LogStatus{}, ClientCounts{});
+    const json j = parseLine(out);
+    const json& t = j["timing"];
+    ASSERT_TRUE(t.is_object()) << out;
+    EXPECT_EQ(t["predict"], json::parse(R"({"samples":2,"last_ms":0.75,"mean_ms":0.5,
+        "max_ms":0.75})"));
+    EXPECT_EQ(t["search"]["last_ms"].get<double>(), 0.01235);  // 4 significant digits
+    const std::pair<const char*, double> expected[] = {
+        {"match", 1.5},          {"update", 0.875},      {"map", 2.0},
+        {"tracking", 4.625},     {"detect_pre", 0.5},    {"detect_forward", 38.25},
+        {"detect_post", 0.0155}, {"scale_update", 1.25}, {"scale_publish", 0.0625},
+    };
+    for (const auto& [name, ms] : expected) {
+        const json& stage = t[name];
+        ASSERT_TRUE(stage.is_object()) << name << ": " << out;
+        EXPECT_EQ(stage.size(), 4U) << name;
+        EXPECT_TRUE(stage["samples"].is_number_unsigned()) << name;
+        EXPECT_EQ(stage["samples"], 1) << name;
+        for (const char* field : {"last_ms", "mean_ms", "max_ms"}) {
+            ASSERT_TRUE(stage[field].is_number()) << name << "." << field;
+            EXPECT_EQ(stage[field].get<double>(), ms) << name << "." << field;
+        }
+    }
+    EXPECT_EQ(t.size(), 11U);
+}
+
+// The mean follows the recent samples: exact over the first 100, then an
+// exponential average with weight 1/100; the max is kept since the start.
+TEST(Protocol, StageTimingMeanAndMax) {
+    StageTiming t;
+    for (int i = 0; i < 100; ++i) {
+        t.add(i < 50 ? 1.0 : 3.0);
+    }
+    EXPECT_EQ(t.samples, 100U);
+    EXPECT_DOUBLE_EQ(t.mean_ms, 2.0);
+    EXPECT_DOUBLE_EQ(t.max_ms, 3.0);
+    t.add(102.0);
+    EXPECT_DOUBLE_EQ(t.mean_ms, 3.0);  // 2 + (102 - 2) / 100
+    EXPECT_DOUBLE_EQ(t.last_ms, 102.0);
+    for (int i = 0; i < 2000; ++i) {
+        t.add(1.0);
+    }
+    EXPECT_NEAR(t.mean_ms, 1.0, 1e-6);  // the spike has faded from the mean...
+    EXPECT_DOUBLE_EQ(t.max_ms, 102.0);  // ...not from the max
+    EXPECT_EQ(t.samples, 2101U);
 }
 
 TEST(Protocol, Posterior) {
@@ -284,6 +358,9 @@ TEST(ProtocolSamples, Write) {
     st.source = "replay:/data/x";
     st.fps = 29.97;
     st.frame_id = 10;
+    st.timing.predict.add(0.1234567);
+    st.timing.detect_forward.add(40.5);
+    st.timing.scale_publish.add(1e-5);
     appendStatus(out, st, log, ClientCounts{2, 16, 3, 1, 0});
     appendPosterior(out, PosteriorSnapshot{});
     PosteriorSnapshot p;

@@ -177,7 +177,7 @@ TEST_F(SocketServiceTest, SendsVersionOnConnect) {
     TestClient c(config_.path);
     const json v = c.readJson();
     EXPECT_EQ(v, json::parse(R"({"class":"VERSION","release":"0.1.0","proto_major":1,
-        "proto_minor":1})"));
+        "proto_minor":2})"));
     EXPECT_EQ(svc->stats().accepted, 1U);
     EXPECT_EQ(svc->stats().connected, 1);
 }
@@ -294,7 +294,7 @@ TEST_F(SocketServiceTest, StatusAndPosterior) {
     EXPECT_EQ(s["log"]["state"], "ok");
     EXPECT_EQ(s["log"]["lines"], 9);
     for (const char* k : {"uptime_s", "frames_total", "source_finished", "detector",
-                          "tracking_ms_mean", "features", "scale_updates", "epoch"}) {
+                          "tracking_ms_mean", "features", "scale_updates", "epoch", "timing"}) {
         EXPECT_TRUE(s.contains(k)) << k;
     }
 

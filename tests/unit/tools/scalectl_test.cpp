@@ -176,6 +176,40 @@ TEST(ScalectlFormat, StatusSummary) {
     EXPECT_FALSE(ctl::formatStatus(R"({"class":"ERROR","message":"busy"})").ok());
 }
 
+// STATUS.timing (proto_minor 2): one row per stage, known stages in pipeline
+// order, unknown ones after them; nothing from a daemon without it.
+TEST(ScalectlFormat, StatusStageTimes) {
+    const std::string line =
+        R"({"class":"STATUS","source":"sim","timing":{)"
+        R"("predict":{"samples":599,"last_ms":0.041,"mean_ms":0.0384,"max_ms":0.21},)"
+        R"("update":{"samples":599,"last_ms":0.9,"mean_ms":0.85,"max_ms":3.5},)"
+        R"("scale_update":{"samples":59,"last_ms":1.25,"mean_ms":1.5,"max_ms":4},)"
+        R"("zz_new":{"samples":1,"last_ms":2,"mean_ms":2,"max_ms":2}}})";
+    auto text = ctl::formatStatus(line);
+    ASSERT_TRUE(text.ok()) << text.error().message;
+    EXPECT_NE(text->find("timing (ms)                         last     mean      max  samples\n"),
+              std::string::npos)
+        << *text;
+    EXPECT_NE(text->find("               predict             0.041    0.038    0.210      599\n"),
+              std::string::npos)
+        << *text;
+    EXPECT_NE(text->find("scale_update        1.250    1.500    4.000       59\n"),
+              std::string::npos)
+        << *text;
+    const auto predict = text->find("predict");
+    const auto update = text->find("update  ");
+    const auto scale = text->find("scale_update");
+    const auto unknown = text->find("zz_new");
+    EXPECT_LT(predict, update);
+    EXPECT_LT(update, scale);
+    EXPECT_LT(scale, unknown);
+    EXPECT_NE(unknown, std::string::npos);
+
+    auto old = ctl::formatStatus(kStatus);
+    ASSERT_TRUE(old.ok());
+    EXPECT_EQ(old->find("timing"), std::string::npos) << *old;
+}
+
 TEST(ScalectlFormat, PosteriorRows) {
     auto p = ctl::parsePosterior(kPosterior);
     ASSERT_TRUE(p.ok()) << p.error().message;

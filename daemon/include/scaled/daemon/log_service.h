@@ -68,6 +68,13 @@ struct FrameEvent {
     double ms = 0;                   // tracking time of this frame
     std::uint64_t dropped = 0;       // frames dropped so far
     std::int64_t mono_ns = 0;
+    // The tracker's stages on this frame, microseconds ("stage_us"; see
+    // vision::TrackStats; 0: the stage did not run).
+    double predict_us = 0;
+    double search_us = 0;
+    double match_us = 0;
+    double update_us = 0;
+    double map_us = 0;
 };
 
 // One detector box.

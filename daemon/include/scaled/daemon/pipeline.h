@@ -72,6 +72,13 @@ public:
         int tracked = 0;
         double ms = 0;
         std::uint64_t dropped = 0;
+        // This frame's tracker stages, microseconds (vision::TrackStats; 0:
+        // the stage did not run on this frame).
+        double predict_us = 0;
+        double search_us = 0;
+        double match_us = 0;
+        double update_us = 0;
+        double map_us = 0;
     };
     struct Scale {
         const ScaleReport* report = nullptr;

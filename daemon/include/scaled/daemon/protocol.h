@@ -19,7 +19,7 @@
 namespace scaled::daemon {
 
 inline constexpr int kProtoMajor = 1;
-inline constexpr int kProtoMinor = 1;  // 1: STATUS.camera
+inline constexpr int kProtoMinor = 2;  // 1: STATUS.camera; 2: STATUS.timing
 
 // The service's own client counters, for STATUS.
 struct ClientCounts {
@@ -30,7 +30,7 @@ struct ClientCounts {
     std::uint64_t detached = 0;
 };
 
-// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":1}
+// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":2}
 void appendVersion(std::string& out, std::string_view release);
 // SCALE; age_s is measured against `now_mono_ns` (CLOCK_MONOTONIC).
 void appendScale(std::string& out, const ScaleReport& report, std::int64_t now_mono_ns);

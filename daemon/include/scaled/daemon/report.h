@@ -56,6 +56,44 @@ struct ScaleReport {
     std::string fault;
 };
 
+// Wall-time statistics of one pipeline stage (protocol: an entry of
+// STATUS.timing). Fixed size: add() never allocates.
+struct StageTiming {
+    // The mean follows the recent samples: the exact mean of the first
+    // kMeanWindow, then an exponential average with weight 1/kMeanWindow (a
+    // time constant of kMeanWindow samples), as tracking_ms_mean always was:
+    // it settles after start-up and follows a change of load within seconds.
+    static constexpr std::uint64_t kMeanWindow = 100;
+
+    std::uint64_t samples = 0;  // times the stage ran since the pipeline started
+    double last_ms = 0;         // the latest sample
+    double mean_ms = 0;         // see kMeanWindow
+    double max_ms = 0;          // since the pipeline started (map building included)
+
+    void add(double ms);
+};
+
+// Where the pipeline's time goes, stage by stage (docs/protocol.md,
+// STATUS.timing, says exactly what each stage covers). The tracking thread
+// fills the first six on every tracked frame (a stage that did not run on a
+// frame adds no sample), the detection thread the others on every detector
+// run (detect_*) and every scale update (scale_*).
+struct PipelineTiming {
+    StageTiming predict;         // EKF prediction (vision::TrackStats::predict_us)
+    StageTiming search;          // predicted measurements, patch warping (search_us)
+    StageTiming match;           // NCC matching (match_us)
+    StageTiming update;          // 1-point RANSAC and EKF updates (update_us)
+    StageTiming map;             // map management and new features (map_us)
+    StageTiming tracking;        // the whole MonoTracker::processFrame call
+    StageTiming detect_pre;      // detector pre-processing (DetectionTiming::pre_ms)
+    StageTiming detect_forward;  // the network (forward_ms)
+    StageTiming detect_post;     // decoding, thresholds, NMS (post_ms)
+    StageTiming scale_update;    // ScaleEstimator::update
+    // The posterior's copy for the hub, ScaleEstimator::summary and the
+    // publication of the report (hub, field-log event).
+    StageTiming scale_publish;
+};
+
 // Pipeline health (protocol class STATUS).
 struct PipelineStatus {
     std::string source;             // "sim", "replay:/path/to/dir", ...
@@ -72,7 +110,7 @@ struct PipelineStatus {
     double detector_latency_ms_last = 0;
     double detector_latency_ms_mean = 0;
     double detector_latency_ms_max = 0;
-    double tracking_ms_mean = 0;
+    double tracking_ms_mean = 0;  // = timing.tracking.mean_ms
     int features_in_map = 0;
     int features_tracked = 0;  // measured (inliers) in the last frame
     std::uint64_t epoch = 0;
@@ -83,6 +121,7 @@ struct PipelineStatus {
     std::uint64_t camera_reconnects = 0;  // times it was lost and came back
     std::string camera_device;            // "/dev/video0 (vivid)"
     std::string camera_mode;              // "YUYV 640x480 @ 30"; empty while lost
+    PipelineTiming timing;                // protocol: STATUS.timing (proto_minor 2)
 };
 
 // Field-log health, published by the log service.
