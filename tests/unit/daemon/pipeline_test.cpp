@@ -337,7 +337,15 @@ TEST(Pipeline, ASlowDetectorNeverBlocksTracking) {
     const PipelineStatus st = hub.status();
     // The one held run plus the latest frame left in the mailbox.
     EXPECT_EQ(st.detections_run, 2U);
-    EXPECT_EQ(st.scale_updates, 2U);  // both against their own frame's snapshot
+    // Both against their own frame's snapshot. Not lossless: on a loaded
+    // machine the ring drops enough frames for SLAM to start a new map, and an
+    // update whose snapshot belongs to the old epoch is dropped by design
+    // (seen once in a parallel ctest run).
+    if (st.epoch == 1) {  // one map from start to end
+        EXPECT_EQ(st.scale_updates, 2U) << "epoch " << st.epoch;
+    } else {
+        EXPECT_GE(st.scale_updates, 1U) << "epoch " << st.epoch;
+    }
 }
 
 // SIGHUP: new priors, the evidence so far is kept (observations go on from
