@@ -225,7 +225,8 @@ TEST(Likelihood, WindowedSumMatchesBruteForceWhereItMatters) {
                 ASSERT_NEAR(l[j], ref[j], 1e-5) << j;
             }
             ASSERT_TRUE(std::isfinite(l[j]));
-            ASSERT_LE(l[j], peak + 1e-9);
+            // Float: the two sums of the same peak differ in the last bits.
+            ASSERT_LE(l[j], peak + test::tolerance(1e-9, 1e-6));
         }
     }
 }
