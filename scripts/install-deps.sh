@@ -11,12 +11,14 @@ packages=(
   libeigen3-dev
   # config files
   libtomlplusplus-dev
+  # daemon and tools: JSON protocol and field log, command lines
+  nlohmann-json3-dev libcli11-dev
   # live drivers: GPIO status LEDs (libgpiod 1.6 on bookworm), libcamera capture
   libgpiod-dev libcamera-dev
   # image front end, detector, dataset readers (OpenCV 4.6 on bookworm)
   libopencv-dev
-  # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  # tests and benchmarks (googletest: the sources, for the aarch64 cross build)
+  libgtest-dev libgmock-dev libbenchmark-dev googletest
   # style checks
   clang-format clang-tidy
   # plotting scripts in tools/
@@ -28,6 +30,12 @@ packages=(
   qemu-system-x86 busybox-static linux-source-6.1 bc flex bison libelf-dev libssl-dev
   xz-utils kmod libcamera-ipa libcamera-tools v4l-utils gpiod
 )
+
+# aarch64 cross build of core and its tests, run under qemu-user (presets
+# aarch64 and aarch64-float, docs/arm.md), from an x86-64 host.
+if [[ $(dpkg --print-architecture) == amd64 ]]; then
+  packages+=(g++-aarch64-linux-gnu qemu-user-static)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
