@@ -18,18 +18,13 @@ Result<FixedPosterior> FixedPosterior::create(const PosteriorConfig& config) {
     if (!grid) {
         return grid.error();
     }
-    if (!(config.converged_rel_width > 0) || !std::isfinite(config.converged_rel_width)) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         "posterior: converged_rel_width must be > 0 (got " +
-                             std::to_string(config.converged_rel_width) + ")");
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
     }
-    if (!(config.log_floor < 0) || !(config.log_floor >= kMinLogFloor)) {
+    if (!(config.log_floor >= kMinLogFloor)) {
         return makeError(ErrorCode::kInvalidArgument,
                          "fixed posterior: log_floor must be in [-16000, 0) (got " +
                              std::to_string(config.log_floor) + ")");
-    }
-    if (!(config.drift_sigma_log >= 0) || !std::isfinite(config.drift_sigma_log)) {
-        return makeError(ErrorCode::kInvalidArgument, "posterior: drift_sigma_log must be >= 0");
     }
     return FixedPosterior(std::move(grid.value()), config.log_floor, config.drift_sigma_log,
                           config.converged_rel_width);

@@ -29,11 +29,7 @@ const char* toString(PosteriorArithmetic arithmetic) {
     return "unknown";
 }
 
-Result<ScalePosterior> ScalePosterior::create(const PosteriorConfig& config) {
-    auto grid = ScaleGrid::create(config.grid);
-    if (!grid) {
-        return grid.error();
-    }
+Result<bool> validate(const PosteriorConfig& config) {
     if (!(config.converged_rel_width > 0) || !std::isfinite(config.converged_rel_width)) {
         return makeError(ErrorCode::kInvalidArgument,
                          "posterior: converged_rel_width must be > 0 (got " +
@@ -44,6 +40,17 @@ Result<ScalePosterior> ScalePosterior::create(const PosteriorConfig& config) {
     }
     if (!(config.drift_sigma_log >= 0) || !std::isfinite(config.drift_sigma_log)) {
         return makeError(ErrorCode::kInvalidArgument, "posterior: drift_sigma_log must be >= 0");
+    }
+    return true;
+}
+
+Result<ScalePosterior> ScalePosterior::create(const PosteriorConfig& config) {
+    auto grid = ScaleGrid::create(config.grid);
+    if (!grid) {
+        return grid.error();
+    }
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
     }
     std::optional<FixedPosterior> fixed;
     if (config.arithmetic == PosteriorArithmetic::kFixed) {
