@@ -27,7 +27,10 @@ bool weaker(const Candidate& a, const Candidate& b) {
 }
 
 // OpenCV's BORDER_REFLECT_101 (its BORDER_DEFAULT): ... 2 1 | 0 1 2 ... n-1 | n-2 ...
-int reflect101(int i, int n) {
+inline int reflect101(int i, int n) {
+    if (i >= 0 && i < n) {
+        return i;  // every pixel but the border ones: keep the per-pixel loops cheap
+    }
     if (n == 1) {
         return 0;
     }
