@@ -110,12 +110,30 @@ void structureResponse(const cv::Mat& gray, const cv::Rect& roi, int block_size,
         for (std::size_t c = 0; c < 3; ++c) {
             const float* src = s.products.data() + c * ucols;
             float* dst = out + c * ucols;
-            for (int j = 0; j < cols; ++j) {
+            // Interior columns read src directly (vectorisable); only the
+            // block's reach past either end reflects. Same order of terms.
+            const int lo = std::min(anchor, cols);
+            const int hi = std::max(lo, cols - (block_size - 1 - anchor));
+            const auto reflected = [&](int j) {
                 float sum = 0;
                 for (int k = 0; k < block_size; ++k) {
                     sum += src[reflect101(j - anchor + k, cols)];
                 }
                 dst[static_cast<std::size_t>(j)] = sum;
+            };
+            for (int j = 0; j < lo; ++j) {
+                reflected(j);
+            }
+            for (int j = lo; j < hi; ++j) {
+                const float* w = src + (j - anchor);
+                float sum = 0;
+                for (int k = 0; k < block_size; ++k) {
+                    sum += w[k];
+                }
+                dst[static_cast<std::size_t>(j)] = sum;
+            }
+            for (int j = hi; j < cols; ++j) {
+                reflected(j);
             }
         }
     }
