@@ -1,7 +1,8 @@
 // Tracker cost per frame (front end + EKF, detection excluded) at 640x480 with
 // 25, 50 and 100 features measured per frame, one thread: on rendered frames
 // of the synthetic room (always available) and on 7-Scenes redkitchen (when
-// ../shared is present). Results: docs/benchmarks.md.
+// ../shared is present); and corner detection alone on one frame of each.
+// Results: docs/benchmarks.md.
 
 #include <filesystem>
 #include <memory>
@@ -15,6 +16,7 @@
 #include <scaled/synth/renderer.h>
 #include <scaled/synth/scene.h>
 #include <scaled/synth/trajectory.h>
+#include <scaled/vision/corner_detector.h>
 #include <scaled/vision/mono_tracker.h>
 
 #include "shared_dir.h"
@@ -117,6 +119,36 @@ void BM_TrackerRedkitchen(benchmark::State& state) {
     runTracker(state, *seq);
 }
 
+// Corner detection alone, as the tracker calls it in steady state: a frame at
+// 640x480, a mask that allows everywhere, a few new corners wanted.
+void runCorners(benchmark::State& state, const cv::Mat& gray) {
+    cv::setNumThreads(1);
+    vision::CornerConfig config;
+    config.max_corners = static_cast<int>(state.range(0));
+    const cv::Mat mask(gray.size(), CV_8UC1, cv::Scalar(255));
+    std::vector<core::Vec2> corners;
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
+        vision::detectCorners(gray, mask, config, corners);
+        benchmark::DoNotOptimize(corners.data());
+    }
+    state.counters["corners"] = static_cast<double>(corners.size());
+}
+
+void BM_CornersSynthetic(benchmark::State& state) {
+    runCorners(state, syntheticSequence().gray[kFrames / 2]);
+}
+
+void BM_CornersRedkitchen(benchmark::State& state) {
+    const Sequence* seq = redkitchenSequence();
+    if (seq == nullptr) {
+        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
+        return;
+    }
+    runCorners(state, seq->gray[kFrames / 2]);
+}
+
+BENCHMARK(BM_CornersSynthetic)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_CornersRedkitchen)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_TrackerSynthetic)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 

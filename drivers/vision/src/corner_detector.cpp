@@ -46,18 +46,24 @@ inline int reflect101(int i, int n) {
 // and cv::dilate, which this replaces, allocate their temporaries every call.
 struct CornerScratch {
     std::vector<float> products;  // dx^2, dx dy, dy^2 of one row (3 x cols)
-    std::vector<float> row_sums;  // products summed along rows over the block (3 x rows x cols)
+    // Products summed along rows over the block, for the last `block` region
+    // rows (a ring: region row r in slot r mod block, 3 x cols per slot).
+    std::vector<float> row_sums;
+    std::vector<float> column;    // row sums summed down the block, for one output row (3 x cols)
     std::vector<float> response;  // rows x cols
     std::vector<Candidate> candidates;
     std::vector<cv::Point> picked;
 
-    void reserve(std::size_t rows, std::size_t cols) {
+    void reserve(std::size_t rows, std::size_t cols, std::size_t block) {
         const std::size_t n = rows * cols;
         if (products.size() < 3 * cols) {
             products.resize(3 * cols);
         }
-        if (row_sums.size() < 3 * n) {
-            row_sums.resize(3 * n);
+        if (row_sums.size() < 3 * block * cols) {
+            row_sums.resize(3 * block * cols);
+        }
+        if (column.size() < 3 * cols) {
+            column.resize(3 * cols);
         }
         if (response.size() < n) {
             response.resize(n);
@@ -70,6 +76,74 @@ struct CornerScratch {
     }
 };
 
+// Sobel derivative products (scaled) of the pixels j in [first, last) of the
+// region row whose image rows above, at and below are up, mid and down; the
+// column of region pixel j is x0 + j, its neighbours l(j) and r(j).
+template <typename Left, typename Right>
+inline void sobelProducts(const uchar* __restrict up, const uchar* __restrict mid,
+                          const uchar* __restrict down, int x0, int first, int last, Left l,
+                          Right r, float scale, float* __restrict xx, float* __restrict xy,
+                          float* __restrict yy) {
+    for (int j = first; j < last; ++j) {
+        const int x = x0 + j;
+        const int xl = l(x);
+        const int xr = r(x);
+        const int gx = (up[xr] - up[xl]) + 2 * (mid[xr] - mid[xl]) + (down[xr] - down[xl]);
+        const int gy = (down[xl] + 2 * down[x] + down[xr]) - (up[xl] + 2 * up[x] + up[xr]);
+        const float dx = static_cast<float>(gx) * scale;
+        const float dy = static_cast<float>(gy) * scale;
+        xx[j] = dx * dx;
+        xy[j] = dx * dy;
+        yy[j] = dy * dy;
+    }
+}
+
+// Row i of the region: its Sobel products summed along the row over the
+// block (BORDER_REFLECT_101 at the region's border), into `out` (3 x cols).
+void rowSums(const cv::Mat& gray, const cv::Rect& roi, int i, int block_size, CornerScratch& s,
+             float* __restrict out) {
+    const int cols = roi.width;
+    const auto ucols = static_cast<std::size_t>(cols);
+    const float scale = static_cast<float>(1.0 / (4.0 * block_size * 255.0));
+    const int anchor = block_size / 2;
+    const int y = roi.y + i;
+    const uchar* up = gray.ptr<uchar>(reflect101(y - 1, gray.rows));
+    const uchar* mid = gray.ptr<uchar>(y);
+    const uchar* down = gray.ptr<uchar>(reflect101(y + 1, gray.rows));
+    float* xx = s.products.data();
+    float* xy = xx + ucols;
+    float* yy = xy + ucols;
+    // Columns whose Sobel neighbours are inside the image need no reflection.
+    const int sobel_lo = std::clamp(1 - roi.x, 0, cols);
+    const int sobel_hi = std::clamp(gray.cols - 1 - roi.x, sobel_lo, cols);
+    const auto left = [&](int x) { return reflect101(x - 1, gray.cols); };
+    const auto right = [&](int x) { return reflect101(x + 1, gray.cols); };
+    sobelProducts(up, mid, down, roi.x, 0, sobel_lo, left, right, scale, xx, xy, yy);
+    const auto before = [](int x) { return x - 1; };
+    const auto after = [](int x) { return x + 1; };
+    sobelProducts(up, mid, down, roi.x, sobel_lo, sobel_hi, before, after, scale, xx, xy, yy);
+    sobelProducts(up, mid, down, roi.x, sobel_hi, cols, left, right, scale, xx, xy, yy);
+    // Columns whose window stays inside the region need no reflection.
+    const int sum_lo = std::min(anchor, cols);
+    const int sum_hi = std::max(sum_lo, cols - (block_size - 1 - anchor));
+    for (std::size_t c = 0; c < 3; ++c) {
+        const float* __restrict src = s.products.data() + c * ucols;
+        float* __restrict dst = out + c * ucols;
+        std::fill(dst, dst + ucols, 0.0F);
+        for (int k = 0; k < block_size; ++k) {
+            for (int j = 0; j < sum_lo; ++j) {
+                dst[j] += src[reflect101(j - anchor + k, cols)];
+            }
+            for (int j = sum_lo; j < sum_hi; ++j) {
+                dst[j] += src[j - anchor + k];
+            }
+            for (int j = sum_hi; j < cols; ++j) {
+                dst[j] += src[reflect101(j - anchor + k, cols)];
+            }
+        }
+    }
+}
+
 // The structure-tensor response of cv::cornerMinEigenVal / cv::cornerHarris
 // (aperture 3) of the region `roi` of `gray`, computed as OpenCV does: Sobel
 // derivatives scaled by 1 / (4 block 255), seeing the image's real pixels
@@ -77,88 +151,54 @@ struct CornerScratch {
 // summed over block x block windows with BORDER_REFLECT_101 at the region's
 // border, then the smaller eigenvalue (or the Harris measure, k = 0.04) in
 // float. Into s.response, row-major, roi.width per row.
+//
+// Every window sum is 0 + t_0 + t_1 + ... + t_(block-1) in that order, for
+// every pixel: the loops run over the block outside and over the pixels
+// inside, so that the compiler vectorises them across pixels without
+// reassociating any sum (the result does not depend on the vector width).
+// Row sums are made as the output rows come to need them, into a ring of
+// `block` rows that stays in cache.
 void structureResponse(const cv::Mat& gray, const cv::Rect& roi, int block_size, bool harris,
                        CornerScratch& s) {
     const int rows = roi.height;
-    const int cols = roi.width;
-    const auto ucols = static_cast<std::size_t>(cols);
-    const float scale = static_cast<float>(1.0 / (4.0 * block_size * 255.0));
+    const auto ucols = static_cast<std::size_t>(roi.width);
     const int anchor = block_size / 2;
+    const auto slot = [&](int row) {
+        return s.row_sums.data() + 3 * static_cast<std::size_t>(row % block_size) * ucols;
+    };
+    // The rows a window needs (reflected at the region's border) lie within
+    // `block` consecutive rows, and the highest is the last one made: a ring
+    // of `block` slots never drops a row still needed.
+    int made = -1;  // highest region row whose sums are in the ring
+    float* __restrict a = s.column.data();
+    float* __restrict b = a + ucols;
+    float* __restrict c = b + ucols;
     for (int i = 0; i < rows; ++i) {
-        const int y = roi.y + i;
-        const uchar* up = gray.ptr<uchar>(reflect101(y - 1, gray.rows));
-        const uchar* mid = gray.ptr<uchar>(y);
-        const uchar* down = gray.ptr<uchar>(reflect101(y + 1, gray.rows));
-        float* xx = s.products.data();
-        float* xy = xx + ucols;
-        float* yy = xy + ucols;
-        for (int j = 0; j < cols; ++j) {
-            const int x = roi.x + j;
-            const int l = reflect101(x - 1, gray.cols);
-            const int r = reflect101(x + 1, gray.cols);
-            const int gx = (up[r] - up[l]) + 2 * (mid[r] - mid[l]) + (down[r] - down[l]);
-            const int gy = (down[l] + 2 * down[x] + down[r]) - (up[l] + 2 * up[x] + up[r]);
-            const float dx = static_cast<float>(gx) * scale;
-            const float dy = static_cast<float>(gy) * scale;
-            const auto uj = static_cast<std::size_t>(j);
-            xx[uj] = dx * dx;
-            xy[uj] = dx * dy;
-            yy[uj] = dy * dy;
+        int highest = 0;
+        for (int k = 0; k < block_size; ++k) {
+            highest = std::max(highest, reflect101(i - anchor + k, rows));
         }
-        // Sums along the row over the block.
-        float* out = s.row_sums.data() + 3 * static_cast<std::size_t>(i) * ucols;
-        for (std::size_t c = 0; c < 3; ++c) {
-            const float* src = s.products.data() + c * ucols;
-            float* dst = out + c * ucols;
-            // Interior columns read src directly (vectorisable); only the
-            // block's reach past either end reflects. Same order of terms.
-            const int lo = std::min(anchor, cols);
-            const int hi = std::max(lo, cols - (block_size - 1 - anchor));
-            const auto reflected = [&](int j) {
-                float sum = 0;
-                for (int k = 0; k < block_size; ++k) {
-                    sum += src[reflect101(j - anchor + k, cols)];
-                }
-                dst[static_cast<std::size_t>(j)] = sum;
-            };
-            for (int j = 0; j < lo; ++j) {
-                reflected(j);
-            }
-            for (int j = lo; j < hi; ++j) {
-                const float* w = src + (j - anchor);
-                float sum = 0;
-                for (int k = 0; k < block_size; ++k) {
-                    sum += w[k];
-                }
-                dst[static_cast<std::size_t>(j)] = sum;
-            }
-            for (int j = hi; j < cols; ++j) {
-                reflected(j);
+        for (; made < highest; ++made) {
+            rowSums(gray, roi, made + 1, block_size, s, slot(made + 1));
+        }
+        std::fill(a, a + 3 * ucols, 0.0F);
+        for (int k = 0; k < block_size; ++k) {
+            const float* __restrict sums = slot(reflect101(i - anchor + k, rows));
+            for (std::size_t j = 0; j < 3 * ucols; ++j) {
+                a[j] += sums[j];
             }
         }
-    }
-    // Sums along the columns, then the response.
-    for (int i = 0; i < rows; ++i) {
-        float* resp = s.response.data() + static_cast<std::size_t>(i) * ucols;
-        for (int j = 0; j < cols; ++j) {
-            const auto uj = static_cast<std::size_t>(j);
-            float a = 0;
-            float b = 0;
-            float c = 0;
-            for (int k = 0; k < block_size; ++k) {
-                const auto row = static_cast<std::size_t>(reflect101(i - anchor + k, rows));
-                const float* sums = s.row_sums.data() + 3 * row * ucols;
-                a += sums[uj];
-                b += sums[ucols + uj];
-                c += sums[2 * ucols + uj];
+        float* __restrict resp = s.response.data() + static_cast<std::size_t>(i) * ucols;
+        if (harris) {
+            constexpr float kHarrisK = 0.04F;
+            for (std::size_t j = 0; j < ucols; ++j) {
+                resp[j] = a[j] * c[j] - b[j] * b[j] - kHarrisK * (a[j] + c[j]) * (a[j] + c[j]);
             }
-            if (harris) {
-                constexpr float kHarrisK = 0.04F;
-                resp[uj] = a * c - b * b - kHarrisK * (a + c) * (a + c);
-            } else {
-                const float ha = a * 0.5F;
-                const float hc = c * 0.5F;
-                resp[uj] = (ha + hc) - std::sqrt((ha - hc) * (ha - hc) + b * b);
+        } else {
+            for (std::size_t j = 0; j < ucols; ++j) {
+                const float ha = a[j] * 0.5F;
+                const float hc = c[j] * 0.5F;
+                resp[j] = (ha + hc) - std::sqrt((ha - hc) * (ha - hc) + b[j] * b[j]);
             }
         }
     }
@@ -191,7 +231,8 @@ void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig&
     // serves the 3x3 local-maximum test.
     const cv::Rect roi(border, border, gray.cols - 2 * border, gray.rows - 2 * border);
     thread_local CornerScratch scratch;
-    scratch.reserve(static_cast<std::size_t>(roi.height), static_cast<std::size_t>(roi.width));
+    scratch.reserve(static_cast<std::size_t>(roi.height), static_cast<std::size_t>(roi.width),
+                    static_cast<std::size_t>(block_size));
     structureResponse(gray, roi, block_size, cfg.use_harris, scratch);
     const auto cols = static_cast<std::size_t>(roi.width);
     const auto at = [&](int y, int x) -> const float* {

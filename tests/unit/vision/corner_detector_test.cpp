@@ -163,6 +163,58 @@ TEST(CornerDetector, RespectsMask) {
     }
 }
 
+// With no border, detectCorners is meant to pick what cv::goodFeaturesToTrack
+// picks (minimum-eigenvalue response, 3x3 local maxima, quality threshold,
+// minimum distance), in the same order. OpenCV's box filter sums with running
+// sums and ours sums each window directly, so responses differ in their last
+// bits; on images without exact ties that changes no pick.
+TEST(CornerDetector, PicksWhatGoodFeaturesToTrackPicks) {
+    struct Case {
+        cv::Mat image;
+        int block_size;
+        int max_corners;
+        double min_distance;
+        bool masked;
+    };
+    const cv::Mat fine = test::smoothTexture(cv::Size(640, 480), 1.5, 7);
+    const cv::Mat coarse = test::smoothTexture(cv::Size(320, 240), 4.0, 11);
+    const cv::Mat odd = test::smoothTexture(cv::Size(97, 61), 1.0, 13);
+    const std::vector<Case> cases{
+        {fine, 3, 200, 10, false},  {fine, 3, 50, 25, true},   {fine, 5, 300, 5, false},
+        {coarse, 3, 100, 8, false}, {coarse, 4, 100, 8, true}, {coarse, 7, 40, 12, false},
+        {odd, 3, 1000, 1, false},   {odd, 2, 1000, 2, true},
+    };
+    int compared = 0;
+    for (std::size_t n = 0; n < cases.size(); ++n) {
+        const Case& c = cases[n];
+        cv::Mat mask;
+        if (c.masked) {
+            // Holes like the tracker's free mask, and one blocked quadrant.
+            const std::vector<Vec2> occupied{Vec2(30, 20), Vec2(50, 40), Vec2(200, 150)};
+            makeFreeMask(c.image.size(), occupied, 12, mask);
+            mask(cv::Rect(0, 0, c.image.cols / 2, c.image.rows / 2)).setTo(cv::Scalar(0));
+        }
+        CornerConfig cfg;
+        cfg.max_corners = c.max_corners;
+        cfg.min_distance_px = static_cast<int>(c.min_distance);
+        cfg.block_size = c.block_size;
+        cfg.border_px = 0;
+        std::vector<Vec2> ours;
+        detectCorners(c.image, mask, cfg, ours);
+        std::vector<cv::Point2f> theirs;
+        cv::goodFeaturesToTrack(c.image, theirs, c.max_corners, cfg.quality_level, c.min_distance,
+                                mask.empty() ? cv::noArray() : mask, c.block_size, 3, false);
+        ASSERT_EQ(ours.size(), theirs.size()) << "case " << n;
+        ASSERT_GT(ours.size(), 10U) << "case " << n;
+        for (std::size_t i = 0; i < ours.size(); ++i) {
+            EXPECT_EQ(ours[i].x(), Scalar(theirs[i].x)) << "case " << n << " corner " << i;
+            EXPECT_EQ(ours[i].y(), Scalar(theirs[i].y)) << "case " << n << " corner " << i;
+        }
+        compared += static_cast<int>(ours.size());
+    }
+    EXPECT_GT(compared, 500);
+}
+
 TEST(CornerDetector, RespectsBorder) {
     // Checkerboard corners at 7, 27, 47, ... reach close to every border.
     const cv::Mat img = test::checkerboard(cv::Size(207, 167), 20, 7);
