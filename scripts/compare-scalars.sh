@@ -3,7 +3,9 @@
 # and compares what they give on the synthetic sequences and on redkitchen
 # (tools/compare_scalars.py; docs/numerics.md records a run). Exit 0 when every
 # compared quantity of the float build is within 1% of the double build's.
-#   scripts/compare-scalars.sh [--frames A:B] [--tolerance 0.01]
+#   scripts/compare-scalars.sh [--frames A:B] [--seeds 8] [--tolerance 0.01]
+# On redkitchen each build runs once per RANSAC seed 1..8; the means over the
+# seeds are bounded, each seed's pair is printed (docs/numerics.md says why).
 # Env: SCALED_SHARED_DIR (default ../shared): without redkitchen only the
 # synthetic comparisons run.
 set -euo pipefail
