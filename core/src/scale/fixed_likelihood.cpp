@@ -6,6 +6,8 @@
 
 #include <scaled/core/scale/fixed_posterior.h>
 
+#include "grid_mode.h"
+
 namespace scaled::core {
 
 namespace {
@@ -254,23 +256,7 @@ bool FixedLikelihood::evaluate(const VerticalExtent& extent, const HeightPrior& 
 }
 
 Scalar gridModeFixed(const ScaleGrid& grid, std::span<const LogQ16> v) {
-    std::size_t j = 0;
-    for (std::size_t i = 1; i < v.size(); ++i) {
-        if (v[i] > v[j]) {
-            j = i;
-        }
-    }
-    Scalar offset = 0;
-    if (j > 0 && j + 1 < v.size()) {
-        const std::int64_t denom = std::int64_t{v[j - 1]} - 2 * std::int64_t{v[j]} + v[j + 1];
-        if (denom < 0) {
-            // Final conversion of one number: the parabola's vertex offset.
-            const std::int64_t num = std::int64_t{v[j - 1]} - v[j + 1];
-            offset = std::clamp(Scalar(0.5) * static_cast<Scalar>(num) / static_cast<Scalar>(denom),
-                                Scalar(-0.5), Scalar(0.5));
-        }
-    }
-    return std::exp(grid.logD(j) + offset * grid.delta());
+    return detail::gridModeOf<std::int64_t>(grid, v);
 }
 
 }  // namespace scaled::core

@@ -6,6 +6,8 @@
 
 #include <scaled/core/scale/likelihood.h>
 
+#include "grid_mode.h"
+
 namespace scaled::core {
 
 bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prior,
@@ -133,21 +135,7 @@ bool evaluateLogLikelihood(const VerticalExtent& extent, const HeightPrior& prio
 }
 
 Scalar gridMode(const ScaleGrid& grid, std::span<const Scalar> v) {
-    std::size_t j = 0;
-    for (std::size_t i = 1; i < v.size(); ++i) {
-        if (v[i] > v[j]) {
-            j = i;
-        }
-    }
-    Scalar offset = 0;
-    if (j > 0 && j + 1 < v.size()) {
-        const Scalar denom = v[j - 1] - 2 * v[j] + v[j + 1];
-        if (denom < 0) {
-            offset =
-                std::clamp(Scalar(0.5) * (v[j - 1] - v[j + 1]) / denom, Scalar(-0.5), Scalar(0.5));
-        }
-    }
-    return std::exp(grid.logD(j) + offset * grid.delta());
+    return detail::gridModeOf<Scalar>(grid, v);
 }
 
 }  // namespace scaled::core
