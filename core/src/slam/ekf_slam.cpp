@@ -5,6 +5,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 
+#include <scaled/core/slam/column_dots.h>
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/core/slam/quaternion.h>
 
@@ -335,11 +336,29 @@ bool EkfSlam::ekfUpdate(int count) {
     for (Eigen::Index r = 0; r < n_; ++r) {
         x_(r) += Wt.col(r).dot(nu);
     }
-    // P -= Wt^T Wt on the lower triangle, mirrored by symmetrize().
-    for (Eigen::Index j = 0; j < n_; ++j) {
-        const auto w_j = Wt.col(j);
-        for (Eigen::Index i = j; i < n_; ++i) {
-            P_(i, j) -= Wt.col(i).dot(w_j);
+    // P -= Wt^T Wt on the lower triangle, mirrored by symmetrize(): four
+    // columns j at a time, each element the same sum as Wt.col(i).dot(Wt.col(j))
+    // (detail::columnDots).
+    constexpr std::size_t kCols = 4;
+    constexpr auto kColsI = static_cast<Eigen::Index>(kCols);
+    Eigen::Index j0 = 0;
+    for (; j0 + kColsI <= n_; j0 += kColsI) {
+        const Scalar* const cols[kCols] = {Wt.col(j0).data(), Wt.col(j0 + 1).data(),
+                                           Wt.col(j0 + 2).data(), Wt.col(j0 + 3).data()};
+        for (Eigen::Index i = j0; i < n_; ++i) {
+            Scalar dots[kCols];
+            detail::columnDots<kCols>(Wt.col(i).data(), cols, m, dots);
+            for (Eigen::Index j = j0; j < j0 + kColsI && j <= i; ++j) {
+                P_(i, j) -= dots[static_cast<std::size_t>(j - j0)];
+            }
+        }
+    }
+    for (; j0 < n_; ++j0) {
+        const Scalar* const col[1] = {Wt.col(j0).data()};
+        for (Eigen::Index i = j0; i < n_; ++i) {
+            Scalar dot[1];
+            detail::columnDots<1>(Wt.col(i).data(), col, m, dot);
+            P_(i, j0) -= dot[0];
         }
     }
     symmetrize();
