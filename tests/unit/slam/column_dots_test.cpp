@@ -68,13 +68,5 @@ TEST(ColumnDots, SumLikeEigensDotForEveryLength) {
     }
 }
 
-TEST(ColumnDots, ReduceLanesByHalves) {
-    const Scalar a[4] = {Scalar(1e8), Scalar(1), Scalar(-1e8), Scalar(1)};
-    // (a0 + a2) + (a1 + a3) = 2, where a left-to-right sum in float would lose the ones.
-    EXPECT_EQ(detail::reduceLanes<4>(a), Scalar(2));
-    const Scalar b[2] = {Scalar(0.5), Scalar(0.25)};
-    EXPECT_EQ(detail::reduceLanes<2>(b), Scalar(0.75));
-}
-
 }  // namespace
 }  // namespace scaled::core::slam
