@@ -353,12 +353,9 @@ bool EkfSlam::ekfUpdate(int count) {
             }
         }
     }
-    for (; j0 < n_; ++j0) {
-        const Scalar* const col[1] = {Wt.col(j0).data()};
+    for (; j0 < n_; ++j0) {  // the last n mod 4 columns
         for (Eigen::Index i = j0; i < n_; ++i) {
-            Scalar dot[1];
-            detail::columnDots<1>(Wt.col(i).data(), col, m, dot);
-            P_(i, j0) -= dot[0];
+            P_(i, j0) -= Wt.col(i).dot(Wt.col(j0));
         }
     }
     symmetrize();

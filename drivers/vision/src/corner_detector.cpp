@@ -170,9 +170,10 @@ void structureResponse(const cv::Mat& gray, const cv::Rect& roi, int block_size,
     // `block` consecutive rows, and the highest is the last one made: a ring
     // of `block` slots never drops a row still needed.
     int made = -1;  // highest region row whose sums are in the ring
-    float* __restrict a = s.column.data();
-    float* __restrict b = a + ucols;
-    float* __restrict c = b + ucols;
+    // The three window sums of a row: a, b, c (one buffer, so not restrict).
+    float* a = s.column.data();
+    float* b = a + ucols;
+    float* c = b + ucols;
     for (int i = 0; i < rows; ++i) {
         int highest = 0;
         for (int k = 0; k < block_size; ++k) {
@@ -181,11 +182,12 @@ void structureResponse(const cv::Mat& gray, const cv::Rect& roi, int block_size,
         for (; made < highest; ++made) {
             rowSums(gray, roi, made + 1, block_size, s, slot(made + 1));
         }
-        std::fill(a, a + 3 * ucols, 0.0F);
+        float* __restrict acc = s.column.data();
+        std::fill(acc, acc + 3 * ucols, 0.0F);
         for (int k = 0; k < block_size; ++k) {
             const float* __restrict sums = slot(reflect101(i - anchor + k, rows));
             for (std::size_t j = 0; j < 3 * ucols; ++j) {
-                a[j] += sums[j];
+                acc[j] += sums[j];
             }
         }
         float* __restrict resp = s.response.data() + static_cast<std::size_t>(i) * ucols;
