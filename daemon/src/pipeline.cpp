@@ -80,7 +80,45 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
         p->grid_d_[j] = static_cast<double>(grid.d(j));
     }
     p->log_p_.resize(grid.size());
+    const core::ObjectEvidence* objects = p->estimator_->objects();
+    const std::size_t max_objects = objects != nullptr ? objects->capacity() : 0;
+    p->objects_.model = config.pipeline.estimator.model;
+    p->objects_.objects.reserve(max_objects);
+    hub.setObjectModel(config.pipeline.estimator.model, max_objects);
     return p;
+}
+
+void collectObjects(const core::ScaleEstimator& estimator, const core::ScaleSummary& posterior,
+                    ObjectsSnapshot& out) {
+    out.objects.clear();
+    const core::ObjectEvidence* table = estimator.objects();
+    if (table == nullptr) {
+        return;
+    }
+    const auto priors = estimator.priors().priors();
+    const int n = std::min(table->activeCount(), static_cast<int>(out.objects.capacity()));
+    for (int k = 0; k < n; ++k) {
+        const core::ObjectSummary s = table->summary(k, posterior);
+        ObjectReport& o = out.objects.emplace_back();
+        o.id = s.id;
+        const auto c = static_cast<std::size_t>(s.class_index);
+        o.setClassName(s.class_index >= 0 && c < priors.size() ? priors[c].className() : "?");
+        o.state = s.state;
+        o.anchor = {static_cast<double>(s.p_AinW.x()), static_cast<double>(s.p_AinW.y()),
+                    static_cast<double>(s.p_AinW.z())};
+        o.anchor_rel_sigma = static_cast<double>(s.anchor_rel_sigma);
+        o.detections = s.detections;
+        o.views = s.views;
+        o.views_used = s.views_used;
+        o.first_frame = s.first_frame;
+        o.last_frame = s.last_frame;
+        o.local_estimate = static_cast<double>(s.local_estimate);
+        // The core reports 0 when the object is unused or the posterior empty.
+        o.has_height = s.state == core::ObjectState::kUsed && s.height_m > 0;
+        o.height_m = static_cast<double>(s.height_m);
+        o.height_ci95_lo_m = static_cast<double>(s.height_ci95_m.lo);
+        o.height_ci95_hi_m = static_cast<double>(s.height_ci95_m.hi);
+    }
 }
 
 Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& hub,
@@ -611,6 +649,11 @@ bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t ep
     report_.updated_mono_ns = monotonicNowNs();
     scale_state_ = summary.state;
     ++status_.scale_updates;
+    // The objects first: a client woken by the SCALE finds the table of the
+    // same update.
+    objects_.epoch = epoch;
+    objects_.frame_id = frame_id;
+    hub_.publishObjects(objects_);
     publishLocked(grid_d_, log_p_);
     if (events_ != nullptr) {
         PipelineEvents::Scale e;
@@ -621,6 +664,7 @@ bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t ep
         e.detections_used = dets;
         e.paper_variance =
             config_.pipeline.estimator.likelihood.variance_model == core::VarianceModel::kPaper;
+        e.objects = objects_.objects;
         events_->onScale(e);
         if (before != published_state_) {
             events_->onState(before, published_state_, epoch, frame_id, "scale update");
@@ -656,7 +700,11 @@ void Pipeline::detectionLoop() {
             job.t_ns = pending_.t_ns;
             pending_full_ = false;
             if (reload_priors_) {
-                estimator.setPriors(std::move(*reload_priors_));
+                if (auto ok = estimator.setPriors(std::move(*reload_priors_));
+                    !ok && events_ != nullptr) {
+                    // The old priors stay; the evidence is kept either way.
+                    events_->onError("priors reload", ok.error().message);
+                }
                 reload_priors_.reset();
             }
             if (reload_detector_) {
@@ -727,7 +775,9 @@ void Pipeline::detectionLoop() {
         for (std::size_t j = 0; j < log_p.size() && j < log_p_.size(); ++j) {
             log_p_[j] = static_cast<double>(log_p[j]);
         }
-        publishUpdate(estimator.summary(), job.snapshot.epoch(), job.snapshot.frameId(),
+        const core::ScaleSummary summary = estimator.summary();
+        collectObjects(estimator, summary, objects_);
+        publishUpdate(summary, job.snapshot.epoch(), job.snapshot.frameId(),
                       job.snapshot.timestampNs(), u.observations, static_cast<int>(n),
                       std::span(records.data(), static_cast<std::size_t>(u.records_written)),
                       std::span(dets.data(), n));

@@ -134,6 +134,7 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
     auto& s = c.tracker.slam;
     auto& d = c.detector;
     auto& e = c.estimator;
+    auto& o = c.estimator.objects;
     return {
         // [tracker]
         real("tracker", "sigma_a", &s.motion.sigma_a, 0, 1e4, Bound::kOpen),
@@ -179,6 +180,9 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         real("detection", "period_s", &c.detection.period_s, 0, 3600),
         // [estimator]
         path("estimator", "priors", &c.priors_path),
+        choice(
+            "estimator", "model", &e.model,
+            {{"paper", core::EstimatorModel::kPaper}, {"object", core::EstimatorModel::kObject}}),
         choice("estimator", "variance", &e.likelihood.variance_model,
                {{"paper", core::VarianceModel::kPaper},
                 {"propagated", core::VarianceModel::kPropagated}}),
@@ -210,6 +214,23 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         choice("estimator", "posterior_arithmetic", &e.posterior.arithmetic,
                {{"floating", core::PosteriorArithmetic::kFloating},
                 {"fixed", core::PosteriorArithmetic::kFixed}}),
+        // [objects]
+        integer("objects", "max_objects", &o.max_objects, 1, 1024),
+        integer("objects", "max_views", &o.max_views, 2, 1024),
+        real("objects", "centre_rel_sigma", &o.centre_rel_sigma, 0, 10),
+        real("objects", "centre_sigma_px", &o.centre_sigma_px, 0, 1000),
+        real("objects", "min_parallax_deg", &o.min_parallax_deg, 0, 90),
+        real("objects", "max_anchor_rel_sigma", &o.max_anchor_rel_sigma, 0, 10, Bound::kOpen),
+        real("objects", "anchor_box_margin", &o.anchor_box_margin, 0, 10),
+        real("objects", "association_gate", &o.association_gate, 0, 100, Bound::kOpen),
+        real("objects", "epipolar_depth_min", &o.epipolar_depth_min, 0, 1e6, Bound::kOpen),
+        real("objects", "epipolar_depth_max", &o.epipolar_depth_max, 0, 1e6, Bound::kOpen),
+        integer("objects", "max_gap_updates", &o.max_gap_updates, 1, 1000000),
+        real("objects", "box_edge_rel_sigma", &o.box_edge_rel_sigma, 0, 1),
+        real("objects", "object_rel_sigma", &o.object_rel_sigma, 0, 10),
+        real("objects", "view_band", &o.view_band, 0, 10, Bound::kOpen),
+        real("objects", "view_reference_quantile", &o.view_reference_quantile, 0, 1),
+        boolean("objects", "width_model", &o.width_model),
     };
 }
 
@@ -272,6 +293,21 @@ Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where) {
     }
     if (auto v = vision::validate(c.tracker); !v) {
         return checkError(where, {"tracker"}, v.error().message);
+    }
+    const auto& o = c.estimator.objects;
+    if (!(o.epipolar_depth_max > o.epipolar_depth_min)) {
+        return checkError(
+            where, {"objects.epipolar_depth_max", "objects.epipolar_depth_min"},
+            "must be greater than objects.epipolar_depth_min = " + num(o.epipolar_depth_min) +
+                " (got " + num(o.epipolar_depth_max) + ")");
+    }
+    if (!(o.centre_rel_sigma > 0 || o.centre_sigma_px > 0)) {
+        return checkError(
+            where, {"objects.centre_rel_sigma", "objects.centre_sigma_px"},
+            "objects.centre_rel_sigma and objects.centre_sigma_px must not both be 0");
+    }
+    if (auto v = core::validate(o); !v) {
+        return checkError(where, {"objects"}, v.error().message);
     }
     return true;
 }

@@ -138,6 +138,28 @@ Result<bool> HeightPrior::setPartialProbability(Scalar probability) {
     return true;
 }
 
+Result<bool> HeightPrior::setWidth(Scalar mean_m, Scalar std_m) {
+    if (!(mean_m >= 0) || !std::isfinite(mean_m) || !(std_m >= 0) || !std::isfinite(std_m) ||
+        (mean_m == 0 && std_m != 0)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "prior '" + class_name_ + "': width needs mean_m >= 0 and std_m >= 0 " +
+                             "(std_m 0 without a mean) (got mean " + std::to_string(mean_m) +
+                             ", std " + std::to_string(std_m) + ")");
+    }
+    width_mean_m_ = mean_m;
+    width_std_m_ = std_m;
+    return true;
+}
+
+Scalar HeightPrior::relativeSpread() const {
+    const Scalar m = mean();
+    Scalar var = binWidth() * binWidth() / 12;
+    for (std::size_t i = 0; i < heights_m_.size(); ++i) {
+        var += probabilities_[i] * (heights_m_[i] - m) * (heights_m_[i] - m);
+    }
+    return m > 0 ? std::sqrt(var) / m : Scalar(0);
+}
+
 Scalar HeightPrior::mean() const {
     Scalar m = 0;
     for (std::size_t i = 0; i < heights_m_.size(); ++i) {

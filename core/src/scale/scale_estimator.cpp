@@ -5,6 +5,16 @@
 
 namespace scaled::core {
 
+const char* toString(EstimatorModel model) {
+    switch (model) {
+        case EstimatorModel::kPaper:
+            return "paper";
+        case EstimatorModel::kObject:
+            return "object";
+    }
+    return "unknown";
+}
+
 Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, PriorTable priors,
                                               const PinholeRadialCamera& camera) {
     if (priors.empty()) {
@@ -42,13 +52,25 @@ Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, Pri
         }
         fixed_likelihood.emplace(std::move(f.value()));
     }
+    std::optional<ObjectEvidence> objects;
+    if (config.model == EstimatorModel::kObject) {
+        auto o = ObjectEvidence::create(config.objects, config.extent, lc, priors, camera,
+                                        posterior->grid());
+        if (!o) {
+            return o.error();
+        }
+        objects.emplace(std::move(o.value()));
+    } else if (config.model != EstimatorModel::kPaper) {
+        return makeError(ErrorCode::kInvalidArgument, "scale estimator: unknown model");
+    }
     return ScaleEstimator(config, std::move(priors), camera, std::move(posterior.value()),
-                          std::move(fixed_likelihood));
+                          std::move(fixed_likelihood), std::move(objects));
 }
 
 ScaleEstimator::ScaleEstimator(const EstimatorConfig& config, PriorTable priors,
                                const PinholeRadialCamera& camera, ScalePosterior posterior,
-                               std::optional<FixedLikelihood> fixed_likelihood)
+                               std::optional<FixedLikelihood> fixed_likelihood,
+                               std::optional<ObjectEvidence> objects)
     : config_(config),
       priors_(std::move(priors)),
       camera_(camera),
@@ -57,7 +79,60 @@ ScaleEstimator::ScaleEstimator(const EstimatorConfig& config, PriorTable priors,
       fixed_likelihood_(std::move(fixed_likelihood)),
       fixed_log_l_(fixed_likelihood_ ? posterior_.grid().size() : 0, 0),
       extents_(static_cast<std::size_t>(config.max_features_per_box)),
-      extent_features_(static_cast<std::size_t>(config.max_features_per_box), -1) {}
+      extent_features_(static_cast<std::size_t>(config.max_features_per_box), -1),
+      objects_(std::move(objects)),
+      class_index_(objects_ ? static_cast<std::size_t>(ObjectEvidence::kMaxDetections) : 0, -1) {}
+
+void ScaleEstimator::reset() {
+    posterior_.reset();
+    if (objects_) {
+        objects_->reset();
+    }
+}
+
+Result<bool> ScaleEstimator::setPriors(PriorTable priors) {
+    if (objects_) {
+        if (auto ok = objects_->setPriors(priors); !ok) {
+            return ok;
+        }
+    }
+    priors_ = std::move(priors);
+    return true;
+}
+
+const HeightPrior* ScaleEstimator::priorFor(const Detection& det) const {
+    const HeightPrior* prior = priors_.find(det.class_name);
+    if (prior == nullptr || (!prior->upright() && !config_.use_non_upright) ||
+        det.score < config_.min_detection_score) {
+        return nullptr;
+    }
+    return prior;
+}
+
+UpdateStats ScaleEstimator::updateObjects(const FrameSnapshot& frame,
+                                          std::span<const Detection> detections,
+                                          std::span<ObservationRecord> records) {
+    UpdateStats stats;
+    const std::size_t n = std::min(detections.size(), class_index_.size());
+    const HeightPrior* first = priors_.priors().data();
+    for (std::size_t i = 0; i < n; ++i) {
+        const HeightPrior* prior = priorFor(detections[i]);
+        class_index_[i] = prior != nullptr ? static_cast<int>(prior - first) : -1;
+    }
+    stats.detections_skipped = static_cast<int>(detections.size() - n);
+    const ObjectEvidence::UpdateStats o =
+        objects_->update(frame, detections.first(n), std::span<const int>(class_index_.data(), n),
+                         {}, records, &stats.records_written);
+    stats.detections_used = o.detections_used;
+    stats.detections_skipped += static_cast<int>(n) - o.detections_used;
+    stats.observations = o.detections_used;
+    stats.objects_used = o.objects_used;
+    stats.views_used = o.views_used;
+    stats.new_objects = o.new_objects;
+    posterior_.reset();
+    objects_->addTo(posterior_);
+    return stats;
+}
 
 bool ScaleEstimator::addObservation(const VerticalExtent& extent, const HeightPrior& prior,
                                     Scalar weight, Scalar* local_estimate) {
@@ -84,12 +159,14 @@ bool ScaleEstimator::addObservation(const VerticalExtent& extent, const HeightPr
 UpdateStats ScaleEstimator::update(const FrameSnapshot& frame,
                                    std::span<const Detection> detections,
                                    std::span<ObservationRecord> records) {
+    if (objects_) {
+        return updateObjects(frame, detections, records);
+    }
     UpdateStats stats;
     for (std::size_t di = 0; di < detections.size(); ++di) {
         const Detection& det = detections[di];
-        const HeightPrior* prior = priors_.find(det.class_name);
-        if (prior == nullptr || (!prior->upright() && !config_.use_non_upright) ||
-            det.score < config_.min_detection_score) {
+        const HeightPrior* prior = priorFor(det);
+        if (prior == nullptr) {
             ++stats.detections_skipped;
             continue;
         }

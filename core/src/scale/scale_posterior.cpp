@@ -94,6 +94,14 @@ void ScalePosterior::normalise() {
     }
 }
 
+void ScalePosterior::setObservationCount(int observations) {
+    if (fixed_) {
+        fixed_->setObservationCount(observations);
+        return;
+    }
+    observations_ = observations;
+}
+
 bool ScalePosterior::addLogLikelihood(std::span<const Scalar> log_l, Scalar weight) {
     if (log_l.size() != grid_.size() || !(weight > 0 && weight <= 1)) {
         return false;

@@ -92,6 +92,7 @@ CaptureReport SlamSnapshot::capture(const EkfSlam& slam, std::int64_t frame_id,
 
 FrameSnapshot SlamSnapshot::view() const {
     FrameSnapshot s;
+    s.frame_id = frame_id_;
     s.pose = pose_;
     s.up_W = up_W_;
     s.features = features_;

@@ -266,7 +266,7 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
          "speed, at_end, max_frames, sim_seed, sim_fps, sim_width_px, sim_height_px)"},
         {"\n\n[sorce]\n",
          "3: sorce: unknown section (allowed: source, tracker, detector, detection, estimator, "
-         "camera, gpio, pipeline, socket, log)"},
+         "objects, camera, gpio, pipeline, socket, log)"},
         {"[source]\nkind = \"usb\"\n",
          "2: source.kind: must be one of \"sim\", \"replay\", \"v4l2\", \"libcamera\" (got "
          "\"usb\")"},

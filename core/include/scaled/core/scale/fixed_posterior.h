@@ -107,6 +107,7 @@ public:
     static Result<FixedPosterior> create(const PosteriorConfig& config);
 
     void reset();
+    void setObservationCount(int observations) { observations_ = observations; }
 
     // Adds weight * log_l (weight in (0, 1], applied as a Q16 multiplier).
     // Values must be <= 0 and >= kFixedLogLikelihoodMin (FixedLikelihood's

@@ -47,6 +47,19 @@ public:
     Result<bool> setPartialProbability(Scalar probability);
     [[nodiscard]] Scalar partialProbability() const { return partial_probability_; }
 
+    // Beyond the paper (the object model, object_evidence.h): the object's
+    // horizontal extent along the line of sight, N(mean, std^2) in metres. A
+    // box seen from above or below spans more than the height: about
+    // H + w (|tan t| + |tan b|) / 2 on the vertical through the object's
+    // centre, t and b the elevations of its top and bottom. std 0 with mean 0:
+    // no width model for this class (the default).
+    Result<bool> setWidth(Scalar mean_m, Scalar std_m);
+    [[nodiscard]] Scalar widthMean() const { return width_mean_m_; }
+    [[nodiscard]] Scalar widthStd() const { return width_std_m_; }
+    [[nodiscard]] bool hasWidth() const { return width_mean_m_ > 0; }
+    // Relative spread of the height distribution (std / mean).
+    [[nodiscard]] Scalar relativeSpread() const;
+
 private:
     HeightPrior() = default;
 
@@ -54,6 +67,8 @@ private:
     bool upright_ = false;
     Scalar bin_width_m_ = 0;
     Scalar partial_probability_ = -1;
+    Scalar width_mean_m_ = 0;
+    Scalar width_std_m_ = 0;
     std::vector<Scalar> heights_m_;
     std::vector<Scalar> probabilities_;
     std::vector<Scalar> log_probabilities_;

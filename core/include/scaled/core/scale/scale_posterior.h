@@ -82,6 +82,10 @@ public:
     // Convolves the posterior with a Gaussian of std sigma_log in log d.
     void diffuse(Scalar sigma_log);
 
+    // Sets the number of observations the summary reports (the object model
+    // adds one likelihood per object but counts its views).
+    void setObservationCount(int observations);
+
     [[nodiscard]] ScaleSummary summary() const;
     [[nodiscard]] const ScaleGrid& grid() const { return grid_; }
     [[nodiscard]] const PosteriorConfig& config() const { return config_; }

@@ -1,0 +1,265 @@
+#pragma once
+
+// ObjectEvidence: the scale evidence of physical objects (docs/method.md,
+// "Object-level evidence"; ScaleEstimator's model "object").
+//
+// 1. Tracks. Detections are associated over detection frames into objects:
+//    same class, and the box centre near where the object is expected: the
+//    projection of its anchor (gated by the anchor's projected uncertainty),
+//    or, before it has one, the epipolar segment of its last box centre over
+//    the depths of the map. Greedy by that distance. An object keeps its id
+//    for the whole epoch, through frames where it is hidden or out of view;
+//    the table is bounded (max_objects; when it is full the object unused
+//    longest is replaced).
+// 2. Anchors. An object's anchor is the point its box-centre rays meet: a
+//    weighted least-squares triangulation over its views (boxes cut by the
+//    image border left out: their centre is not the object's), with the
+//    3x3 covariance of that fit. It needs min_parallax_deg between views,
+//    must lie in front of every view and inside (a margin around) most of
+//    its boxes, and is used once its depth uncertainty is below
+//    max_anchor_rel_sigma of its distance. Map features are not used: on the
+//    real sequences few of them fall on an object, and those that do are as
+//    often the wall behind it or the table in front (docs/accuracy.md).
+// 3. Per-view extent. Every stored view is measured again with the current
+//    anchor: D on the vertical line through the anchor (vertical_extent.h:
+//    roll compensation and the truncation rules apply), kappa from the
+//    elevations of its top and bottom points, and a per-view error from the
+//    box edges (box_edge_sigma_px, at least box_edge_rel_sigma of the box).
+//    Views far below the object's best views (partly hidden) or far above
+//    them (merged boxes) leave the product (view_band).
+// 4. One height per object: object_likelihood.h.
+//
+// Everything is allocated at create(); update() does not allocate.
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/result.h>
+#include <scaled/core/scale/height_prior.h>
+#include <scaled/core/scale/object_likelihood.h>
+#include <scaled/core/scale/scale_grid.h>
+#include <scaled/core/scale/scale_posterior.h>
+#include <scaled/core/scale/vertical_extent.h>
+
+namespace scaled::core {
+
+struct FrameSnapshot;
+struct Detection;
+struct ObservationRecord;
+
+struct ObjectConfig {
+    int max_objects = 32;  // objects tracked at once, in [1, 1024]
+    int max_views = 32;    // views kept per object (the oldest is replaced), in [2, 1024]
+    // Anchoring: the box centre's noise, a fraction of the box diagonal plus
+    // pixels (the centre of a box is not a fixed point of the object).
+    Scalar centre_rel_sigma = Scalar(0.1);
+    Scalar centre_sigma_px = 3;
+    Scalar min_parallax_deg = 2;                 // between the views an anchor is made of
+    Scalar max_anchor_rel_sigma = Scalar(0.15);  // anchor depth std / distance for use
+    Scalar anchor_box_margin = Scalar(0.15);     // the anchor projects inside the box grown by this
+    // Association: a box joins an object whose predicted centre lies within
+    // association_gate half-diagonals of the box (plus 2 sigma of the
+    // projected anchor); an object without anchor is searched along the
+    // epipolar segment of its last box centre over epipolar_depth_min..max
+    // times the median depth of the map in view, and only for
+    // max_gap_updates updates after its last view.
+    Scalar association_gate = 1;
+    Scalar epipolar_depth_min = Scalar(0.25);
+    Scalar epipolar_depth_max = 4;
+    int max_gap_updates = 30;
+    // Per-view error of a box edge: at least this fraction of the box height
+    // (ExtentConfig::box_edge_sigma_px is the floor in pixels).
+    Scalar box_edge_rel_sigma = Scalar(0.03);
+    // Relative error common to all views of one object (a detector that boxes
+    // this object consistently too large, the model's own error).
+    Scalar object_rel_sigma = Scalar(0.05);
+    // Views whose normalised extent D / (1 + kappa w/H) differs from the
+    // object's reference (the view_reference_quantile of its views) by more
+    // than view_band (or 3 per-view sigmas) are left out.
+    Scalar view_band = Scalar(0.2);
+    Scalar view_reference_quantile = Scalar(0.8);
+    bool width_model = true;  // the class's width prior (H + kappa w); off: w = 0
+    ApparentHeightPrior::GridSpec height_grid;
+};
+
+// The message names the field and its value.
+Result<bool> validate(const ObjectConfig& config);
+
+enum class ObjectState : std::uint8_t {
+    kTentative,  // no usable anchor yet
+    kAnchored,   // anchored, no view measurable from it
+    kUsed,       // its likelihood is part of the posterior
+};
+const char* toString(ObjectState state);
+
+struct ObjectSummary {
+    int id = 0;            // stable within the epoch, from 1
+    int class_index = -1;  // into the PriorTable's priors()
+    ObjectState state = ObjectState::kTentative;
+    Vec3 p_AinW = Vec3::Zero();   // anchor, SLAM units (valid unless tentative)
+    Scalar anchor_rel_sigma = 0;  // depth std / distance of the anchor
+    int detections = 0;           // associated so far
+    int views = 0;                // kept
+    int views_used = 0;           // in its likelihood
+    std::int64_t first_frame = 0;
+    std::int64_t last_frame = 0;
+    Scalar local_estimate = 0;  // mode over d of this object's likelihood alone (0: none)
+    // Its apparent height (metres, h of object_likelihood.h) at the posterior's
+    // MAP and 95% bounds of d (0 when unused or without a posterior).
+    Scalar height_m = 0;
+    Interval height_ci95_m;
+};
+
+// One detection's fate in an update.
+struct ObjectAssignment {
+    int object_id = 0;  // 0: not associated (unknown class, skipped, table full)
+    bool new_object = false;
+};
+
+class ObjectEvidence {
+public:
+    // At most this many detections are associated per update; more are skipped.
+    static constexpr int kMaxDetections = 256;
+
+    // priors: the classes' height (and width) priors; partial weights come
+    // from the priors (partialProbability()) or likelihood.partial_weight when
+    // likelihood.partial_visibility is on; outliers from likelihood.robust.
+    static Result<ObjectEvidence> create(const ObjectConfig& config, const ExtentConfig& extent,
+                                         const LikelihoodConfig& likelihood,
+                                         const PriorTable& priors,
+                                         const PinholeRadialCamera& camera, const ScaleGrid& grid);
+
+    // New priors (SIGHUP): the table stays, the likelihoods are evaluated
+    // again at the next update. Allocates.
+    Result<bool> setPriors(const PriorTable& priors);
+
+    // Forgets every object (a new map).
+    void reset();
+
+    struct UpdateStats {
+        int detections_used = 0;  // associated to an object that is used
+        int views_used = 0;       // views in the posterior after this update (all objects)
+        int objects_used = 0;
+        int new_objects = 0;
+    };
+
+    // One frame's detections. class_index[i] is the prior of detections[i]
+    // (-1: skip it). assignments (when not empty) receives each detection's
+    // object; records (as many as fit) one entry per detection that became a
+    // used view of its object.
+    UpdateStats update(const FrameSnapshot& frame, std::span<const Detection> detections,
+                       std::span<const int> class_index, std::span<ObjectAssignment> assignments,
+                       std::span<ObservationRecord> records, int* records_written);
+
+    // Adds the used objects' log-likelihoods to the posterior (after reset()
+    // of the posterior by the caller) and sets its observation count to the
+    // views used. Returns the number of objects added.
+    int addTo(ScalePosterior& posterior) const;
+
+    [[nodiscard]] std::size_t capacity() const { return tracks_.size(); }
+    // Active objects, in slot order (ids are not contiguous).
+    [[nodiscard]] int activeCount() const;
+    // Summary of the k-th active object (k < activeCount()), heights at the
+    // given posterior summary.
+    [[nodiscard]] ObjectSummary summary(int k, const ScaleSummary& posterior) const;
+    // The k-th active object's normalised log-likelihood over the grid (empty unless used).
+    [[nodiscard]] std::span<const Scalar> logLikelihood(int k) const;
+
+    // The 95% relative width that the used objects and their classes' spreads
+    // allow at best: 1.96-sigma bounds of the log-normal of combined relative
+    // std 1 / sqrt(sum_o 1 / s_o^2), s_o the class spread with the object's
+    // common error. 0 without used objects.
+    [[nodiscard]] Scalar informationLimitRelWidth95() const;
+
+    [[nodiscard]] const ObjectConfig& config() const { return config_; }
+
+private:
+    struct View {
+        CameraPose pose;
+        Vec3 up_W = Vec3(0, 0, 1);
+        BoundingBox box;
+        std::int64_t frame_id = 0;
+        Scalar depth_hint = 1;  // median depth of the map in view, SLAM units
+    };
+    struct Track {
+        bool active = false;
+        int id = 0;
+        int class_index = -1;
+        int detections = 0;
+        int stored = 0;  // views kept
+        int head = 0;    // next view slot (ring)
+        int last_update = 0;
+        std::int64_t first_frame = 0;
+        std::int64_t last_frame = 0;
+        bool anchored = false;
+        Vec3 p_AinW = Vec3::Zero();
+        Mat3 P_AinW = Mat3::Zero();
+        Scalar anchor_rel_sigma = 0;
+        bool used = false;
+        bool dirty = false;
+        int views_used = 0;
+        Scalar local_estimate = 0;
+        // Weighted sums of the used views for objectHeightAt-style heights:
+        // h(d) = (d * s_d - mu_w * s_k) / s_1.
+        double s_1 = 0;
+        double s_d = 0;
+        double s_k = 0;
+    };
+    struct Candidate {
+        Scalar cost = 0;
+        int detection = 0;
+        int track = 0;
+    };
+
+    ObjectEvidence(const ObjectConfig& config, const ExtentConfig& extent,
+                   const LikelihoodConfig& likelihood, const PinholeRadialCamera& camera,
+                   const ScaleGrid& grid);
+    Result<bool> buildPriors(const PriorTable& priors);
+
+    [[nodiscard]] View& view(int track, int k) {
+        return views_[static_cast<std::size_t>(track * config_.max_views + k)];
+    }
+    [[nodiscard]] const View& view(int track, int k) const {
+        return views_[static_cast<std::size_t>(track * config_.max_views + k)];
+    }
+    [[nodiscard]] std::span<Scalar> cache(int track) {
+        return {log_l_.data() + static_cast<std::size_t>(track) * grid_.size(), grid_.size()};
+    }
+    [[nodiscard]] std::span<const Scalar> cache(int track) const {
+        return {log_l_.data() + static_cast<std::size_t>(track) * grid_.size(), grid_.size()};
+    }
+    [[nodiscard]] int activeSlot(int k) const;
+    [[nodiscard]] Scalar medianDepth(const FrameSnapshot& frame);
+    [[nodiscard]] bool onBorder(const BoundingBox& box) const;
+    // Association distance of a box to a track (in gate units), or a negative
+    // value when the track cannot take it.
+    [[nodiscard]] Scalar associationCost(const Track& t, int slot, const FrameSnapshot& frame,
+                                         const BoundingBox& box, Scalar depth_hint) const;
+    int newTrack(int class_index);
+    void triangulate(Track& t, int slot);
+    void evaluate(Track& t, int slot);
+
+    ObjectConfig config_;
+    ExtentConfig extent_;
+    LikelihoodConfig likelihood_;
+    PinholeRadialCamera camera_;
+    ScaleGrid grid_;
+    std::vector<ApparentHeightPrior> apparent_;  // one per class of the PriorTable
+    std::vector<Scalar> width_ratio_;            // mu_w / mean height per class
+    std::vector<Scalar> class_spread_;           // relative std of the class height
+    std::vector<Track> tracks_;
+    std::vector<View> views_;
+    std::vector<Scalar> log_l_;
+    std::vector<ObjectViewExtent> extents_;  // scratch, max_views
+    std::vector<Scalar> norm_;               // scratch, max_views
+    std::vector<Scalar> norm_sorted_;        // scratch, max_views
+    std::vector<Candidate> candidates_;      // scratch, kMaxDetections * max_objects
+    std::array<Scalar, 512> depths_{};       // scratch for the median depth
+    int next_id_ = 1;
+    int updates_ = 0;
+};
+
+}  // namespace scaled::core

@@ -1,0 +1,737 @@
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <string>
+
+#include <Eigen/Eigenvalues>
+
+#include <scaled/core/scale/likelihood.h>
+#include <scaled/core/scale/object_evidence.h>
+#include <scaled/core/scale/scale_estimator.h>
+
+namespace scaled::core {
+
+namespace {
+
+Error invalid(const std::string& field, Scalar value, const std::string& rule) {
+    return makeError(ErrorCode::kInvalidArgument, "objects: " + field + " must be " + rule +
+                                                      " (got " + std::to_string(value) + ")");
+}
+
+Vec2 centreOf(const BoundingBox& b) {
+    return {(b.x_min_px + b.x_max_px) / 2, (b.y_min_px + b.y_max_px) / 2};
+}
+
+Scalar diagonalOf(const BoundingBox& b) {
+    return std::hypot(b.x_max_px - b.x_min_px, b.y_max_px - b.y_min_px);
+}
+
+// Distance from q to the segment [a, b].
+Scalar segmentDistance(const Vec2& q, const Vec2& a, const Vec2& b) {
+    const Vec2 ab = b - a;
+    const Scalar len2 = ab.squaredNorm();
+    const Scalar t = len2 > 0 ? std::clamp((q - a).dot(ab) / len2, Scalar(0), Scalar(1)) : 0;
+    return (q - (a + t * ab)).norm();
+}
+
+// Tangent of the elevation of p seen from c (up positive).
+Scalar tanElevation(const Vec3& p, const Vec3& c, const Vec3& up_W) {
+    const Vec3 e = p - c;
+    const Scalar vertical = e.dot(up_W);
+    const Scalar horizontal = (e - vertical * up_W).norm();
+    return horizontal > 0 ? vertical / horizontal : Scalar(0);
+}
+
+}  // namespace
+
+const char* toString(ObjectState state) {
+    switch (state) {
+        case ObjectState::kTentative:
+            return "tentative";
+        case ObjectState::kAnchored:
+            return "anchored";
+        case ObjectState::kUsed:
+            return "used";
+    }
+    return "unknown";
+}
+
+Result<bool> validate(const ObjectConfig& c) {
+    const auto in = [](Scalar v, Scalar lo, Scalar hi) {
+        return std::isfinite(v) && v >= lo && v <= hi;
+    };
+    if (c.max_objects < 1 || c.max_objects > 1024) {
+        return invalid("max_objects", static_cast<Scalar>(c.max_objects), "in [1, 1024]");
+    }
+    if (c.max_views < 2 || c.max_views > 1024) {
+        return invalid("max_views", static_cast<Scalar>(c.max_views), "in [2, 1024]");
+    }
+    if (!in(c.centre_rel_sigma, 0, 10) || !in(c.centre_sigma_px, 0, 1000) ||
+        !(c.centre_rel_sigma > 0 || c.centre_sigma_px > 0)) {
+        return invalid("centre_rel_sigma", c.centre_rel_sigma,
+                       "in [0, 10] with centre_sigma_px in [0, 1000], not both 0");
+    }
+    if (!in(c.min_parallax_deg, 0, 90)) {
+        return invalid("min_parallax_deg", c.min_parallax_deg, "in [0, 90]");
+    }
+    if (!in(c.max_anchor_rel_sigma, 0, 10) || !(c.max_anchor_rel_sigma > 0)) {
+        return invalid("max_anchor_rel_sigma", c.max_anchor_rel_sigma, "in (0, 10]");
+    }
+    if (!in(c.anchor_box_margin, 0, 10)) {
+        return invalid("anchor_box_margin", c.anchor_box_margin, "in [0, 10]");
+    }
+    if (!in(c.association_gate, 0, 100) || !(c.association_gate > 0)) {
+        return invalid("association_gate", c.association_gate, "in (0, 100]");
+    }
+    if (!(c.epipolar_depth_min > 0) || !(c.epipolar_depth_max > c.epipolar_depth_min) ||
+        !std::isfinite(c.epipolar_depth_max)) {
+        return invalid("epipolar_depth_min", c.epipolar_depth_min,
+                       "> 0 and below epipolar_depth_max");
+    }
+    if (c.max_gap_updates < 1) {
+        return invalid("max_gap_updates", static_cast<Scalar>(c.max_gap_updates), ">= 1");
+    }
+    if (!in(c.box_edge_rel_sigma, 0, 1)) {
+        return invalid("box_edge_rel_sigma", c.box_edge_rel_sigma, "in [0, 1]");
+    }
+    if (!in(c.object_rel_sigma, 0, 10)) {
+        return invalid("object_rel_sigma", c.object_rel_sigma, "in [0, 10]");
+    }
+    if (!in(c.view_band, 0, 10) || !(c.view_band > 0)) {
+        return invalid("view_band", c.view_band, "in (0, 10]");
+    }
+    if (!in(c.view_reference_quantile, 0, 1)) {
+        return invalid("view_reference_quantile", c.view_reference_quantile, "in [0, 1]");
+    }
+    return true;
+}
+
+Result<ObjectEvidence> ObjectEvidence::create(
+    const ObjectConfig& config, const ExtentConfig& extent, const LikelihoodConfig& likelihood,
+    const PriorTable& priors, const PinholeRadialCamera& camera, const ScaleGrid& grid) {
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
+    }
+    ObjectEvidence e(config, extent, likelihood, camera, grid);
+    if (auto ok = e.buildPriors(priors); !ok) {
+        return ok.error();
+    }
+    return e;
+}
+
+ObjectEvidence::ObjectEvidence(const ObjectConfig& config, const ExtentConfig& extent,
+                               const LikelihoodConfig& likelihood,
+                               const PinholeRadialCamera& camera, const ScaleGrid& grid)
+    : config_(config),
+      extent_(extent),
+      likelihood_(likelihood),
+      camera_(camera),
+      grid_(grid),
+      tracks_(static_cast<std::size_t>(config.max_objects)),
+      views_(static_cast<std::size_t>(config.max_objects) *
+             static_cast<std::size_t>(config.max_views)),
+      log_l_(static_cast<std::size_t>(config.max_objects) * grid.size(), 0),
+      extents_(static_cast<std::size_t>(config.max_views)),
+      norm_(static_cast<std::size_t>(config.max_views)),
+      norm_sorted_(static_cast<std::size_t>(config.max_views)) {
+    candidates_.reserve(static_cast<std::size_t>(kMaxDetections) *
+                        static_cast<std::size_t>(config.max_objects));
+}
+
+Result<bool> ObjectEvidence::buildPriors(const PriorTable& priors) {
+    std::vector<ApparentHeightPrior> apparent;
+    std::vector<Scalar> ratio;
+    std::vector<Scalar> spread;
+    for (const HeightPrior& p : priors.priors()) {
+        Scalar partial = 0;
+        if (likelihood_.partial_visibility) {
+            partial =
+                p.partialProbability() >= 0 ? p.partialProbability() : likelihood_.partial_weight;
+        }
+        auto a = ApparentHeightPrior::create(p, partial, config_.height_grid);
+        if (!a) {
+            return a.error();
+        }
+        apparent.push_back(std::move(a.value()));
+        const Scalar mean = p.mean();
+        ratio.push_back(config_.width_model && mean > 0 ? p.widthMean() / mean : Scalar(0));
+        spread.push_back(p.relativeSpread());
+    }
+    apparent_ = std::move(apparent);
+    width_ratio_ = std::move(ratio);
+    class_spread_ = std::move(spread);
+    for (Track& t : tracks_) {
+        if (t.active && t.class_index >= static_cast<int>(apparent_.size())) {
+            t = Track{};  // its class is gone
+        }
+        t.dirty = t.active;
+    }
+    return true;
+}
+
+Result<bool> ObjectEvidence::setPriors(const PriorTable& priors) {
+    return buildPriors(priors);
+}
+
+void ObjectEvidence::reset() {
+    for (Track& t : tracks_) {
+        t = Track{};
+    }
+    next_id_ = 1;
+    updates_ = 0;
+}
+
+int ObjectEvidence::activeCount() const {
+    int n = 0;
+    for (const Track& t : tracks_) {
+        n += t.active ? 1 : 0;
+    }
+    return n;
+}
+
+int ObjectEvidence::activeSlot(int k) const {
+    for (std::size_t i = 0; i < tracks_.size(); ++i) {
+        if (tracks_[i].active && k-- == 0) {
+            return static_cast<int>(i);
+        }
+    }
+    return -1;
+}
+
+bool ObjectEvidence::onBorder(const BoundingBox& b) const {
+    const Scalar m = extent_.border_margin_px;
+    return b.x_min_px <= m || b.y_min_px <= m ||
+           b.x_max_px >= static_cast<Scalar>(camera_.width() - 1) - m ||
+           b.y_max_px >= static_cast<Scalar>(camera_.height() - 1) - m;
+}
+
+Scalar ObjectEvidence::medianDepth(const FrameSnapshot& frame) {
+    const Mat3 R_WtoC = frame.pose.R_CtoW.transpose();
+    std::size_t n = 0;
+    for (const MapFeature& f : frame.features) {
+        if (n == depths_.size()) {
+            break;
+        }
+        const Scalar z = (R_WtoC * (f.p_FinW - frame.pose.p_CinW)).z();
+        if (z > 0 && std::isfinite(z)) {
+            depths_[n++] = z;
+        }
+    }
+    if (n == 0) {
+        return 1;
+    }
+    auto mid = depths_.begin() + static_cast<std::ptrdiff_t>(n / 2);
+    std::nth_element(depths_.begin(), mid, depths_.begin() + static_cast<std::ptrdiff_t>(n));
+    return *mid;
+}
+
+Scalar ObjectEvidence::associationCost(const Track& t, int slot, const FrameSnapshot& frame,
+                                       const BoundingBox& box, Scalar depth_hint) const {
+    const Vec2 c = centreOf(box);
+    const Scalar half_diag = diagonalOf(box) / 2;
+    if (!(half_diag > 0)) {
+        return -1;
+    }
+    const Mat3 R_WtoC = frame.pose.R_CtoW.transpose();
+    if (t.anchored) {
+        const Vec3 p_C = R_WtoC * (t.p_AinW - frame.pose.p_CinW);
+        const auto px = camera_.project(p_C);
+        if (!px) {
+            return -1;
+        }
+        const auto& k = camera_.intrinsics();
+        const Scalar sigma_px =
+            std::max(k.fx, k.fy) * std::sqrt(std::max(Scalar(0), t.P_AinW.trace())) / p_C.z();
+        const Scalar cost =
+            (*px - c).norm() / (config_.association_gate * half_diag + 2 * sigma_px);
+        return cost <= 1 ? cost : -1;
+    }
+    if (updates_ - t.last_update > config_.max_gap_updates || t.stored == 0) {
+        return -1;
+    }
+    // The epipolar segment of the last box centre over the depths of the map.
+    const View& last = view(slot, (t.head + config_.max_views - 1) % config_.max_views);
+    const auto ray_C = camera_.unproject(centreOf(last.box));
+    if (!ray_C) {
+        return -1;
+    }
+    const Scalar size_ratio = diagonalOf(box) / std::max(diagonalOf(last.box), Scalar(1));
+    if (size_ratio > Scalar(2.5) || size_ratio < Scalar(0.4)) {
+        return -1;
+    }
+    const Vec3 ray_W = last.pose.R_CtoW * ray_C->normalized();
+    constexpr int kSamples = 12;
+    const Scalar z_lo = config_.epipolar_depth_min * std::min(depth_hint, last.depth_hint);
+    const Scalar z_hi = config_.epipolar_depth_max * std::max(depth_hint, last.depth_hint);
+    const Scalar step = std::log(z_hi / z_lo) / (kSamples - 1);
+    Scalar best = std::numeric_limits<Scalar>::infinity();
+    Vec2 prev = Vec2::Zero();
+    bool have_prev = false;
+    for (int i = 0; i < kSamples; ++i) {
+        const Scalar z = z_lo * std::exp(step * static_cast<Scalar>(i));
+        const auto px =
+            camera_.project(R_WtoC * (last.pose.p_CinW + z * ray_W - frame.pose.p_CinW));
+        if (!px) {
+            have_prev = false;
+            continue;
+        }
+        best = std::min(best, have_prev ? segmentDistance(c, prev, *px) : (*px - c).norm());
+        prev = *px;
+        have_prev = true;
+    }
+    const Scalar cost = best / (config_.association_gate * half_diag);
+    return cost <= 1 ? cost : -1;
+}
+
+int ObjectEvidence::newTrack(int class_index) {
+    int slot = -1;
+    for (std::size_t i = 0; i < tracks_.size(); ++i) {
+        if (!tracks_[i].active) {
+            slot = static_cast<int>(i);
+            break;
+        }
+    }
+    if (slot < 0) {
+        // Full: replace an unused object first, then the one seen longest ago.
+        auto worse = [](const Track& a, const Track& b) {
+            if (a.used != b.used) {
+                return !a.used;
+            }
+            return a.last_update < b.last_update;
+        };
+        slot = 0;
+        for (std::size_t i = 1; i < tracks_.size(); ++i) {
+            if (worse(tracks_[i], tracks_[static_cast<std::size_t>(slot)])) {
+                slot = static_cast<int>(i);
+            }
+        }
+    }
+    Track& t = tracks_[static_cast<std::size_t>(slot)];
+    t = Track{};
+    t.active = true;
+    t.id = next_id_++;
+    t.class_index = class_index;
+    return slot;
+}
+
+void ObjectEvidence::triangulate(Track& t, int slot) {
+    t.anchored = false;
+    const auto& k = camera_.intrinsics();
+    const Scalar f = (k.fx + k.fy) / 2;
+    Vec3 X = Vec3::Zero();
+    Mat3 H = Mat3::Zero();
+    int n = 0;
+    for (int iter = 0; iter < 2; ++iter) {
+        H.setZero();
+        Vec3 b = Vec3::Zero();
+        n = 0;
+        for (int i = 0; i < t.stored; ++i) {
+            const View& v = view(slot, i);
+            if (onBorder(v.box)) {
+                continue;
+            }
+            const auto ray_C = camera_.unproject(centreOf(v.box));
+            if (!ray_C) {
+                continue;
+            }
+            const Vec3 r = v.pose.R_CtoW * ray_C->normalized();
+            const Scalar sigma_angle =
+                (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
+            const Scalar dist =
+                iter == 0 ? v.depth_hint : std::max((X - v.pose.p_CinW).dot(r), v.depth_hint / 100);
+            const Scalar s = sigma_angle * dist;
+            const Mat3 A = (Mat3::Identity() - r * r.transpose()) / (s * s);
+            H += A;
+            b += A * v.pose.p_CinW;
+            ++n;
+        }
+        if (n < 2) {
+            return;
+        }
+        Eigen::SelfAdjointEigenSolver<Mat3> eig(H);
+        if (eig.info() != Eigen::Success || !(eig.eigenvalues()(0) > 0) ||
+            !(eig.eigenvalues()(0) >
+              eig.eigenvalues()(2) * std::numeric_limits<Scalar>::epsilon() * 1000)) {
+            return;
+        }
+        X = eig.eigenvectors() *
+            (eig.eigenvalues().cwiseInverse().asDiagonal() * (eig.eigenvectors().transpose() * b));
+    }
+    // Checks: in front of, and inside (a margin around) the views it is made
+    // of; enough parallax between them.
+    Scalar max_angle_cos = 1;
+    int inside = 0;
+    Vec3 r_prev = Vec3::Zero();
+    Vec3 r_first = Vec3::Zero();
+    bool have = false;
+    const View* latest = nullptr;
+    for (int i = 0; i < t.stored; ++i) {
+        const View& v = view(slot, i);
+        if (onBorder(v.box)) {
+            continue;
+        }
+        const auto ray_C = camera_.unproject(centreOf(v.box));
+        if (!ray_C) {
+            continue;
+        }
+        const Vec3 r = v.pose.R_CtoW * ray_C->normalized();
+        if ((X - v.pose.p_CinW).dot(r) <= 0) {
+            return;
+        }
+        if (!have) {
+            r_first = r;
+            have = true;
+        }
+        max_angle_cos = std::min({max_angle_cos, r.dot(r_first), have ? r.dot(r_prev) : Scalar(1)});
+        r_prev = r;
+        const auto px = camera_.project(v.pose.R_CtoW.transpose() * (X - v.pose.p_CinW));
+        const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
+        const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
+        if (px && px->x() >= v.box.x_min_px - mw && px->x() <= v.box.x_max_px + mw &&
+            px->y() >= v.box.y_min_px - mh && px->y() <= v.box.y_max_px + mh) {
+            ++inside;
+        }
+        latest = &v;
+    }
+    // The largest angle between the first view and any other bounds the
+    // parallax from below; pairs among the others are not needed for the gate.
+    const Scalar parallax_deg = std::acos(std::clamp(max_angle_cos, Scalar(-1), Scalar(1))) * 180 /
+                                std::numbers::pi_v<Scalar>;
+    if (latest == nullptr || parallax_deg < config_.min_parallax_deg || 2 * inside < n) {
+        return;
+    }
+    const Mat3 P = H.inverse();
+    const Vec3 e = X - latest->pose.p_CinW;
+    const Scalar dist = e.norm();
+    const Vec3 dir = e / dist;
+    const Scalar rel = std::sqrt(std::max(Scalar(0), dir.dot(P * dir))) / dist;
+    if (!std::isfinite(rel)) {
+        return;
+    }
+    t.p_AinW = X;
+    t.P_AinW = P;
+    t.anchor_rel_sigma = rel;
+    t.anchored = rel <= config_.max_anchor_rel_sigma;
+}
+
+void ObjectEvidence::evaluate(Track& t, int slot) {
+    t.dirty = false;
+    t.used = false;
+    t.views_used = 0;
+    t.local_estimate = 0;
+    t.s_1 = t.s_d = t.s_k = 0;
+    if (!t.anchored || t.class_index < 0 || t.class_index >= static_cast<int>(apparent_.size())) {
+        return;
+    }
+    const ApparentHeightPrior& prior = apparent_[static_cast<std::size_t>(t.class_index)];
+    const Scalar ratio = width_ratio_[static_cast<std::size_t>(t.class_index)];
+    std::size_t n = 0;
+    for (int i = 0; i < t.stored; ++i) {
+        const View& v = view(slot, i);
+        const auto px = camera_.project(v.pose.R_CtoW.transpose() * (t.p_AinW - v.pose.p_CinW));
+        if (!px) {
+            continue;
+        }
+        const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
+        const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
+        if (px->x() < v.box.x_min_px - mw || px->x() > v.box.x_max_px + mw ||
+            px->y() < v.box.y_min_px - mh || px->y() > v.box.y_max_px + mh) {
+            continue;  // not this object's box, as the anchor sees it
+        }
+        // The vertical line through the anchor, moved into the box when the
+        // anchor projects into the margin around it.
+        Vec3 p = t.p_AinW;
+        VerticalExtent ve;
+        ExtentStatus status =
+            computeVerticalExtent(camera_, v.pose, v.up_W, p, v.box, extent_, &ve);
+        if (status == ExtentStatus::kOutsideBox) {
+            const Vec2 q(std::clamp(px->x(), v.box.x_min_px + 1, v.box.x_max_px - 1),
+                         std::clamp(px->y(), v.box.y_min_px + 1, v.box.y_max_px - 1));
+            const auto ray_C = camera_.unproject(q);
+            if (!ray_C) {
+                continue;
+            }
+            const Scalar depth = (v.pose.R_CtoW.transpose() * (t.p_AinW - v.pose.p_CinW)).z();
+            p = v.pose.p_CinW + v.pose.R_CtoW * (*ray_C * depth);
+            status = computeVerticalExtent(camera_, v.pose, v.up_W, p, v.box, extent_, &ve);
+        }
+        if (status != ExtentStatus::kOk) {
+            continue;
+        }
+        const Scalar h_px = (ve.pi_t_px - ve.pi_d_px).norm();
+        const Scalar edge = std::max(extent_.box_edge_sigma_px, config_.box_edge_rel_sigma * h_px);
+        ObjectViewExtent x;
+        x.D = ve.D;
+        x.kappa = (std::abs(tanElevation(ve.p_t_W, v.pose.p_CinW, v.up_W)) +
+                   std::abs(tanElevation(ve.p_d_W, v.pose.p_CinW, v.up_W))) /
+                  2;
+        x.sigma_D = ve.D * std::sqrt(Scalar(2)) * edge / std::max(h_px, Scalar(1));
+        extents_[n] = x;
+        norm_[n] = x.D / (1 + x.kappa * ratio);
+        ++n;
+    }
+    if (n == 0) {
+        return;
+    }
+    // Views far from the object's reference extent leave the product.
+    std::copy_n(norm_.begin(), n, norm_sorted_.begin());
+    const auto q_idx = static_cast<std::ptrdiff_t>(
+        std::lround(config_.view_reference_quantile * static_cast<Scalar>(n - 1)));
+    std::nth_element(norm_sorted_.begin(), norm_sorted_.begin() + q_idx,
+                     norm_sorted_.begin() + static_cast<std::ptrdiff_t>(n));
+    const Scalar reference = norm_sorted_[static_cast<std::size_t>(q_idx)];
+    for (std::size_t i = 0; i < n; ++i) {
+        norm_sorted_[i] = extents_[i].sigma_D / extents_[i].D;
+    }
+    const auto mid = static_cast<std::ptrdiff_t>(n / 2);
+    std::nth_element(norm_sorted_.begin(), norm_sorted_.begin() + mid,
+                     norm_sorted_.begin() + static_cast<std::ptrdiff_t>(n));
+    const Scalar band =
+        std::max(config_.view_band, 3 * norm_sorted_[static_cast<std::size_t>(mid)]);
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (std::abs(norm_[i] / reference - 1) <= band) {
+            extents_[kept++] = extents_[i];
+        }
+    }
+    if (kept == 0) {
+        return;
+    }
+    ObjectLikelihoodConfig lc;
+    lc.width_model = config_.width_model;
+    lc.rel_sigma = std::hypot(config_.object_rel_sigma, t.anchor_rel_sigma);
+    lc.outlier_weight = likelihood_.robust ? likelihood_.outlier_weight : Scalar(0);
+    const std::span<const ObjectViewExtent> used(extents_.data(), kept);
+    if (!evaluateObjectLogLikelihood(used, prior, grid_, lc, cache(slot))) {
+        return;
+    }
+    t.used = true;
+    t.views_used = static_cast<int>(kept);
+    t.local_estimate = gridMode(grid_, cache(slot));
+    for (const auto& x : used) {
+        const double w = 1 / (static_cast<double>(x.sigma_D) * static_cast<double>(x.sigma_D));
+        t.s_1 += w;
+        t.s_d += w * static_cast<double>(x.D);
+        t.s_k += w * static_cast<double>(x.kappa);
+    }
+}
+
+ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
+                                                   std::span<const Detection> detections,
+                                                   std::span<const int> class_index,
+                                                   std::span<ObjectAssignment> assignments,
+                                                   std::span<ObservationRecord> records,
+                                                   int* records_written) {
+    ++updates_;
+    UpdateStats stats;
+    const Scalar depth_hint = medianDepth(frame);
+    const int n_det = static_cast<int>(std::min<std::size_t>(
+        {detections.size(), class_index.size(), static_cast<std::size_t>(kMaxDetections)}));
+    for (auto& a : assignments) {
+        a = ObjectAssignment{};
+    }
+    // Candidate pairs, then greedy assignment by cost.
+    candidates_.clear();
+    for (int di = 0; di < n_det; ++di) {
+        const int ci = class_index[static_cast<std::size_t>(di)];
+        if (ci < 0) {
+            continue;
+        }
+        for (std::size_t ti = 0; ti < tracks_.size(); ++ti) {
+            const Track& t = tracks_[ti];
+            if (!t.active || t.class_index != ci) {
+                continue;
+            }
+            const Scalar cost =
+                associationCost(t, static_cast<int>(ti), frame,
+                                detections[static_cast<std::size_t>(di)].box, depth_hint);
+            if (cost >= 0 && candidates_.size() < candidates_.capacity()) {
+                candidates_.push_back({cost, di, static_cast<int>(ti)});
+            }
+        }
+    }
+    std::sort(candidates_.begin(), candidates_.end(), [](const Candidate& a, const Candidate& b) {
+        return a.cost < b.cost ||
+               (a.cost == b.cost &&
+                (a.detection < b.detection || (a.detection == b.detection && a.track < b.track)));
+    });
+    std::array<int, kMaxDetections> track_of{};
+    track_of.fill(-1);
+    for (const Candidate& c : candidates_) {
+        if (track_of[static_cast<std::size_t>(c.detection)] >= 0 ||
+            tracks_[static_cast<std::size_t>(c.track)].last_update == updates_) {
+            continue;
+        }
+        track_of[static_cast<std::size_t>(c.detection)] = c.track;
+        tracks_[static_cast<std::size_t>(c.track)].last_update = updates_;
+    }
+    // New objects for the rest; a view for every associated detection.
+    for (int di = 0; di < n_det; ++di) {
+        const int ci = class_index[static_cast<std::size_t>(di)];
+        if (ci < 0) {
+            continue;
+        }
+        int slot = track_of[static_cast<std::size_t>(di)];
+        bool fresh = false;
+        if (slot < 0) {
+            slot = newTrack(ci);
+            fresh = true;
+            ++stats.new_objects;
+            track_of[static_cast<std::size_t>(di)] = slot;
+        }
+        Track& t = tracks_[static_cast<std::size_t>(slot)];
+        View& v = view(slot, t.head);
+        v.pose = frame.pose;
+        v.up_W = frame.up_W;
+        v.box = detections[static_cast<std::size_t>(di)].box;
+        v.frame_id = frame.frame_id;
+        v.depth_hint = depth_hint;
+        t.head = (t.head + 1) % config_.max_views;
+        t.stored = std::min(t.stored + 1, config_.max_views);
+        if (t.detections == 0) {
+            t.first_frame = frame.frame_id;
+        }
+        ++t.detections;
+        t.last_frame = frame.frame_id;
+        t.last_update = updates_;
+        t.dirty = true;
+        if (static_cast<std::size_t>(di) < assignments.size()) {
+            assignments[static_cast<std::size_t>(di)] = {t.id, fresh};
+        }
+    }
+    for (std::size_t ti = 0; ti < tracks_.size(); ++ti) {
+        Track& t = tracks_[ti];
+        if (!t.active || !t.dirty) {
+            continue;
+        }
+        triangulate(t, static_cast<int>(ti));
+        evaluate(t, static_cast<int>(ti));
+    }
+    // Records: the detections of this update that are views of used objects.
+    int written = 0;
+    for (int di = 0; di < n_det; ++di) {
+        const int slot = track_of[static_cast<std::size_t>(di)];
+        if (slot < 0) {
+            continue;
+        }
+        const Track& t = tracks_[static_cast<std::size_t>(slot)];
+        if (!t.used) {
+            continue;
+        }
+        ++stats.detections_used;
+        if (static_cast<std::size_t>(written) < records.size()) {
+            ObservationRecord& r = records[static_cast<std::size_t>(written++)];
+            r = ObservationRecord{};
+            r.detection_index = di;
+            r.object_id = t.id;
+            r.local_estimate = t.local_estimate;
+            r.weight = 1;
+            // The view just added, measured with the current anchor.
+            VerticalExtent ve;
+            if (computeVerticalExtent(camera_, frame.pose, frame.up_W, t.p_AinW,
+                                      detections[static_cast<std::size_t>(di)].box, extent_,
+                                      &ve) == ExtentStatus::kOk) {
+                r.D = ve.D;
+                const Scalar h_px = (ve.pi_t_px - ve.pi_d_px).norm();
+                const Scalar edge =
+                    std::max(extent_.box_edge_sigma_px, config_.box_edge_rel_sigma * h_px);
+                r.sigma_D_box = ve.D * std::sqrt(Scalar(2)) * edge / std::max(h_px, Scalar(1));
+                r.kappa = (std::abs(tanElevation(ve.p_t_W, frame.pose.p_CinW, frame.up_W)) +
+                           std::abs(tanElevation(ve.p_d_W, frame.pose.p_CinW, frame.up_W))) /
+                          2;
+            }
+        }
+    }
+    if (records_written != nullptr) {
+        *records_written = written;
+    }
+    for (const Track& t : tracks_) {
+        if (t.active && t.used) {
+            ++stats.objects_used;
+            stats.views_used += t.views_used;
+        }
+    }
+    return stats;
+}
+
+int ObjectEvidence::addTo(ScalePosterior& posterior) const {
+    int objects = 0;
+    int views = 0;
+    for (std::size_t ti = 0; ti < tracks_.size(); ++ti) {
+        const Track& t = tracks_[ti];
+        if (!t.active || !t.used) {
+            continue;
+        }
+        if (posterior.addLogLikelihood(cache(static_cast<int>(ti)))) {
+            ++objects;
+            views += t.views_used;
+        }
+    }
+    posterior.setObservationCount(views);
+    return objects;
+}
+
+ObjectSummary ObjectEvidence::summary(int k, const ScaleSummary& posterior) const {
+    ObjectSummary s;
+    const int slot = activeSlot(k);
+    if (slot < 0) {
+        return s;
+    }
+    const Track& t = tracks_[static_cast<std::size_t>(slot)];
+    s.id = t.id;
+    s.class_index = t.class_index;
+    s.state = t.used ? ObjectState::kUsed
+                     : (t.anchored ? ObjectState::kAnchored : ObjectState::kTentative);
+    s.p_AinW = t.p_AinW;
+    s.anchor_rel_sigma = t.anchor_rel_sigma;
+    s.detections = t.detections;
+    s.views = t.stored;
+    s.views_used = t.views_used;
+    s.first_frame = t.first_frame;
+    s.last_frame = t.last_frame;
+    s.local_estimate = t.local_estimate;
+    if (t.used && t.s_1 > 0 && posterior.state != ScaleState::kNoData) {
+        const double mu_w =
+            config_.width_model
+                ? static_cast<double>(
+                      apparent_[static_cast<std::size_t>(t.class_index)].widthMean())
+                : 0.0;
+        const auto at = [&](Scalar d) {
+            return static_cast<Scalar>((static_cast<double>(d) * t.s_d - mu_w * t.s_k) / t.s_1);
+        };
+        s.height_m = at(posterior.map);
+        s.height_ci95_m = {at(posterior.ci95.lo), at(posterior.ci95.hi)};
+    }
+    return s;
+}
+
+std::span<const Scalar> ObjectEvidence::logLikelihood(int k) const {
+    const int slot = activeSlot(k);
+    if (slot < 0 || !tracks_[static_cast<std::size_t>(slot)].used) {
+        return {};
+    }
+    return cache(slot);
+}
+
+Scalar ObjectEvidence::informationLimitRelWidth95() const {
+    double info = 0;
+    for (const Track& t : tracks_) {
+        if (!t.active || !t.used) {
+            continue;
+        }
+        const double s =
+            std::hypot(static_cast<double>(class_spread_[static_cast<std::size_t>(t.class_index)]),
+                       static_cast<double>(config_.object_rel_sigma));
+        if (s > 0) {
+            info += 1 / (s * s);
+        }
+    }
+    if (!(info > 0)) {
+        return 0;
+    }
+    const double sigma = 1 / std::sqrt(info);
+    return static_cast<Scalar>(std::exp(1.96 * sigma) - std::exp(-1.96 * sigma));
+}
+
+}  // namespace scaled::core

@@ -1,0 +1,260 @@
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <string>
+
+#include <scaled/core/scale/object_likelihood.h>
+
+namespace scaled::core {
+
+namespace {
+
+// Length of the overlap of [a0, a1] and [b0, b1].
+double overlap(double a0, double a1, double b0, double b1) {
+    return std::max(0.0, std::min(a1, b1) - std::max(a0, b0));
+}
+
+double logSumExp2(double a, double b) {
+    const double top = std::max(a, b);
+    if (!std::isfinite(top)) {
+        return top;
+    }
+    return top + std::log(std::exp(a - top) + std::exp(b - top));
+}
+
+}  // namespace
+
+Result<ApparentHeightPrior> ApparentHeightPrior::create(const HeightPrior& prior,
+                                                        Scalar partial_weight,
+                                                        const GridSpec& grid) {
+    if (grid.bins < 16 || grid.bins > 4096 || !(grid.h_min_m > 0) ||
+        !(grid.h_max_m > grid.h_min_m) || !std::isfinite(grid.h_max_m)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "apparent height prior: the height grid needs 16..4096 bins and "
+                         "0 < h_min_m < h_max_m");
+    }
+    if (!(partial_weight >= 0 && partial_weight < 1)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "apparent height prior '" + prior.className() +
+                             "': partial weight must be in [0, 1) (got " +
+                             std::to_string(partial_weight) + ")");
+    }
+    if (prior.size() == 0) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "apparent height prior '" + prior.className() + "': empty prior");
+    }
+    ApparentHeightPrior p;
+    const auto n = static_cast<std::size_t>(grid.bins);
+    const double log_min = std::log(static_cast<double>(grid.h_min_m));
+    const double step = (std::log(static_cast<double>(grid.h_max_m)) - log_min) /
+                        static_cast<double>(grid.bins - 1);
+    p.log_h_min_ = static_cast<Scalar>(log_min);
+    p.log_step_ = static_cast<Scalar>(step);
+    p.width_mean_m_ = prior.widthMean();
+    p.width_std_m_ = prior.widthStd();
+    p.heights_.resize(n);
+    p.log_mass_.resize(n);
+    p.bin_var_.resize(n);
+    std::vector<double> lo(n);
+    std::vector<double> hi(n);
+    for (std::size_t m = 0; m < n; ++m) {
+        const double c = log_min + step * static_cast<double>(m);
+        lo[m] = std::exp(c - step / 2);
+        hi[m] = std::exp(c + step / 2);
+        p.heights_[m] = static_cast<Scalar>(std::exp(c));
+        p.bin_var_[m] = static_cast<Scalar>((hi[m] - lo[m]) * (hi[m] - lo[m]) / 12);
+    }
+    std::vector<double> mass(n, 0.0);
+    const auto heights = prior.heights();
+    const auto probs = prior.probabilities();
+    const double bw = static_cast<double>(prior.binWidth());
+    const double w_full = 1 - static_cast<double>(partial_weight);
+    for (std::size_t i = 0; i < heights.size(); ++i) {
+        const double h = static_cast<double>(heights[i]);
+        const double pi = static_cast<double>(probs[i]);
+        if (bw > 0) {
+            // A bin of the class histogram stands for a uniform interval.
+            for (std::size_t m = 0; m < n; ++m) {
+                mass[m] += w_full * pi * overlap(lo[m], hi[m], h - bw / 2, h + bw / 2) / bw;
+            }
+        } else {
+            const double idx = (std::log(h) - log_min) / step;
+            const auto m = static_cast<std::size_t>(
+                std::clamp(std::lround(idx), 0L, static_cast<long>(n) - 1));
+            mass[m] += w_full * pi;
+        }
+        if (partial_weight > 0) {
+            // A visible fraction uniform in (0, 1): density p_i / H on (0, H).
+            for (std::size_t m = 0; m < n; ++m) {
+                mass[m] +=
+                    static_cast<double>(partial_weight) * pi * overlap(lo[m], hi[m], 0, h) / h;
+            }
+        }
+    }
+    double total = 0;
+    for (const double v : mass) {
+        total += v;
+    }
+    if (!(total > 0)) {
+        return makeError(
+            ErrorCode::kInvalidArgument,
+            "apparent height prior '" + prior.className() + "': no mass inside the height grid");
+    }
+    for (std::size_t m = 0; m < n; ++m) {
+        p.log_mass_[m] = mass[m] > 0 ? static_cast<Scalar>(std::log(mass[m] / total))
+                                     : -std::numeric_limits<Scalar>::infinity();
+    }
+    return p;
+}
+
+bool evaluateObjectLogLikelihood(std::span<const ObjectViewExtent> views,
+                                 const ApparentHeightPrior& prior, const ScaleGrid& grid,
+                                 const ObjectLikelihoodConfig& config, std::span<Scalar> log_l) {
+    if (views.empty() || log_l.size() != grid.size() || prior.size() == 0 ||
+        !(config.outlier_weight >= 0 && config.outlier_weight < 1)) {
+        return false;
+    }
+    // Sums over the views that do not depend on d.
+    double s11 = 0;
+    double sk1 = 0;
+    double skk = 0;
+    double log_s = 0;
+    for (const auto& v : views) {
+        const double s2 = static_cast<double>(v.sigma_D) * static_cast<double>(v.sigma_D);
+        if (!(v.D > 0) || !std::isfinite(v.D) || !(s2 > 0) || !std::isfinite(s2) ||
+            !std::isfinite(v.kappa)) {
+            return false;
+        }
+        s11 += 1 / s2;
+        sk1 += static_cast<double>(v.kappa) / s2;
+        skk += static_cast<double>(v.kappa) * static_cast<double>(v.kappa) / s2;
+        log_s += std::log(s2);
+    }
+    const bool width = config.width_model && prior.widthMean() > 0;
+    const double mu_w = width ? static_cast<double>(prior.widthMean()) : 0.0;
+    const double sw2 =
+        width ? static_cast<double>(prior.widthStd()) * static_cast<double>(prior.widthStd()) : 0.0;
+    const double rho2 =
+        static_cast<double>(config.rel_sigma) * static_cast<double>(config.rel_sigma);
+    const double n_views = static_cast<double>(views.size());
+    const double log_2pi = std::log(2 * std::numbers::pi);
+    const double eps = static_cast<double>(config.outlier_weight);
+    const double log_in = std::log1p(-eps);
+    const double log_out = eps > 0 ? std::log(eps) : 0.0;
+    const double log_range = std::log(std::log(static_cast<double>(prior.height(prior.size() - 1)) /
+                                               static_cast<double>(prior.height(0))));
+    const double h_floor = static_cast<double>(prior.height(0));
+    // The prior's support: bins with mass.
+    std::size_t m_first = 0;
+    while (m_first < prior.size() && !std::isfinite(prior.logMass(m_first))) {
+        ++m_first;
+    }
+    std::size_t m_last = prior.size();
+    while (m_last > m_first && !std::isfinite(prior.logMass(m_last - 1))) {
+        --m_last;
+    }
+    if (m_first >= m_last) {
+        return false;
+    }
+    constexpr double kWindowSigmas2 = 64;  // 8 sigma
+    Scalar top = -std::numeric_limits<Scalar>::infinity();
+    for (std::size_t j = 0; j < grid.size(); ++j) {
+        const double d = static_cast<double>(grid.d(j));
+        const double u = 1 / d;
+        double sc1 = 0;
+        double skc = 0;
+        double scc = 0;
+        for (const auto& v : views) {
+            const double s2 = static_cast<double>(v.sigma_D) * static_cast<double>(v.sigma_D);
+            const double k = static_cast<double>(v.kappa);
+            const double c = static_cast<double>(v.D) - u * k * mu_w;
+            sc1 += c / s2;
+            skc += k * c / s2;
+            scc += c * c / s2;
+        }
+        // w integrated out: g = 1 / (skk + d^2 / sigma_w^2) (0 without width uncertainty).
+        const double g = sw2 > 0 ? 1 / (skk + d * d / sw2) : 0.0;
+        const double logdet = log_s + (sw2 > 0 ? std::log1p(sw2 * u * u * skk) : 0.0);
+        const double q2 = std::max(u * u * (s11 - sk1 * sk1 * g), 1e-300);
+        const double q1 = -2 * u * (sc1 - skc * sk1 * g);
+        const double q0 = scc - skc * skc * g;
+        const double h_star = -q1 / (2 * q2);
+        const double rss = std::max(0.0, q0 - q1 * q1 / (4 * q2));
+        // log of int exp(-q2 (h - h*)^2 / 2) ... dh, before the prior: the
+        // Gaussian in h is sqrt(2 pi / q2) N(h; h*, 1 / q2).
+        const double cst =
+            -0.5 * rss - 0.5 * logdet - 0.5 * n_views * log_2pi + 0.5 * (log_2pi - std::log(q2));
+        const double var_h = 1 / q2;
+        // Prior terms within 8 sigma of h*; the nearest bin when none is.
+        double best = -std::numeric_limits<double>::infinity();
+        double sum = 0;
+        double nearest_term = -std::numeric_limits<double>::infinity();
+        double nearest_dist = std::numeric_limits<double>::infinity();
+        for (int pass = 0; pass < 2; ++pass) {
+            for (std::size_t m = m_first; m < m_last; ++m) {
+                const double lm = static_cast<double>(prior.logMass(m));
+                if (!std::isfinite(lm)) {
+                    continue;
+                }
+                const double h = static_cast<double>(prior.height(m));
+                const double var = var_h + h * h * rho2 + static_cast<double>(prior.binVariance(m));
+                const double r2 = (h - h_star) * (h - h_star);
+                if (r2 > kWindowSigmas2 * var) {
+                    if (pass == 0 && r2 / var < nearest_dist) {
+                        nearest_dist = r2 / var;
+                        nearest_term = lm - 0.5 * r2 / var - 0.5 * (log_2pi + std::log(var));
+                    }
+                    continue;
+                }
+                const double t = lm - 0.5 * r2 / var - 0.5 * (log_2pi + std::log(var));
+                if (pass == 0) {
+                    best = std::max(best, t);
+                } else {
+                    sum += std::exp(t - best);
+                }
+            }
+            if (!std::isfinite(best)) {
+                break;
+            }
+        }
+        const double model = std::isfinite(best) ? cst + best + std::log(sum) : cst + nearest_term;
+        double value = model;
+        if (eps > 0) {
+            // Unknown height, log-uniform over the height grid: flat in d.
+            const double outlier = cst - std::log(std::max(h_star, h_floor)) - log_range;
+            value = logSumExp2(log_in + model, log_out + outlier);
+        }
+        log_l[j] = static_cast<Scalar>(value);
+        top = std::max(top, log_l[j]);
+    }
+    if (!std::isfinite(top)) {
+        return false;
+    }
+    // Far below anything the posterior keeps (its floor is -1000 nats), and
+    // finite: a sum of many objects' values cannot overflow, even in float.
+    constexpr Scalar kLogFloor = Scalar(-1e5);
+    for (auto& v : log_l) {
+        v = std::isfinite(v) ? std::max(v - top, kLogFloor) : kLogFloor;
+    }
+    return true;
+}
+
+Scalar objectHeightAt(std::span<const ObjectViewExtent> views, Scalar width_mean_m, Scalar d) {
+    double num = 0;
+    double den = 0;
+    for (const auto& v : views) {
+        const double s2 = static_cast<double>(v.sigma_D) * static_cast<double>(v.sigma_D);
+        if (!(s2 > 0)) {
+            continue;
+        }
+        const double a = static_cast<double>(d) * static_cast<double>(v.D) -
+                         static_cast<double>(v.kappa) * static_cast<double>(width_mean_m);
+        // Weights 1 / (d sigma)^2, relative: 1 / s2 suffices.
+        num += a / s2;
+        den += 1 / s2;
+    }
+    return den > 0 ? static_cast<Scalar>(num / den) : Scalar(0);
+}
+
+}  // namespace scaled::core
