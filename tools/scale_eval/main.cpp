@@ -37,6 +37,7 @@ void usage(std::FILE* out) {
         "usage: scale-eval --dataset DIR [--format tum|kitti|folder|video] [--config FILE]\n"
         "                  [--set section.key=value]... [--frames A:B] [--out DIR] [--json]\n"
         "                  [--intrinsics fx,fy,cx,cy] [--window N] [--delta N] [--no-plots]\n"
+        "                  [--truth-geometry]\n"
         "Runs EKF MonoSLAM, the object detector (synchronously, every detection.every_frames\n"
         "frames) and the metric scale estimator over a dataset and compares the estimate with\n"
         "the ground truth (Sim(3) alignment of the trajectory).\n"
@@ -53,6 +54,8 @@ void usage(std::FILE* out) {
         "  --delta N       frames between the camera positions of the distance errors\n"
         "                  (default 30)\n"
         "  --no-plots      with --out: write the CSV files only\n"
+        "  --truth-geometry give the estimator the ground-truth camera poses and gravity\n"
+        "                  (metric: the true scale is 1): the evidence with a right map\n"
         "The model defaults to $SCALED_SHARED_DIR/models/yolox_nano.onnx (../shared), the\n"
         "priors to config/priors.toml of the source tree.\n",
         out);
@@ -95,6 +98,10 @@ int main(int argc, char** argv) {
         }
         if (a == "--no-plots") {
             plots = false;
+            continue;
+        }
+        if (a == "--truth-geometry") {
+            opt.truth_geometry = true;
             continue;
         }
         if (i + 1 >= argc) {

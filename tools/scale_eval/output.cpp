@@ -181,6 +181,39 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
          ",\"rel_error\":" + stats(baselineErrors(r, false)) +
          "},\"single_detection\":{\"scale\":" + num(r.baseline_single_scale, 7) +
          ",\"rel_error\":" + stats(baselineErrors(r, true)) + "}}";
+    // Calibration and the served estimate's accuracy, whatever its state.
+    const Calibration cal = calibration(r.updates, options.settle_seconds);
+    s += ",\"model\":" + jsonString(core::toString(cfg.estimator.model));
+    s += ",\"truth_geometry\":" + std::string(options.truth_geometry ? "true" : "false");
+    s += ",\"ci95_coverage\":" + num(cal.ci95_coverage, 4);
+    s += ",\"ci95_coverage_updates\":" + std::to_string(cal.updates);
+    s += ",\"wrong_converged_updates\":" + std::to_string(cal.wrong_converged_updates);
+    s += ",\"rel_error_after_5s\":" + stats(cal.after_settle);
+    s += ",\"rel_error_after_5s_window\":" + stats(cal.after_settle_window);
+    s += ",\"observations_per_100_frames\":" +
+         jsonNumber(r.frames > 0 ? 100.0 * static_cast<double>(r.observations.size()) /
+                                       static_cast<double>(r.frames)
+                                 : 0.0,
+                    4);
+    {
+        const UpdateRow* last_up = r.updates.empty() ? nullptr : &r.updates.back();
+        int objects_seen = 0;
+        for (const ObjectRow& o : r.objects) {
+            objects_seen = std::max(objects_seen, o.id);
+        }
+        s += ",\"objects\":{\"seen\":" + std::to_string(objects_seen) +
+             ",\"used_final\":" + std::to_string(last_up ? last_up->objects_used : 0) +
+             ",\"views_used_final\":" + std::to_string(last_up ? last_up->views_used : 0) + "}";
+        // What the distinct objects and their classes allow, next to what was reached.
+        s += ",\"information_limit\":{\"rel_width95_final\":" +
+             (last_up && last_up->information_limit > 0 ? jsonNumber(last_up->information_limit, 4)
+                                                        : std::string("null")) +
+             ",\"achieved_rel_width95_final\":" +
+             (last_up && last_up->scale.state != core::ScaleState::kNoData
+                  ? jsonNumber(static_cast<double>(last_up->scale.rel_width95), 4)
+                  : std::string("null")) +
+             "}";
+    }
     s += ",\"ms_per_frame\":" + jsonNumber(r.ms_per_frame, 4);
     s += ",\"tracker_ms_per_frame\":" + jsonNumber(r.tracker_ms_per_frame, 4);
     s += ",\"detector_ms_per_update\":" + jsonNumber(r.detector_ms_per_update, 4);

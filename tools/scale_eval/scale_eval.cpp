@@ -127,6 +127,39 @@ std::optional<std::size_t> convergedAt(std::span<const UpdateRow> updates, doubl
     return first;
 }
 
+Calibration calibration(std::span<const UpdateRow> updates, double settle_s) {
+    Calibration c;
+    int covered = 0;
+    std::vector<double> e;
+    std::vector<double> ew;
+    for (const UpdateRow& u : updates) {
+        if (!u.scale_true || u.scale.state == core::ScaleState::kNoData ||
+            u.scale.observations == 0) {
+            continue;
+        }
+        const double truth = *u.scale_true;
+        const bool inside = static_cast<double>(u.scale.ci95.lo) <= truth &&
+                            truth <= static_cast<double>(u.scale.ci95.hi);
+        ++c.updates;
+        covered += inside ? 1 : 0;
+        if (u.scale.state == core::ScaleState::kConverged && !inside) {
+            ++c.wrong_converged_updates;
+        }
+        if (u.t_in_map_s >= settle_s) {
+            e.push_back(std::abs(static_cast<double>(u.scale.map) / truth - 1));
+            if (u.scale_true_window) {
+                ew.push_back(std::abs(static_cast<double>(u.scale.map) / *u.scale_true_window - 1));
+            }
+        }
+    }
+    if (c.updates > 0) {
+        c.ci95_coverage = static_cast<double>(covered) / c.updates;
+    }
+    c.after_settle = describe(std::move(e));
+    c.after_settle_window = describe(std::move(ew));
+    return c;
+}
+
 ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window) {
     std::vector<double> e;
     for (std::size_t i = first; i < updates.size(); ++i) {
@@ -275,12 +308,17 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             track.t_s.push_back(row.t_s);
             track_rows.push_back(r.frame_rows.size());
             row.scale_true = truthScale(track.est, track.gt, options.min_truth_path_m);
+            if (options.truth_geometry) {
+                row.scale_true = 1.0;  // the estimator sees metric poses
+            }
             const std::size_t w = std::min<std::size_t>(
                 track.est.size(), static_cast<std::size_t>(options.window_frames));
             const std::size_t from = track.est.size() - w;
             row.scale_true_window =
-                truthScale(std::span(track.est).subspan(from), std::span(track.gt).subspan(from),
-                           options.min_truth_path_m);
+                options.truth_geometry
+                    ? std::optional<double>(1.0)
+                    : truthScale(std::span(track.est).subspan(from),
+                                 std::span(track.gt).subspan(from), options.min_truth_path_m);
             if (!epoch_baseline_constant && row.t_s - epoch_t0_s >= options.baseline_seconds) {
                 epoch_baseline_constant = truthScale(track.est, track.gt, 0);
                 if (!r.baseline_constant_scale) {
@@ -304,10 +342,25 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             for (const auto& m : points) {
                 features.push_back({m.p_FinW, m.P_FinW});
             }
-            const core::FrameSnapshot snapshot{slam.pose(), slam.upW(), features};
+            core::FrameSnapshot snapshot{slam.pose(), slam.upW(), features, frame.id};
+            if (options.truth_geometry) {
+                // Metric, true geometry: no map features (the object model
+                // needs none), the true camera and gravity.
+                snapshot.features = {};
+                if (frame.T_CtoW_gt && frame.gravity_down_C) {
+                    snapshot.pose = *frame.T_CtoW_gt;
+                    snapshot.up_W = -(frame.T_CtoW_gt->R_CtoW * *frame.gravity_down_C).normalized();
+                } else {
+                    // No truth for this frame: no update from it.
+                    snapshot.pose = slam.pose();
+                }
+            }
             t0 = Clock::now();
+            const bool usable =
+                !options.truth_geometry || (frame.T_CtoW_gt && frame.gravity_down_C);
             const core::UpdateStats u =
-                estimator->update(snapshot, std::span(dets.data(), n), records);
+                usable ? estimator->update(snapshot, std::span(dets.data(), n), records)
+                       : core::UpdateStats{};
             estimator_ms += msSince(t0);
 
             UpdateRow up;
@@ -315,12 +368,38 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             up.row = r.frame_rows.size();
             up.frame = frame.id;
             up.t_s = row.t_s;
+            up.t_in_map_s = row.t_s - epoch_t0_s;
             up.epoch = row.epoch;
             up.detections = static_cast<int>(n);
             up.observations = u.observations;
+            up.objects_used = u.objects_used;
+            up.views_used = u.views_used;
+            up.information_limit = static_cast<double>(estimator->informationLimitRelWidth95());
             up.scale = estimator->summary();
             up.scale_true = row.scale_true;
             up.scale_true_window = row.scale_true_window;
+            if (const core::ObjectEvidence* objs = estimator->objects()) {
+                for (int k = 0; k < objs->activeCount(); ++k) {
+                    const core::ObjectSummary os = objs->summary(k, up.scale);
+                    ObjectRow orow;
+                    orow.update = up.update;
+                    orow.frame = frame.id;
+                    orow.id = os.id;
+                    orow.class_name = estimator->priors()
+                                          .priors()[static_cast<std::size_t>(os.class_index)]
+                                          .className();
+                    orow.state = core::toString(os.state);
+                    orow.detections = os.detections;
+                    orow.views_used = os.views_used;
+                    orow.local_estimate = static_cast<double>(os.local_estimate);
+                    orow.height_m = static_cast<double>(os.height_m);
+                    orow.height_lo_m = static_cast<double>(os.height_ci95_m.lo);
+                    orow.height_hi_m = static_cast<double>(os.height_ci95_m.hi);
+                    orow.anchor = os.p_AinW;
+                    orow.anchor_rel_sigma = static_cast<double>(os.anchor_rel_sigma);
+                    r.objects.push_back(std::move(orow));
+                }
+            }
             if (!epoch_baseline_single && u.observations > 0) {
                 epoch_baseline_single = static_cast<double>(up.scale.map);
                 if (!r.baseline_single_scale) {
@@ -343,6 +422,8 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
                                                static_cast<double>(rec.sigma_D_box));
                 o.local_estimate = static_cast<double>(rec.local_estimate);
                 o.weight = static_cast<double>(rec.weight);
+                o.object_id = rec.object_id;
+                o.kappa = static_cast<double>(rec.kappa);
                 r.observations.push_back(std::move(o));
                 if (options.keep_curves) {
                     const core::HeightPrior* prior = priors.find(d.class_name);

@@ -40,6 +40,13 @@ struct EvalOptions {
     // whose ground-truth distance is at least min_distance_m.
     int distance_delta_frames = 30;
     double min_distance_m = 0.05;
+    // Give the estimator the ground-truth camera poses and gravity (metric:
+    // the true scale is then 1) instead of the tracker's: what the evidence
+    // can do when the map is right. Frames without ground truth give no update.
+    bool truth_geometry = false;
+    // The served estimate's accuracy is taken over the updates at least this
+    // long after their map started.
+    double settle_seconds = 5.0;
     // Keep every update's posterior and every observation's likelihood,
     // decimated to at most curve_bins grid points (for figures).
     bool keep_curves = false;
@@ -67,9 +74,13 @@ struct UpdateRow {
     std::size_t row = 0;  // index of the frame's FrameRow
     std::int64_t frame = 0;
     double t_s = 0;
+    double t_in_map_s = 0;  // since this epoch's map started
     int epoch = 0;
     int detections = 0;
     int observations = 0;
+    int objects_used = 0;          // model object: objects in the posterior
+    int views_used = 0;            // and their views
+    double information_limit = 0;  // 95% relative width the evidence allows at best (0: unknown)
     core::ScaleSummary scale;
     std::optional<double> scale_true;
     std::optional<double> scale_true_window;
@@ -84,6 +95,25 @@ struct ObservationRow {
     double sigma_D = 0;  // the likelihood's sigma in SLAM units (the variance model in use)
     double local_estimate = 0;
     double weight = 1;
+    int object_id = 0;  // model object
+    double kappa = 0;
+};
+
+// One object's state after an update (model object), for objects.csv.
+struct ObjectRow {
+    int update = 0;
+    std::int64_t frame = 0;
+    int id = 0;
+    std::string class_name;
+    std::string state;
+    int detections = 0;
+    int views_used = 0;
+    double local_estimate = 0;  // 0: none
+    double height_m = 0;
+    double height_lo_m = 0;
+    double height_hi_m = 0;
+    core::Vec3 anchor = core::Vec3::Zero();
+    double anchor_rel_sigma = 0;
 };
 
 // How an estimate compares with the truth over a run.
@@ -121,6 +151,7 @@ struct EvalResult {
     std::vector<FrameRow> frame_rows;
     std::vector<UpdateRow> updates;
     std::vector<ObservationRow> observations;
+    std::vector<ObjectRow> objects;
 
     // Curves for the figures (keep_curves): grid values of d, one normalised
     // log posterior per update, one normalised log likelihood per observation.
@@ -149,6 +180,16 @@ core::Result<EvalResult> evaluate(drivers::FrameSource& source, detector::Object
 // run (itself included) has a 95% interval narrower than rel_width of its MAP.
 // nullopt when the last update is not that narrow (or there are none).
 std::optional<std::size_t> convergedAt(std::span<const UpdateRow> updates, double rel_width);
+
+// The calibration and served-accuracy figures of a run (docs/accuracy.md).
+struct Calibration {
+    int updates = 0;                      // with ground truth and at least one observation
+    std::optional<double> ci95_coverage;  // share of them whose 95% interval holds the truth
+    int wrong_converged_updates = 0;      // converged, and the 95% interval excludes the truth
+    ErrorStats after_settle;         // |MAP/truth - 1| over the updates settle_s after map start
+    ErrorStats after_settle_window;  // the same against the sliding-window truth
+};
+Calibration calibration(std::span<const UpdateRow> updates, double settle_s);
 
 // |estimate / truth - 1| of every update from `first` on that has a truth.
 ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window);
