@@ -67,7 +67,8 @@ struct ClassSpec {
     std::optional<bool> upright;
     std::optional<std::string> source;
     std::optional<int> bins;
-    Located<Scalar> mean_m, std_m, min_m, max_m, bin_width_m, partial_probability;
+    Located<Scalar> mean_m, std_m, min_m, max_m, bin_width_m, partial_probability, width_mean_m,
+        width_std_m;
     Located<std::vector<Scalar>> heights_m, probabilities;
 
     // The number-valued and array-valued keys by name; nullptr for others.
@@ -78,7 +79,9 @@ struct ClassSpec {
             {"min_m", &min_m},
             {"max_m", &max_m},
             {"bin_width_m", &bin_width_m},
-            {"partial_probability", &partial_probability}};
+            {"partial_probability", &partial_probability},
+            {"width_mean_m", &width_mean_m},
+            {"width_std_m", &width_std_m}};
         for (const auto& [name, field] : keys) {
             if (name == key) {
                 return field;
@@ -120,6 +123,20 @@ std::optional<Error> checkRanges(const Reporter& rep, const std::string& base, c
     if (s.partial_probability && !(*s.partial_probability >= 0 && *s.partial_probability < 1)) {
         return rep.at(s.partial_probability.node, base + ".partial_probability",
                       "must be in [0, 1) (got " + num(*s.partial_probability) + ")");
+    }
+    if (s.width_mean_m && !(*s.width_mean_m > 0 && std::isfinite(*s.width_mean_m))) {
+        return rep.at(s.width_mean_m.node, base + ".width_mean_m",
+                      "must be > 0 (got " + num(*s.width_mean_m) + ")");
+    }
+    if (s.width_std_m && !(*s.width_std_m >= 0 && std::isfinite(*s.width_std_m))) {
+        return rep.at(s.width_std_m.node, base + ".width_std_m",
+                      "must be >= 0 (got " + num(*s.width_std_m) + ")");
+    }
+    if (s.width_std_m && !s.width_mean_m) {
+        return rep.at(s.width_std_m.node, base + ".width_std_m", "needs width_mean_m beside it");
+    }
+    if (s.width_mean_m && !s.width_std_m) {
+        return rep.at(s.width_mean_m.node, base + ".width_mean_m", "needs width_std_m beside it");
     }
     if (s.heights_m) {
         const auto& h = *s.heights_m;
@@ -222,7 +239,8 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
         } else {
             return rep.at(&node, full,
                           "unknown key (allowed: upright, source, mean_m, std_m, min_m, max_m, "
-                          "bins, heights_m, probabilities, bin_width_m, partial_probability)");
+                          "bins, heights_m, probabilities, bin_width_m, partial_probability, "
+                          "width_mean_m, width_std_m)");
         }
     }
     if (!spec.upright) {
@@ -269,6 +287,11 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
         if (auto set = prior->setPartialProbability(*spec.partial_probability); !set) {
             return rep.at(spec.partial_probability.node, base + ".partial_probability",
                           set.error().message);
+        }
+    }
+    if (spec.width_mean_m) {
+        if (auto set = prior->setWidth(*spec.width_mean_m, *spec.width_std_m); !set) {
+            return rep.at(spec.width_mean_m.node, base + ".width_mean_m", set.error().message);
         }
     }
     return prior;

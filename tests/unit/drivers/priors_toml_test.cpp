@@ -33,6 +33,10 @@ std::string shippedPath() {
     return std::string(SCALED_SOURCE_DIR) + "/config/priors.toml";
 }
 
+std::string redkitchenPath() {
+    return std::string(SCALED_SOURCE_DIR) + "/config/priors-redkitchen.toml";
+}
+
 std::string readFile(const std::filesystem::path& path) {
     std::ifstream in(path, std::ios::binary);
     EXPECT_TRUE(in.good()) << "cannot open " << path;
@@ -258,6 +262,79 @@ TEST(ShippedPriors, EveryClassTableHasANonEmptySource) {
     }
 }
 
+// Every class with upright = true has a width prior (the object model needs
+// one), with a real spread, and its source names where the width comes from.
+// Fails when someone adds an upright class without width_mean_m/width_std_m.
+void expectWidthForEveryUprightClass(const std::string& path) {
+    SCOPED_TRACE(path);
+    const std::string text = readFile(path);
+    const auto r = parsePriors(text, path);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    const auto headers = classHeaders(text);
+    const auto ls = splitLines(text);
+    int upright = 0;
+    for (std::size_t h = 0; h < headers.size(); ++h) {
+        const auto& [name, header_line] = headers[h];
+        SCOPED_TRACE(name);
+        const HeightPrior* p = r.value().find(name);
+        ASSERT_NE(p, nullptr);
+        if (!p->upright()) {
+            continue;
+        }
+        ++upright;
+        EXPECT_TRUE(p->hasWidth()) << "upright class without width_mean_m/width_std_m";
+        EXPECT_GT(p->widthMean(), 0.0);
+        // A population spread, not an exact width.
+        EXPECT_GT(p->widthStd(), 0.0);
+        EXPECT_LE(p->widthStd(), p->widthMean());
+        const std::size_t end = h + 1 < headers.size()
+                                    ? static_cast<std::size_t>(headers[h + 1].second - 1)
+                                    : ls.size();
+        bool source_names_width = false;
+        for (auto i = static_cast<std::size_t>(header_line); i < end; ++i) {
+            source_names_width = source_names_width || (ls[i].starts_with("source") &&
+                                                        ls[i].find("width:") != std::string::npos);
+        }
+        EXPECT_TRUE(source_names_width) << "source does not say where the width comes from";
+    }
+    EXPECT_GT(upright, 0);
+}
+
+TEST(ShippedPriors, EveryUprightClassHasAWidth) {
+    expectWidthForEveryUprightClass(shippedPath());
+
+    const auto r = loadPriorsFile(shippedPath());
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    const auto widthOf = [&](const char* name) { return r.value().find(name)->widthMean(); };
+    // A few against the product ranges the file cites.
+    EXPECT_GE(widthOf("cup"), 0.06);
+    EXPECT_LE(widthOf("cup"), 0.10);
+    EXPECT_GE(widthOf("person"), 0.2);
+    EXPECT_LE(widthOf("person"), 0.5);
+    EXPECT_GE(widthOf("microwave"), 0.3);
+    EXPECT_LE(widthOf("microwave"), 0.5);
+    EXPECT_GE(widthOf("car"), 1.7);
+    EXPECT_LE(widthOf("car"), 5.0);
+    // The chair's box top is its backrest: less than the seat depth.
+    EXPECT_LT(widthOf("chair"), 0.40);
+}
+
+TEST(ShippedPriors, RedkitchenChairAndCupHaveWidths) {
+    expectWidthForEveryUprightClass(redkitchenPath());
+
+    const auto r = loadPriorsFile(redkitchenPath());
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    const HeightPrior* cup = r.value().find("cup");
+    const HeightPrior* chair = r.value().find("chair");
+    ASSERT_NE(cup, nullptr);
+    ASSERT_NE(chair, nullptr);
+    EXPECT_DOUBLE_EQ(cup->widthMean(), 0.08);
+    EXPECT_DOUBLE_EQ(cup->widthStd(), 0.01);
+    EXPECT_DOUBLE_EQ(chair->widthMean(), 0.25);
+    EXPECT_DOUBLE_EQ(chair->widthStd(), 0.15);
+    EXPECT_FALSE(r.value().find("dining table")->hasWidth());
+}
+
 // ---------------------------------------------------------------------------
 // Valid input
 // ---------------------------------------------------------------------------
@@ -358,6 +435,69 @@ TEST(ParsePriors, HistogramBinsIsTheDefaultAndClassBinsOverridesIt) {
     ASSERT_TRUE(r9.ok()) << r9.error().message;
     EXPECT_EQ(r9.value().find("a")->size(), 9u);
     EXPECT_EQ(r9.value().find("b")->size(), 3u);
+}
+
+TEST(ParsePriors, ReadsTheOptionalWidthInBothForms) {
+    const std::string text = lines({
+        "version = 1",
+        "[classes.cup]",
+        "upright = true",
+        R"(source = "s")",
+        "heights_m = [0.09, 0.1]",
+        "probabilities = [1, 1]",
+        "width_mean_m = 0.08",
+        "width_std_m = 0.01",
+        "[classes.chair]",
+        "width_std_m = 0.15",
+        "width_mean_m = 0.25",
+        "upright = true",
+        R"(source = "s")",
+        "mean_m = 0.9",
+        "std_m = 0.1",
+        "min_m = 0.6",
+        "max_m = 1.3",
+        "[classes.tv]",
+        "upright = true",
+        R"(source = "s")",
+        "heights_m = [0.5]",
+        "probabilities = [1]",
+        "width_mean_m = 1",
+        "width_std_m = 0",
+        "[classes.book]",
+        "upright = false",
+        R"(source = "s")",
+        "heights_m = [0.2]",
+        "probabilities = [1]",
+    });
+    const auto r = parsePriors(text, kName);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    const HeightPrior* cup = r.value().find("cup");
+    const HeightPrior* chair = r.value().find("chair");
+    const HeightPrior* tv = r.value().find("tv");
+    const HeightPrior* book = r.value().find("book");
+    ASSERT_TRUE(cup != nullptr && chair != nullptr && tv != nullptr && book != nullptr);
+    EXPECT_TRUE(cup->hasWidth());
+    EXPECT_DOUBLE_EQ(cup->widthMean(), 0.08);
+    EXPECT_DOUBLE_EQ(cup->widthStd(), 0.01);
+    EXPECT_TRUE(chair->hasWidth());
+    EXPECT_DOUBLE_EQ(chair->widthMean(), 0.25);
+    EXPECT_DOUBLE_EQ(chair->widthStd(), 0.15);
+    // Integers are numbers; std 0 is an exact width.
+    EXPECT_TRUE(tv->hasWidth());
+    EXPECT_DOUBLE_EQ(tv->widthMean(), 1.0);
+    EXPECT_DOUBLE_EQ(tv->widthStd(), 0.0);
+    // Without the keys: no width model.
+    EXPECT_FALSE(book->hasWidth());
+    EXPECT_DOUBLE_EQ(book->widthMean(), 0.0);
+    EXPECT_DOUBLE_EQ(book->widthStd(), 0.0);
+    // The width does not change the height histogram.
+    const auto plain = HeightPrior::fromNormal("chair", 0.9, 0.1, 0.6, 1.3, 24, true);
+    ASSERT_TRUE(plain.ok()) << plain.error().message;
+    ASSERT_EQ(chair->size(), plain->size());
+    for (std::size_t i = 0; i < plain->size(); ++i) {
+        EXPECT_DOUBLE_EQ(chair->heights()[i], plain->heights()[i]) << i;
+        EXPECT_DOUBLE_EQ(chair->probabilities()[i], plain->probabilities()[i]) << i;
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -468,6 +608,77 @@ TEST(ParsePriorsErrors, IncompleteNormalForm) {
     const std::string msg = parseError(cupWith({"mean_m = 0.10", "min_m = 0.05", "max_m = 0.18"}));
     EXPECT_TRUE(startsWith(msg, where(3, "classes.cup.std_m")));
     EXPECT_TRUE(contains(msg, "missing"));
+}
+
+// Lines 6-7 of cupWith: the explicit form; the width keys follow from line 8.
+std::string cupWidthError(std::initializer_list<std::string_view> width_lines) {
+    std::string text = cupWith({"heights_m = [0.1]", "probabilities = [1]"});
+    for (const auto l : width_lines) {
+        text += l;
+        text += '\n';
+    }
+    return parseError(text);
+}
+
+TEST(ParsePriorsErrors, WidthMeanNotPositive) {
+    for (const std::string_view value : {"0", "-0.05", "nan", "inf"}) {
+        SCOPED_TRACE(value);
+        const std::string line = "width_mean_m = " + std::string(value);
+        const std::string msg = cupWidthError({line, "width_std_m = 0.01"});
+        EXPECT_TRUE(startsWith(msg, where(8, "classes.cup.width_mean_m")));
+        EXPECT_TRUE(contains(msg, "must be > 0"));
+        EXPECT_TRUE(contains(msg, "(got " + std::string(value) + ")"));
+    }
+}
+
+TEST(ParsePriorsErrors, WidthStdNegative) {
+    for (const std::string_view value : {"-0.01", "-1", "nan"}) {
+        SCOPED_TRACE(value);
+        const std::string line = "width_std_m = " + std::string(value);
+        const std::string msg = cupWidthError({"width_mean_m = 0.08", line});
+        EXPECT_TRUE(startsWith(msg, where(9, "classes.cup.width_std_m")));
+        EXPECT_TRUE(contains(msg, "must be >= 0"));
+        EXPECT_TRUE(contains(msg, "(got " + std::string(value) + ")"));
+    }
+}
+
+TEST(ParsePriorsErrors, WidthMeanWithoutStdAndStdWithoutMean) {
+    const std::string mean_only = cupWidthError({"width_mean_m = 0.08"});
+    EXPECT_TRUE(startsWith(mean_only, where(8, "classes.cup.width_mean_m")));
+    EXPECT_TRUE(contains(mean_only, "width_std_m"));
+
+    const std::string std_only = cupWidthError({"", "width_std_m = 0.01"});
+    EXPECT_TRUE(startsWith(std_only, where(9, "classes.cup.width_std_m")));
+    EXPECT_TRUE(contains(std_only, "width_mean_m"));
+
+    // Also in the mean/std form of the heights.
+    const std::string normal = parseError(cupWith(
+        {"mean_m = 0.10", "std_m = 0.02", "min_m = 0.05", "max_m = 0.18", "width_std_m = 0.01"}));
+    EXPECT_TRUE(startsWith(normal, where(10, "classes.cup.width_std_m")));
+    EXPECT_TRUE(contains(normal, "width_mean_m"));
+}
+
+TEST(ParsePriorsErrors, WidthOfWrongType) {
+    const std::string mean = cupWidthError({R"(width_mean_m = "wide")", "width_std_m = 0.01"});
+    EXPECT_TRUE(startsWith(mean, where(8, "classes.cup.width_mean_m")));
+    EXPECT_TRUE(contains(mean, "must be a number"));
+    EXPECT_TRUE(contains(mean, R"("wide")"));
+
+    const std::string std_m = cupWidthError({"width_mean_m = 0.08", "width_std_m = [0.01]"});
+    EXPECT_TRUE(startsWith(std_m, where(9, "classes.cup.width_std_m")));
+    EXPECT_TRUE(contains(std_m, "must be a number"));
+    EXPECT_TRUE(contains(std_m, "an array"));
+
+    const std::string boolean = cupWidthError({"width_mean_m = true", "width_std_m = 0.01"});
+    EXPECT_TRUE(startsWith(boolean, where(8, "classes.cup.width_mean_m")));
+    EXPECT_TRUE(contains(boolean, "(got true)"));
+}
+
+TEST(ParsePriorsErrors, UnknownKeyListsTheWidthKeys) {
+    const std::string msg = cupWidthError({"width_m = 0.08"});
+    EXPECT_TRUE(startsWith(msg, where(8, "classes.cup.width_m")));
+    EXPECT_TRUE(contains(msg, "unknown key"));
+    EXPECT_TRUE(contains(msg, "width_mean_m, width_std_m"));
 }
 
 TEST(ParsePriorsErrors, HeightsAndProbabilitiesOfDifferentLengths) {
