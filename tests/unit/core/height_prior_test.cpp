@@ -1,4 +1,8 @@
+#include <cmath>
+#include <limits>
 #include <numeric>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -90,6 +94,81 @@ TEST(HeightPrior, RejectsBadInputWithClearMessages) {
         EXPECT_NE(c.r.error().message.find(c.expect), std::string::npos) << c.r.error().message;
         EXPECT_NE(c.r.error().message.find("prior 'a'"), std::string::npos);
     }
+}
+
+TEST(HeightPrior, WidthIsOffUntilSetAndSetWidthChecksItsArguments) {
+    const std::vector<Scalar> h{0.1};
+    const std::vector<Scalar> p{1};
+    auto prior = HeightPrior::fromHistogram("cup", h, p, 0, true);
+    ASSERT_TRUE(prior.ok()) << prior.error().message;
+    EXPECT_FALSE(prior->hasWidth());
+    SCALED_EXPECT_SCALAR_EQ(prior->widthMean(), 0);
+    SCALED_EXPECT_SCALAR_EQ(prior->widthStd(), 0);
+
+    ASSERT_TRUE(prior->setWidth(Scalar(0.08), Scalar(0.01)).ok());
+    EXPECT_TRUE(prior->hasWidth());
+    SCALED_EXPECT_SCALAR_EQ(prior->widthMean(), 0.08);
+    SCALED_EXPECT_SCALAR_EQ(prior->widthStd(), 0.01);
+    // An exact width (std 0) is a width.
+    ASSERT_TRUE(prior->setWidth(Scalar(0.5), 0).ok());
+    EXPECT_TRUE(prior->hasWidth());
+    SCALED_EXPECT_SCALAR_EQ(prior->widthStd(), 0);
+
+    const Scalar inf = std::numeric_limits<Scalar>::infinity();
+    const Scalar nan = std::numeric_limits<Scalar>::quiet_NaN();
+    struct Case {
+        Scalar mean_m;
+        Scalar std_m;
+    };
+    for (const Case c : {Case{-0.1, 0.01}, Case{0.1, -0.01}, Case{0, 0.01}, Case{nan, 0.01},
+                         Case{0.1, nan}, Case{inf, 0.01}, Case{0.1, inf}}) {
+        SCOPED_TRACE(testing::Message() << "mean " << c.mean_m << " std " << c.std_m);
+        const auto r = prior->setWidth(c.mean_m, c.std_m);
+        ASSERT_FALSE(r.ok());
+        EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
+        EXPECT_NE(r.error().message.find("prior 'cup'"), std::string::npos) << r.error().message;
+        EXPECT_NE(r.error().message.find("width"), std::string::npos) << r.error().message;
+        // A rejected width leaves the one set before.
+        SCALED_EXPECT_SCALAR_EQ(prior->widthMean(), 0.5);
+        SCALED_EXPECT_SCALAR_EQ(prior->widthStd(), 0);
+    }
+
+    // Mean 0 with std 0 switches the width off again.
+    ASSERT_TRUE(prior->setWidth(0, 0).ok());
+    EXPECT_FALSE(prior->hasWidth());
+    SCALED_EXPECT_SCALAR_EQ(prior->widthMean(), 0);
+}
+
+TEST(HeightPrior, RelativeSpreadIncludesTheBinWidth) {
+    // Heights 0.1, 0.3, 0.4 with 1/4, 1/2, 1/4 in bins 0.05 wide: mean 0.275,
+    // variance sum p (h - mean)^2 + 0.05^2 / 12 (uniform within a bin).
+    const std::vector<Scalar> h{0.1, 0.3, 0.4};
+    const std::vector<Scalar> p{1, 2, 1};
+    const auto prior = HeightPrior::fromHistogram("x", h, p, 0.05, true);
+    ASSERT_TRUE(prior.ok()) << prior.error().message;
+    const double mean = 0.275;
+    const double between = 0.25 * 0.175 * 0.175 + 0.5 * 0.025 * 0.025 + 0.25 * 0.125 * 0.125;
+    const double within = 0.05 * 0.05 / 12;
+    EXPECT_NEAR(prior->relativeSpread(), std::sqrt(between + within) / mean,
+                test::tolerance(1e-12, 1e-6));
+    EXPECT_NEAR(prior->relativeSpread(), 0.399724, 1e-6);
+
+    // Exact heights (bin width 0): the spread of the bins alone.
+    const auto exact = HeightPrior::fromHistogram("x", h, p, 0, true);
+    ASSERT_TRUE(exact.ok()) << exact.error().message;
+    EXPECT_NEAR(exact->relativeSpread(), std::sqrt(between) / mean, test::tolerance(1e-12, 1e-6));
+
+    // One bin: only its width spreads it; one exact height: no spread.
+    const std::vector<Scalar> one_h{0.1};
+    const std::vector<Scalar> one_p{1};
+    EXPECT_NEAR(HeightPrior::fromHistogram("x", one_h, one_p, 0.02, true)->relativeSpread(),
+                0.02 / std::sqrt(12.0) / 0.1, test::tolerance(1e-12, 1e-6));
+    EXPECT_EQ(HeightPrior::fromHistogram("x", one_h, one_p, 0, true)->relativeSpread(), 0);
+
+    // A finely binned normal: std / mean of the normal.
+    const auto normal = HeightPrior::fromNormal("x", 1.0, 0.1, 0.5, 1.5, 200, true);
+    ASSERT_TRUE(normal.ok()) << normal.error().message;
+    EXPECT_NEAR(normal->relativeSpread(), 0.1, 1e-3);
 }
 
 TEST(PriorTable, FindsAndReplacesByName) {
