@@ -29,6 +29,194 @@ TEST(PipelineConfig, DefaultsAreTheChosenOnes) {
     EXPECT_TRUE(c.estimator.likelihood.partial_visibility);
     EXPECT_TRUE(c.estimator.extent.compensate_roll);
     EXPECT_EQ(c.estimator.posterior.arithmetic, core::PosteriorArithmetic::kFloating);
+    // The object model is opt-in; its settings are ObjectConfig's.
+    EXPECT_EQ(c.estimator.model, core::EstimatorModel::kPaper);
+    const core::ObjectConfig o;
+    EXPECT_EQ(c.estimator.objects.max_objects, o.max_objects);
+    EXPECT_EQ(c.estimator.objects.max_views, o.max_views);
+    EXPECT_EQ(c.estimator.objects.max_gap_updates, o.max_gap_updates);
+    EXPECT_EQ(c.estimator.objects.epipolar_depth_min, o.epipolar_depth_min);
+    EXPECT_EQ(c.estimator.objects.epipolar_depth_max, o.epipolar_depth_max);
+    EXPECT_EQ(c.estimator.objects.view_band, o.view_band);
+    EXPECT_TRUE(c.estimator.objects.width_model);
+}
+
+TEST(PipelineConfig, ReadsTheObjectModelKeys) {
+    PipelineConfig c = defaultPipelineConfig();
+    // Values a float build holds exactly, all different from the defaults.
+    const std::string text = R"([estimator]
+model = "object"
+[objects]
+max_objects = 8
+max_views = 16
+centre_rel_sigma = 0.25
+centre_sigma_px = 0
+min_parallax_deg = 4.5
+max_anchor_rel_sigma = 0.5
+anchor_box_margin = 0
+association_gate = 1.5
+epipolar_depth_min = 0.5
+epipolar_depth_max = 8
+max_gap_updates = 12
+box_edge_rel_sigma = 0.0625
+object_rel_sigma = 0.125
+view_band = 0.375
+view_reference_quantile = 0.5
+width_model = false
+)";
+    auto r = applyPipelineToml(text, "test.toml", "/base", c);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    const auto& o = c.estimator.objects;
+    EXPECT_EQ(c.estimator.model, core::EstimatorModel::kObject);
+    EXPECT_EQ(o.max_objects, 8);
+    EXPECT_EQ(o.max_views, 16);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.centre_rel_sigma), 0.25);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.centre_sigma_px), 0.0);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.min_parallax_deg), 4.5);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.max_anchor_rel_sigma), 0.5);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.anchor_box_margin), 0.0);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.association_gate), 1.5);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.epipolar_depth_min), 0.5);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.epipolar_depth_max), 8.0);
+    EXPECT_EQ(o.max_gap_updates, 12);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.box_edge_rel_sigma), 0.0625);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.object_rel_sigma), 0.125);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.view_band), 0.375);
+    EXPECT_DOUBLE_EQ(static_cast<double>(o.view_reference_quantile), 0.5);
+    EXPECT_FALSE(o.width_model);
+    // Untouched keys keep their values.
+    EXPECT_TRUE(c.estimator.likelihood.robust);
+
+    // toToml writes them back, and reading that gives the same configuration.
+    const std::string dumped = toToml(c);
+    EXPECT_NE(dumped.find("[objects]\nmax_objects = 8\n"), std::string::npos) << dumped;
+    EXPECT_NE(dumped.find("model = \"object\"\n"), std::string::npos) << dumped;
+    PipelineConfig back = defaultPipelineConfig();
+    ASSERT_TRUE(applyPipelineToml(dumped, "dump", "/", back).ok());
+    EXPECT_EQ(toToml(back), dumped);
+
+    // Overrides reach them too.
+    ASSERT_TRUE(applyPipelineOverrides({"estimator.model=paper", "objects.width_model=true",
+                                        "objects.max_views=2", "objects.view_band=10"},
+                                       c)
+                    .ok());
+    EXPECT_EQ(c.estimator.model, core::EstimatorModel::kPaper);
+    EXPECT_TRUE(c.estimator.objects.width_model);
+    EXPECT_EQ(c.estimator.objects.max_views, 2);
+    EXPECT_DOUBLE_EQ(static_cast<double>(c.estimator.objects.view_band), 10.0);
+}
+
+TEST(PipelineConfig, ObjectModelKeysAreRangeChecked) {
+    struct Case {
+        const char* line;     // at line 3 of the file, in [objects]
+        const char* message;  // after "test.toml:3: objects.KEY: "
+    };
+    const Case cases[] = {
+        {"max_objects = 0", "must be an integer in [1, 1024] (got 0)"},
+        {"max_objects = 1025", "must be an integer in [1, 1024] (got 1025)"},
+        {"max_objects = 2.5", "must be an integer in [1, 1024] (got 2.5)"},
+        {"max_views = 1", "must be an integer in [2, 1024] (got 1)"},
+        {"max_views = 1025", "must be an integer in [2, 1024] (got 1025)"},
+        {"centre_rel_sigma = -0.5", "must be a number in [0, 10] (got -0.5)"},
+        {"centre_rel_sigma = 11", "must be a number in [0, 10] (got 11)"},
+        {"centre_sigma_px = -1", "must be a number in [0, 1000] (got -1)"},
+        {"centre_sigma_px = 1001", "must be a number in [0, 1000] (got 1001)"},
+        {"min_parallax_deg = -1", "must be a number in [0, 90] (got -1)"},
+        {"min_parallax_deg = 91", "must be a number in [0, 90] (got 91)"},
+        {"max_anchor_rel_sigma = 0", "must be a number in (0, 10] (got 0)"},
+        {"max_anchor_rel_sigma = 10.5", "must be a number in (0, 10] (got 10.5)"},
+        {"anchor_box_margin = -0.5", "must be a number in [0, 10] (got -0.5)"},
+        {"anchor_box_margin = 11", "must be a number in [0, 10] (got 11)"},
+        {"association_gate = 0", "must be a number in (0, 100] (got 0)"},
+        {"association_gate = 101", "must be a number in (0, 100] (got 101)"},
+        {"epipolar_depth_min = 0", "must be a number in (0, 1e+06] (got 0)"},
+        {"epipolar_depth_min = nan", "must be a number in (0, 1e+06] (got nan)"},
+        {"epipolar_depth_max = -4", "must be a number in (0, 1e+06] (got -4)"},
+        {"epipolar_depth_max = 1000001", "must be a number in (0, 1e+06] (got 1000001)"},
+        {"max_gap_updates = 0", "must be an integer in [1, 1000000] (got 0)"},
+        {"max_gap_updates = 1000001", "must be an integer in [1, 1000000] (got 1000001)"},
+        {"box_edge_rel_sigma = -0.5", "must be a number in [0, 1] (got -0.5)"},
+        {"box_edge_rel_sigma = 1.5", "must be a number in [0, 1] (got 1.5)"},
+        {"object_rel_sigma = -0.5", "must be a number in [0, 10] (got -0.5)"},
+        {"object_rel_sigma = 11", "must be a number in [0, 10] (got 11)"},
+        {"view_band = 0", "must be a number in (0, 10] (got 0)"},
+        {"view_band = 11", "must be a number in (0, 10] (got 11)"},
+        {"view_reference_quantile = -0.5", "must be a number in [0, 1] (got -0.5)"},
+        {"view_reference_quantile = 1.5", "must be a number in [0, 1] (got 1.5)"},
+        {"width_model = 1", "must be true or false (got 1)"},
+        {"width_model = \"yes\"", "must be true or false (got \"yes\")"},
+    };
+    for (const Case& k : cases) {
+        SCOPED_TRACE(k.line);
+        PipelineConfig c = defaultPipelineConfig();
+        const std::string line = k.line;
+        const std::string key = line.substr(0, line.find(" = "));
+        EXPECT_EQ(applyError("[objects]\n\n" + line + "\n", c),
+                  "test.toml:3: objects." + key + ": " + k.message);
+        // Nothing applied.
+        EXPECT_EQ(toToml(c), toToml(defaultPipelineConfig()));
+    }
+
+    PipelineConfig c = defaultPipelineConfig();
+    EXPECT_EQ(applyError("[estimator]\nmodel = \"objects\"\n", c),
+              "test.toml:2: estimator.model: must be one of \"paper\", \"object\" (got "
+              "\"objects\")");
+    EXPECT_EQ(applyError("[objects]\nmax_object = 8\n", c),
+              "test.toml:2: objects.max_object: unknown key (allowed in [objects]: max_objects, "
+              "max_views, centre_rel_sigma, centre_sigma_px, min_parallax_deg, "
+              "max_anchor_rel_sigma, anchor_box_margin, association_gate, epipolar_depth_min, "
+              "epipolar_depth_max, max_gap_updates, box_edge_rel_sigma, object_rel_sigma, "
+              "view_band, view_reference_quantile, width_model)");
+    EXPECT_EQ(applyError("objects = 1\n", c), "test.toml:1: objects: must be a table ([objects])");
+    auto bad = applyPipelineOverrides({"objects.max_views=0"}, c);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().message,
+              "--set objects.max_views=0: objects.max_views: must be an integer in [2, 1024] (got "
+              "0)");
+}
+
+TEST(PipelineConfig, EpipolarDepthMaxMustExceedMin) {
+    PipelineConfig c = defaultPipelineConfig();
+    // Equal is rejected, at the line of epipolar_depth_max.
+    EXPECT_EQ(applyError("[objects]\nepipolar_depth_min = 2\nepipolar_depth_max = 2\n", c),
+              "test.toml:3: objects.epipolar_depth_max: must be greater than "
+              "objects.epipolar_depth_min = 2 (got 2)");
+    EXPECT_EQ(applyError("[objects]\nepipolar_depth_max = 0.5\nepipolar_depth_min = 3\n", c),
+              "test.toml:2: objects.epipolar_depth_max: must be greater than "
+              "objects.epipolar_depth_min = 3 (got 0.5)");
+    // Only the minimum in the file, above the default maximum (4): the
+    // message points at the line that is there.
+    EXPECT_EQ(applyError("[objects]\n\nepipolar_depth_min = 5\n", c),
+              "test.toml:3: objects.epipolar_depth_max: must be greater than "
+              "objects.epipolar_depth_min = 5 (got 4)");
+    EXPECT_EQ(toToml(c), toToml(defaultPipelineConfig()));
+    // A maximum just above the minimum is fine.
+    ASSERT_TRUE(applyPipelineToml("[objects]\nepipolar_depth_min = 2\nepipolar_depth_max = 2.5\n",
+                                  "test.toml", "/base", c)
+                    .ok());
+    // Overrides are checked after all of them, named by the --set that made them.
+    PipelineConfig d = defaultPipelineConfig();
+    auto r = applyPipelineOverrides({"objects.epipolar_depth_max=0.125"}, d);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message,
+              "--set objects.epipolar_depth_max=0.125: objects.epipolar_depth_max: must be "
+              "greater than objects.epipolar_depth_min = 0.25 (got 0.125)");
+    EXPECT_TRUE(applyPipelineOverrides(
+                    {"objects.epipolar_depth_max=0.125", "objects.epipolar_depth_min=0.0625"}, d)
+                    .ok());
+}
+
+TEST(PipelineConfig, CentreSigmasMustNotBothBeZero) {
+    PipelineConfig c = defaultPipelineConfig();
+    EXPECT_EQ(applyError("[objects]\ncentre_rel_sigma = 0\ncentre_sigma_px = 0\n", c),
+              "test.toml:2: objects.centre_rel_sigma: objects.centre_rel_sigma and "
+              "objects.centre_sigma_px must not both be 0");
+    // Either alone may be 0.
+    for (const char* text :
+         {"[objects]\ncentre_rel_sigma = 0\n", "[objects]\ncentre_sigma_px = 0\n"}) {
+        PipelineConfig d = defaultPipelineConfig();
+        EXPECT_TRUE(applyPipelineToml(text, "test.toml", "/base", d).ok()) << text;
+    }
 }
 
 TEST(PipelineConfig, PosteriorArithmeticIsCheckedLikeEveryKey) {
@@ -91,16 +279,17 @@ seed = 7
 
 TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
     PipelineConfig c = defaultPipelineConfig();
-    EXPECT_EQ(applyError("[estimator]\nrobust = true\nrobustt = 1\n", c),
-              "test.toml:3: estimator.robustt: unknown key (allowed in [estimator]: priors, "
-              "variance, robust, outlier_weight, outlier_height_range_m, partial_visibility, "
-              "partial_weight, min_sigma_m, weighting, use_non_upright, min_detection_score, "
-              "max_features_per_box, compensate_roll, propagate_variance, box_edge_sigma_px, "
-              "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
-              "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
+    EXPECT_EQ(
+        applyError("[estimator]\nrobust = true\nrobustt = 1\n", c),
+        "test.toml:3: estimator.robustt: unknown key (allowed in [estimator]: priors, "
+        "model, variance, robust, outlier_weight, outlier_height_range_m, partial_visibility, "
+        "partial_weight, min_sigma_m, weighting, use_non_upright, min_detection_score, "
+        "max_features_per_box, compensate_roll, propagate_variance, box_edge_sigma_px, "
+        "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
+        "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
     EXPECT_EQ(applyError("\n[estimatr]\n", c),
               "test.toml:2: estimatr: unknown section (allowed: source, tracker, detector, "
-              "detection, estimator, camera, gpio, pipeline, socket, log)");
+              "detection, estimator, objects, camera, gpio, pipeline, socket, log)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 0\n", c),
               "test.toml:2: detection.every_frames: must be an integer in [1, 100000] (got 0)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 2.5\n", c),
