@@ -110,6 +110,8 @@ const char* toString(Command command) {
             return "posterior";
         case Command::kSetGravity:
             return "set_gravity";
+        case Command::kObjects:
+            return "objects";
     }
     return "";
 }
@@ -252,6 +254,68 @@ void appendPosterior(std::string& out, const PosteriorSnapshot& p) {
     out += "}\n";
 }
 
+void appendObjectMembers(std::string& out, const ObjectReport& o, std::string_view class_key,
+                         int digits) {
+    const bool anchored = o.state != core::ObjectState::kTentative;
+    out += R"("id":)";
+    appendJsonInt(out, o.id);
+    key(out, class_key);
+    appendJsonString(out, o.className());
+    key(out, "state");
+    appendJsonString(out, core::toString(o.state));
+    key(out, "anchor");
+    if (anchored) {
+        out += '[';
+        appendJsonNumber(out, o.anchor[0], digits);
+        out += ',';
+        appendJsonNumber(out, o.anchor[1], digits);
+        out += ',';
+        appendJsonNumber(out, o.anchor[2], digits);
+        out += ']';
+    } else {
+        out += "null";
+    }
+    key(out, "anchor_rel_sigma");
+    appendJsonNumberOr(out, anchored, o.anchor_rel_sigma, digits);
+    key(out, "detections");
+    appendJsonInt(out, o.detections);
+    key(out, "views");
+    appendJsonInt(out, o.views);
+    key(out, "views_used");
+    appendJsonInt(out, o.views_used);
+    key(out, "first_frame");
+    appendJsonInt(out, o.first_frame);
+    key(out, "last_frame");
+    appendJsonInt(out, o.last_frame);
+    key(out, "local_estimate");
+    appendJsonNumberOr(out, o.local_estimate != 0, o.local_estimate, digits);
+    key(out, "height_m");
+    appendJsonNumberOr(out, o.has_height, o.height_m, digits);
+    key(out, "height_ci95_m");
+    appendJsonInterval(out, o.has_height, o.height_ci95_lo_m, o.height_ci95_hi_m, digits);
+}
+
+void appendObjects(std::string& out, const ObjectsSnapshot& s) {
+    // 7 significant digits: more than a SLAM anchor or a height carries.
+    constexpr int kDigits = 7;
+    out += R"({"class":"OBJECTS","epoch":)";
+    appendJsonInt(out, s.epoch);
+    key(out, "frame_id");
+    appendJsonInt(out, s.frame_id);
+    key(out, "model");
+    appendJsonString(out, core::toString(s.model));
+    key(out, "objects");
+    out += '[';
+    bool first = true;
+    for (const ObjectReport& o : s.objects) {
+        out += first ? "{" : ",{";
+        first = false;
+        appendObjectMembers(out, o, "class", kDigits);
+        out += '}';
+    }
+    out += "]}\n";
+}
+
 void appendWatch(std::string& out, bool enable) {
     out += R"({"class":"WATCH","enable":)";
     appendBool(out, enable);
@@ -298,6 +362,8 @@ Request parseRequest(std::string_view line) {
         r.command = Command::kStatus;
     } else if (r.cmd == "posterior") {
         r.command = Command::kPosterior;
+    } else if (r.cmd == "objects") {
+        r.command = Command::kObjects;
     } else if (r.cmd == "watch") {
         const auto it = doc.find("enable");
         if (it != doc.end()) {
@@ -332,8 +398,9 @@ Request parseRequest(std::string_view line) {
         }
         r.command = Command::kSetGravity;
     } else {
-        return invalid(r.cmd, "unknown command \"" + r.cmd +
-                                  "\" (known: poll, watch, status, posterior, set_gravity)");
+        return invalid(r.cmd,
+                       "unknown command \"" + r.cmd +
+                           "\" (known: poll, watch, status, posterior, objects, set_gravity)");
     }
     return r;
 }

@@ -1,7 +1,9 @@
 #include <algorithm>
 #include <cerrno>
+#include <cstddef>
 #include <ctime>
 #include <sys/eventfd.h>
+#include <type_traits>
 #include <unistd.h>
 
 #include <scaled/daemon/report.h>
@@ -45,6 +47,25 @@ void StageTiming::add(double ms) {
     max_ms = std::max(max_ms, ms);
 }
 
+// publishObjects() copies within reserved storage only while this holds.
+static_assert(std::is_trivially_copyable_v<ObjectReport>);
+
+std::string_view ObjectReport::className() const {
+    return {class_name.data(), std::find(class_name.begin(), class_name.end(), '\0')};
+}
+
+void ObjectReport::setClassName(std::string_view name) {
+    std::size_t n = std::min(name.size(), class_name.size() - 1);
+    if (n < name.size()) {
+        // Cut before a continuation byte (10xxxxxx): no half character.
+        while (n > 0 && (static_cast<unsigned char>(name[n]) & 0xC0U) == 0x80U) {
+            --n;
+        }
+    }
+    std::copy_n(name.begin(), n, class_name.begin());
+    std::fill(class_name.begin() + static_cast<std::ptrdiff_t>(n), class_name.end(), '\0');
+}
+
 std::int64_t monotonicNowNs() {
     timespec ts{};
     clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -72,6 +93,12 @@ void ReportHub::publishScale(const ScaleReport& report, std::span<const double> 
             // A new map: the old posterior is about a scale that no longer exists.
             has_posterior_ = false;
             posterior_.epoch = report.epoch;
+        }
+        if (report.epoch != objects_.epoch) {
+            // ... and the old objects are anchored in a map that no longer exists.
+            objects_.objects.clear();
+            objects_.epoch = report.epoch;
+            objects_.frame_id = -1;
         }
         if (!grid_d.empty() && grid_d.size() == log_p.size() &&
             grid_d.size() <= posterior_.d.capacity()) {
@@ -101,6 +128,25 @@ void ReportHub::publishLogStatus(const LogStatus& status) {
     log_status_ = status;
 }
 
+void ReportHub::setObjectModel(core::EstimatorModel model, std::size_t max_objects) {
+    const std::lock_guard lock(mutex_);
+    objects_.model = model;
+    objects_.objects.clear();
+    objects_.objects.reserve(max_objects);
+}
+
+void ReportHub::publishObjects(const ObjectsSnapshot& objects) {
+    const std::lock_guard lock(mutex_);
+    objects_.epoch = objects.epoch;
+    objects_.frame_id = objects.frame_id;
+    objects_.model = objects.model;
+    // Within the reserved capacity: assign() of trivially copyable entries
+    // does not allocate.
+    const std::size_t n = std::min(objects.objects.size(), objects_.objects.capacity());
+    objects_.objects.assign(objects.objects.begin(),
+                            objects.objects.begin() + static_cast<std::ptrdiff_t>(n));
+}
+
 ScaleReport ReportHub::scale() const {
     const std::lock_guard lock(mutex_);
     return scale_;
@@ -123,6 +169,14 @@ bool ReportHub::posterior(PosteriorSnapshot& out) const {
     }
     out = posterior_;
     return true;
+}
+
+void ReportHub::objects(ObjectsSnapshot& out) const {
+    const std::lock_guard lock(mutex_);
+    out.epoch = objects_.epoch;
+    out.frame_id = objects_.frame_id;
+    out.model = objects_.model;
+    out.objects.assign(objects_.objects.begin(), objects_.objects.end());
 }
 
 void ReportHub::consumeWake() const {

@@ -69,6 +69,7 @@ struct SocketService::Loop {
     ScaleReport latest;      // the report the watchers saw last
     std::uint64_t seen_seq = 0;
     PosteriorSnapshot posterior;
+    ObjectsSnapshot objects;  // the hub's table, copied for an OBJECTS reply
     bool accept_paused = false;
 
     void run();
@@ -317,6 +318,10 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
                 posterior.log_p.clear();
             }
             appendPosterior(reply, posterior);
+            break;
+        case Command::kObjects:
+            svc.hub_.objects(objects);
+            appendObjects(reply, objects);
             break;
         case Command::kSetGravity:
             svc.hub_.requestGravity(core::Vec3(static_cast<core::Scalar>(req.down[0]),

@@ -52,7 +52,53 @@ TEST(Protocol, Version) {
     appendVersion(out, "0.1.0");
     EXPECT_EQ(out,
               "{\"class\":\"VERSION\",\"release\":\"0.1.0\",\"proto_major\":1,"
-              "\"proto_minor\":2}\n");
+              "\"proto_minor\":3}\n");
+}
+
+// Three objects, one of each state: what OBJECTS and the field log's OBJECT
+// lines are tested with.
+ObjectsSnapshot sampleObjects() {
+    ObjectsSnapshot s;
+    s.epoch = 2;
+    s.frame_id = 450;
+    s.model = core::EstimatorModel::kObject;
+    ObjectReport used;
+    used.id = 3;
+    used.setClassName("chair");
+    used.state = core::ObjectState::kUsed;
+    used.anchor = {0.4123456789, -0.125, 2.5};
+    used.anchor_rel_sigma = 0.0431;
+    used.detections = 12;
+    used.views = 10;
+    used.views_used = 9;
+    used.first_frame = 120;
+    used.last_frame = 450;
+    used.local_estimate = 1.2101;
+    used.has_height = true;
+    used.height_m = 0.87;
+    used.height_ci95_lo_m = 0.82;
+    used.height_ci95_hi_m = 0.93;
+    ObjectReport anchored;
+    anchored.id = 5;
+    anchored.setClassName("potted plant");
+    anchored.state = core::ObjectState::kAnchored;
+    anchored.anchor = {1, 2, 3};
+    anchored.anchor_rel_sigma = 0.25;
+    anchored.detections = 3;
+    anchored.views = 3;
+    anchored.first_frame = 300;
+    anchored.last_frame = 440;
+    ObjectReport tentative;
+    tentative.id = 7;
+    tentative.setClassName("cup \"a\"");
+    tentative.anchor = {9, 9, 9};  // not valid while tentative: not written
+    tentative.anchor_rel_sigma = 0.5;
+    tentative.detections = 1;
+    tentative.views = 1;
+    tentative.first_frame = 450;
+    tentative.last_frame = 450;
+    s.objects = {used, anchored, tentative};
+    return s;
 }
 
 TEST(Protocol, ScaleWithAScale) {
@@ -217,6 +263,102 @@ TEST(Protocol, StageTimingMeanAndMax) {
     EXPECT_EQ(t.samples, 2101U);
 }
 
+// OBJECTS (proto_minor 3) with the paper model: no table, the model says so.
+TEST(Protocol, ObjectsOfThePaperModel) {
+    std::string out;
+    appendObjects(out, ObjectsSnapshot{});
+    EXPECT_EQ(out,
+              "{\"class\":\"OBJECTS\",\"epoch\":0,\"frame_id\":-1,\"model\":\"paper\","
+              "\"objects\":[]}\n");
+}
+
+// OBJECTS: every member of every object; anchors while tentative, local
+// estimates of 0 and heights of unused objects are null; numbers with 7
+// significant digits; names escaped.
+TEST(Protocol, ObjectsHaveEveryMember) {
+    std::string out;
+    appendObjects(out, sampleObjects());
+    const json j = parseLine(out);
+    EXPECT_EQ(j["class"], "OBJECTS");
+    EXPECT_EQ(j["epoch"], 2);
+    EXPECT_EQ(j["frame_id"], 450);
+    EXPECT_EQ(j["model"], "object");
+    ASSERT_TRUE(j["objects"].is_array()) << out;
+    ASSERT_EQ(j["objects"].size(), 3U) << out;
+    EXPECT_EQ(j["objects"][0], json::parse(R"({"id":3,"class":"chair","state":"used",
+        "anchor":[0.4123457,-0.125,2.5],"anchor_rel_sigma":0.0431,"detections":12,"views":10,
+        "views_used":9,"first_frame":120,"last_frame":450,"local_estimate":1.2101,
+        "height_m":0.87,"height_ci95_m":[0.82,0.93]})"));
+    EXPECT_EQ(j["objects"][1], json::parse(R"({"id":5,"class":"potted plant","state":"anchored",
+        "anchor":[1,2,3],"anchor_rel_sigma":0.25,"detections":3,"views":3,"views_used":0,
+        "first_frame":300,"last_frame":440,"local_estimate":null,"height_m":null,
+        "height_ci95_m":null})"));
+    EXPECT_EQ(j["objects"][2], json::parse(R"({"id":7,"class":"cup \"a\"","state":"tentative",
+        "anchor":null,"anchor_rel_sigma":null,"detections":1,"views":1,"views_used":0,
+        "first_frame":450,"last_frame":450,"local_estimate":null,"height_m":null,
+        "height_ci95_m":null})"));
+    // The members in their documented order.
+    EXPECT_NE(out.find(R"("objects":[{"id":3,"class":"chair","state":"used","anchor":[)"),
+              std::string::npos)
+        << out;
+}
+
+// Class names live in fixed storage: a long one is cut to 31 bytes, never in
+// the middle of a UTF-8 character.
+TEST(Protocol, ObjectClassNamesAreCut) {
+    ObjectReport o;
+    o.setClassName("chair");
+    EXPECT_EQ(o.className(), "chair");
+    const std::string longer(40, 'x');
+    o.setClassName(longer);
+    EXPECT_EQ(o.className(), longer.substr(0, kObjectClassChars - 1));
+    // 30 ASCII bytes, then a 2-byte character that would end at byte 32.
+    o.setClassName(std::string(30, 'a') + "\xC3\xA9z");
+    EXPECT_EQ(o.className(), std::string(30, 'a'));
+    o.setClassName(std::string(29, 'a') + "\xC3\xA9z");
+    EXPECT_EQ(o.className(), std::string(29, 'a') + "\xC3\xA9");
+    o.setClassName("");
+    EXPECT_EQ(o.className(), "");
+}
+
+// The hub keeps the table of the latest update within the size it was given,
+// and empties it when a report of another epoch (a new map) is published.
+TEST(Protocol, HubObjectTable) {
+    ReportHub hub(4);
+    ObjectsSnapshot got;
+    hub.objects(got);
+    EXPECT_EQ(got.model, core::EstimatorModel::kPaper);
+    EXPECT_EQ(got.frame_id, -1);
+    EXPECT_TRUE(got.objects.empty());
+
+    hub.setObjectModel(core::EstimatorModel::kObject, 2);
+    ObjectsSnapshot three = sampleObjects();
+    hub.objects(got);
+    EXPECT_EQ(got.model, core::EstimatorModel::kObject);
+    ScaleReport r;
+    r.epoch = 2;
+    hub.publishScale(r);
+    hub.publishObjects(three);  // three entries, room for two
+    hub.objects(got);
+    EXPECT_EQ(got.epoch, 2U);
+    EXPECT_EQ(got.frame_id, 450);
+    ASSERT_EQ(got.objects.size(), 2U);
+    EXPECT_EQ(got.objects[0].id, 3);
+    EXPECT_EQ(got.objects[1].className(), "potted plant");
+
+    r.frame_id = 460;
+    hub.publishScale(r);  // same epoch: the table stays
+    hub.objects(got);
+    EXPECT_EQ(got.objects.size(), 2U);
+    r.epoch = 3;
+    hub.publishScale(r);  // a new map
+    hub.objects(got);
+    EXPECT_EQ(got.epoch, 3U);
+    EXPECT_EQ(got.frame_id, -1);
+    EXPECT_TRUE(got.objects.empty());
+    EXPECT_EQ(got.model, core::EstimatorModel::kObject);
+}
+
 TEST(Protocol, Posterior) {
     std::string out;
     appendPosterior(out, PosteriorSnapshot{});
@@ -286,6 +428,8 @@ TEST(Protocol, ParsesEveryCommand) {
     EXPECT_EQ(parseRequest(R"({"cmd":"poll"})").command, Command::kPoll);
     EXPECT_EQ(parseRequest(R"({"cmd":"status"})").command, Command::kStatus);
     EXPECT_EQ(parseRequest(R"({"cmd":"posterior","extra":[1,2]})").command, Command::kPosterior);
+    EXPECT_EQ(parseRequest(R"({"cmd":"objects"})").command, Command::kObjects);
+    EXPECT_STREQ(toString(Command::kObjects), "objects");
     Request w = parseRequest(R"( {"cmd":"watch"} )");
     EXPECT_EQ(w.command, Command::kWatch);
     EXPECT_TRUE(w.enable);
@@ -315,7 +459,8 @@ TEST(Protocol, RejectsBadRequests) {
         {"{}", "request has no \"cmd\"", ""},
         {"{\"cmd\":3}", "\"cmd\" must be a string", ""},
         {"{\"cmd\":\"fly\"}",
-         "unknown command \"fly\" (known: poll, watch, status, posterior, set_gravity)", "fly"},
+         "unknown command \"fly\" (known: poll, watch, status, posterior, objects, set_gravity)",
+         "fly"},
         {"{\"cmd\":\"watch\",\"enable\":1}", "\"enable\" must be true or false", "watch"},
         {"{\"cmd\":\"set_gravity\"}", "\"down\" must be an array of 3 finite numbers, not all zero",
          "set_gravity"},
@@ -367,6 +512,8 @@ TEST(ProtocolSamples, Write) {
     p.d = {0.5, 1.0};
     p.log_p = {0, -std::numeric_limits<double>::infinity()};
     appendPosterior(out, p);
+    appendObjects(out, ObjectsSnapshot{});
+    appendObjects(out, sampleObjects());
     appendWatch(out, true);
     appendWatch(out, false);
     appendAck(out, "set_gravity");

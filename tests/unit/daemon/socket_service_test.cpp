@@ -177,7 +177,7 @@ TEST_F(SocketServiceTest, SendsVersionOnConnect) {
     TestClient c(config_.path);
     const json v = c.readJson();
     EXPECT_EQ(v, json::parse(R"({"class":"VERSION","release":"0.1.0","proto_major":1,
-        "proto_minor":2})"));
+        "proto_minor":3})"));
     EXPECT_EQ(svc->stats().accepted, 1U);
     EXPECT_EQ(svc->stats().connected, 1);
 }
@@ -303,6 +303,63 @@ TEST_F(SocketServiceTest, StatusAndPosterior) {
     EXPECT_EQ(p["epoch"], 1);
     EXPECT_EQ(p["d"], json(d));
     EXPECT_EQ(p["log_p"], json(lp));
+}
+
+// OBJECTS: the hub's table of the latest update, the model in use; a new
+// epoch empties it.
+TEST_F(SocketServiceTest, ObjectsReplyCarriesThePublishedTable) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    EXPECT_EQ(c->request(R"({"cmd":"objects"})"),
+              json::parse(R"({"class":"OBJECTS","epoch":0,"frame_id":-1,"model":"paper",
+                  "objects":[]})"));
+
+    hub_.setObjectModel(core::EstimatorModel::kObject, 8);
+    hub_.publishScale(reportAt(42));  // epoch 1
+    ObjectsSnapshot objects;
+    objects.epoch = 1;
+    objects.frame_id = 42;
+    objects.model = core::EstimatorModel::kObject;
+    for (int id : {2, 4}) {
+        ObjectReport& o = objects.objects.emplace_back();
+        o.id = id;
+        o.setClassName(id == 2 ? "chair" : "tv");
+        o.state = id == 2 ? core::ObjectState::kUsed : core::ObjectState::kTentative;
+        o.anchor = {0.5, -1, 2};
+        o.anchor_rel_sigma = 0.05;
+        o.detections = 3 * id;
+        o.views = 2 * id;
+        o.views_used = id == 2 ? 4 : 0;
+        o.first_frame = 10;
+        o.last_frame = 42;
+        o.local_estimate = id == 2 ? 1.25 : 0;
+        o.has_height = id == 2;
+        o.height_m = 0.875;
+        o.height_ci95_lo_m = 0.75;
+        o.height_ci95_hi_m = 1;
+    }
+    hub_.publishObjects(objects);
+    const json j = c->request(R"({"cmd":"objects"})");
+    EXPECT_EQ(j["class"], "OBJECTS");
+    EXPECT_EQ(j["epoch"], 1);
+    EXPECT_EQ(j["frame_id"], 42);
+    EXPECT_EQ(j["model"], "object");
+    ASSERT_EQ(j["objects"].size(), 2U) << j.dump();
+    EXPECT_EQ(j["objects"][0], json::parse(R"({"id":2,"class":"chair","state":"used",
+        "anchor":[0.5,-1,2],"anchor_rel_sigma":0.05,"detections":6,"views":4,"views_used":4,
+        "first_frame":10,"last_frame":42,"local_estimate":1.25,"height_m":0.875,
+        "height_ci95_m":[0.75,1]})"));
+    EXPECT_EQ(j["objects"][1]["class"], "tv");
+    EXPECT_TRUE(j["objects"][1]["anchor"].is_null());
+    EXPECT_TRUE(j["objects"][1]["height_m"].is_null());
+
+    ScaleReport next = reportAt(50);
+    next.epoch = 2;  // a new map: its objects are gone
+    hub_.publishScale(next);
+    EXPECT_EQ(c->request(R"({"cmd":"objects"})"),
+              json::parse(R"({"class":"OBJECTS","epoch":2,"frame_id":-1,"model":"object",
+                  "objects":[]})"));
 }
 
 TEST_F(SocketServiceTest, SetGravityIsNormalisedAndForwarded) {

@@ -19,7 +19,7 @@
 namespace scaled::daemon {
 
 inline constexpr int kProtoMajor = 1;
-inline constexpr int kProtoMinor = 2;  // 1: STATUS.camera; 2: STATUS.timing
+inline constexpr int kProtoMinor = 3;  // 1: STATUS.camera; 2: STATUS.timing; 3: OBJECTS
 
 // The service's own client counters, for STATUS.
 struct ClientCounts {
@@ -30,13 +30,23 @@ struct ClientCounts {
     std::uint64_t detached = 0;
 };
 
-// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":2}
+// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":3}
 void appendVersion(std::string& out, std::string_view release);
 // SCALE; age_s is measured against `now_mono_ns` (CLOCK_MONOTONIC).
 void appendScale(std::string& out, const ScaleReport& report, std::int64_t now_mono_ns);
 void appendStatus(std::string& out, const PipelineStatus& status, const LogStatus& log,
                   const ClientCounts& clients);
 void appendPosterior(std::string& out, const PosteriorSnapshot& posterior);
+// OBJECTS (proto_minor 3): the object table of the latest scale update.
+void appendObjects(std::string& out, const ObjectsSnapshot& objects);
+// The members of one object, `"id":3,"<class_key>":"chair","state":...`
+// without braces: the entries of OBJECTS (class_key "class") and the field
+// log's OBJECT lines (class_key "object_class"). Numbers with up to `digits`
+// significant digits; anchor and anchor_rel_sigma are null while the object
+// is tentative, local_estimate when it is 0, height_m and height_ci95_m
+// without a height.
+void appendObjectMembers(std::string& out, const ObjectReport& object, std::string_view class_key,
+                         int digits);
 void appendWatch(std::string& out, bool enable);
 void appendAck(std::string& out, std::string_view cmd);
 // ERROR; `cmd` is included when non-empty.
@@ -51,6 +61,7 @@ enum class Command : std::uint8_t {
     kStatus,
     kPosterior,
     kSetGravity,
+    kObjects,
 };
 const char* toString(Command command);
 

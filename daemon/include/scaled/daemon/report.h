@@ -1,7 +1,7 @@
 #pragma once
 
 // What the daemon tells the outside world: the scale report, the pipeline's
-// health and the posterior grid, and ReportHub, the one place the pipeline
+// health, the posterior grid and the object table, and ReportHub, the one place the pipeline
 // publishes them and every reader (socket, field log, status line, sd_notify)
 // takes them from.
 //
@@ -18,8 +18,11 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include <scaled/core/scale/object_evidence.h>
+#include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/types.h>
 
 namespace scaled::daemon {
@@ -144,6 +147,47 @@ struct PosteriorSnapshot {
     std::vector<double> log_p;  // normalised log density (max 0), same size
 };
 
+// Bytes of an object's class name in ObjectReport, the terminating NUL
+// included: longer names are cut (at a UTF-8 character boundary).
+inline constexpr std::size_t kObjectClassChars = 32;
+
+// One object of the estimator's object table (protocol class OBJECTS, the
+// field log's OBJECT lines): core::ObjectSummary with its class name copied
+// into fixed storage, so a table of them is copied without allocating.
+struct ObjectReport {
+    int id = 0;                                        // stable within the epoch, from 1
+    std::array<char, kObjectClassChars> class_name{};  // NUL-terminated
+    core::ObjectState state = core::ObjectState::kTentative;
+    std::array<double, 3> anchor{0, 0, 0};  // p_AinW, SLAM units (not valid while tentative)
+    double anchor_rel_sigma = 0;            // depth std / distance of the anchor
+    int detections = 0;                     // associated so far
+    int views = 0;                          // kept
+    int views_used = 0;                     // in its likelihood
+    std::int64_t first_frame = 0;
+    std::int64_t last_frame = 0;  // the latest frame that gave it a view
+    double local_estimate = 0;    // this object's own scale (m per SLAM unit); 0: none
+    // Its height at the posterior's MAP and 95% bounds, metres; has_height is
+    // false unless the object is used and the posterior has evidence.
+    bool has_height = false;
+    double height_m = 0;
+    double height_ci95_lo_m = 0;
+    double height_ci95_hi_m = 0;
+
+    // class_name as a view (up to its NUL).
+    [[nodiscard]] std::string_view className() const;
+    // Copies `name` into class_name, cut to kObjectClassChars - 1 bytes
+    // without splitting a UTF-8 sequence.
+    void setClassName(std::string_view name);
+};
+
+// The object table after the latest scale update (protocol class OBJECTS).
+struct ObjectsSnapshot {
+    std::uint64_t epoch = 0;
+    std::int64_t frame_id = -1;  // frame of the scale update it was taken at (-1: none this epoch)
+    core::EstimatorModel model = core::EstimatorModel::kPaper;
+    std::vector<ObjectReport> objects;  // empty with the paper model
+};
+
 class ReportHub {
 public:
     // grid_bins: size of the posterior grid (buffers are reserved for it).
@@ -162,6 +206,14 @@ public:
                       std::span<const double> log_p = {});
     void publishStatus(const PipelineStatus& status);
     void publishLogStatus(const LogStatus& status);
+    // The estimator's model and the size of the object table (max_objects;
+    // 0 with the paper model). Pipeline::create calls it before any thread
+    // runs; it allocates, publishObjects() then does not.
+    void setObjectModel(core::EstimatorModel model, std::size_t max_objects);
+    // The object table after a scale update; entries beyond the size given
+    // to setObjectModel() are left out. A later publishScale() of another
+    // epoch empties it (its objects belonged to the old map).
+    void publishObjects(const ObjectsSnapshot& objects);
 
     // --- readers ------------------------------------------------------------
     [[nodiscard]] ScaleReport scale() const;
@@ -169,6 +221,9 @@ public:
     [[nodiscard]] LogStatus logStatus() const;
     // false when no posterior was published yet.
     bool posterior(PosteriorSnapshot& out) const;
+    // The latest object table (empty before the first update of the epoch);
+    // `out` keeps its capacity when it suffices.
+    void objects(ObjectsSnapshot& out) const;
     // Increases with every publishScale().
     [[nodiscard]] std::uint64_t scaleSequence() const { return scale_seq_.load(); }
 
@@ -192,6 +247,7 @@ private:
     LogStatus log_status_;
     PosteriorSnapshot posterior_;
     bool has_posterior_ = false;
+    ObjectsSnapshot objects_;
     std::optional<core::Vec3> gravity_request_;
     std::atomic<std::uint64_t> scale_seq_{0};
     int wake_fd_ = -1;
