@@ -4,6 +4,7 @@
 // the SIGHUP reload keeping the posterior. Waiting is on the hub's eventfd
 // with a bounded timeout, never a sleep.
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -36,6 +37,7 @@ public:
     void onScale(const Scale& s) override {
         const std::lock_guard lock(mutex_);
         scales_.push_back(*s.report);
+        objects_.emplace_back(s.objects.begin(), s.objects.end());
     }
     void onState(DaemonState from, DaemonState to, std::uint64_t epoch, std::int64_t frame_id,
                  const char* /*reason*/) override {
@@ -65,12 +67,18 @@ public:
         const std::lock_guard lock(mutex_);
         return errors_;
     }
+    // The object table of each onScale, in the order of scales().
+    std::vector<std::vector<ObjectReport>> objects() const {
+        const std::lock_guard lock(mutex_);
+        return objects_;
+    }
 
 private:
     mutable std::mutex mutex_;
     std::vector<ScaleReport> scales_;
     std::vector<StateChange> states_;
     std::vector<std::string> errors_;
+    std::vector<std::vector<ObjectReport>> objects_;
 };
 
 // A detector that runs the sim detector only when the test lets it: it
@@ -186,6 +194,13 @@ TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
     ASSERT_TRUE(hub.posterior(post));
     EXPECT_EQ(post.d.size(), post.log_p.size());
     EXPECT_EQ(post.frame_id, last.frame_id);
+    // The paper model has no object table: OBJECTS is empty and says so.
+    ObjectsSnapshot objects;
+    hub.objects(objects);
+    EXPECT_EQ(objects.model, core::EstimatorModel::kPaper);
+    EXPECT_EQ(objects.epoch, last.epoch);
+    EXPECT_EQ(objects.frame_id, last.frame_id);
+    EXPECT_TRUE(objects.objects.empty());
 
     // initialising -> tracking (epoch 1) -> converging (-> converged maybe).
     const auto states = rec.states();
@@ -259,6 +274,102 @@ TEST(Pipeline, StatusReportsStageTimes) {
     EXPECT_GT(stage_sum, 0.0);
     EXPECT_LE(stage_sum, t.tracking.mean_ms * 1.05 + 0.01);
     EXPECT_DOUBLE_EQ(st.tracking_ms_mean, t.tracking.mean_ms);
+}
+
+// estimator.model = "object": after every scale update the detection thread
+// publishes the object table (OBJECTS) with the update's epoch and frame,
+// and hands the same table to the events (the field log's OBJECT lines).
+TEST(Pipeline, PublishesTheObjectTable) {
+    DaemonConfig c = config(AtEnd::kExit);
+    c.pipeline.estimator.model = core::EstimatorModel::kObject;
+    // The sim's camera mostly turns: with the default anchor thresholds no
+    // object is anchored well enough within a short run. This test is about
+    // the publication, so it takes looser anchors to see used objects.
+    c.pipeline.estimator.objects.max_anchor_rel_sigma = core::Scalar(0.6);
+    c.pipeline.estimator.objects.min_parallax_deg = 1;
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    Recorder rec;
+    PipelineParts pp = parts(10.0, true);  // 300 frames
+    std::vector<std::string> classes;
+    for (const auto& prior : pp.priors.priors()) {
+        classes.push_back(prior.className());
+    }
+    auto p = Pipeline::create(c, std::move(pp), hub, &rec);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ObjectsSnapshot before;
+    hub.objects(before);
+    EXPECT_EQ(before.model, core::EstimatorModel::kObject);  // known before the first update
+    EXPECT_TRUE(before.objects.empty());
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    (*p)->stop();
+    ASSERT_FALSE((*p)->failure().has_value());
+    ASSERT_EQ(hub.status().epoch, 1U);
+
+    const ScaleReport last = hub.scale();
+    ObjectsSnapshot got;
+    hub.objects(got);
+    EXPECT_EQ(got.model, core::EstimatorModel::kObject);
+    EXPECT_EQ(got.epoch, last.epoch);
+    EXPECT_EQ(got.frame_id, last.frame_id);
+    ASSERT_FALSE(got.objects.empty());
+    EXPECT_LE(got.objects.size(),
+              static_cast<std::size_t>(c.pipeline.estimator.objects.max_objects));
+    std::vector<int> ids;
+    int used = 0;
+    for (const ObjectReport& o : got.objects) {
+        SCOPED_TRACE("object " + std::to_string(o.id));
+        EXPECT_GT(o.id, 0);
+        ids.push_back(o.id);
+        EXPECT_NE(std::find(classes.begin(), classes.end(), std::string(o.className())),
+                  classes.end())
+            << o.className();
+        EXPECT_LE(o.first_frame, o.last_frame);
+        EXPECT_LE(o.last_frame, got.frame_id);
+        EXPECT_LE(o.views_used, o.views);
+        EXPECT_GE(o.detections, 1);
+        if (o.has_height) {
+            EXPECT_EQ(o.state, core::ObjectState::kUsed);
+            EXPECT_LE(o.height_ci95_lo_m, o.height_m);
+            EXPECT_GE(o.height_ci95_hi_m, o.height_m);
+        }
+        if (o.state == core::ObjectState::kUsed) {
+            ++used;
+            EXPECT_GT(o.views_used, 0);
+            EXPECT_GT(o.local_estimate, 0.0);
+            EXPECT_TRUE(std::isfinite(o.anchor[0]) && std::isfinite(o.anchor[1]) &&
+                        std::isfinite(o.anchor[2]));
+        }
+    }
+    std::sort(ids.begin(), ids.end());
+    EXPECT_EQ(std::adjacent_find(ids.begin(), ids.end()), ids.end()) << "ids must be unique";
+    EXPECT_GT(used, 0) << "no object was used in " << last.frame_id << " frames";
+    if (last.has_scale) {
+        EXPECT_TRUE(std::any_of(got.objects.begin(), got.objects.end(),
+                                [](const ObjectReport& o) { return o.has_height; }));
+    }
+
+    // The events saw the table of every update; the last one is the hub's.
+    const auto scales = rec.scales();
+    const auto tables = rec.objects();
+    ASSERT_EQ(tables.size(), scales.size());
+    ASSERT_FALSE(tables.empty());
+    ASSERT_EQ(tables.back().size(), got.objects.size());
+    for (std::size_t k = 0; k < got.objects.size(); ++k) {
+        EXPECT_EQ(tables.back()[k].id, got.objects[k].id);
+        EXPECT_EQ(tables.back()[k].last_frame, got.objects[k].last_frame);
+    }
+    // Some update gave views to objects (their last_frame is its frame): the
+    // field log writes those as OBJECT lines.
+    bool viewed = false;
+    for (std::size_t i = 0; i < scales.size(); ++i) {
+        for (const ObjectReport& o : tables[i]) {
+            EXPECT_LE(o.last_frame, scales[i].frame_id);
+            viewed = viewed || o.last_frame == scales[i].frame_id;
+        }
+    }
+    EXPECT_TRUE(viewed);
 }
 
 // A replay that loops: the map cannot continue across the jump, so a new map

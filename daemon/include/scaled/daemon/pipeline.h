@@ -87,6 +87,10 @@ public:
         std::span<const core::ObservationRecord> records;
         std::span<const core::Detection> detections_used;  // records index into this
         bool paper_variance = false;  // sigma_D is the paper's (else propagated)
+        // The object table after this update (estimator.model "object"; empty
+        // with the paper model). An object whose last_frame is the report's
+        // frame_id received a view in this update.
+        std::span<const ObjectReport> objects;
     };
 
     // Every LogConfig::frame_every tracked frames.
@@ -113,6 +117,14 @@ struct PipelineParts {
     // (nothing dropped, deterministic). Else frames are dropped when late.
     bool lossless = false;
 };
+
+// The estimator's object table into out.objects (cleared first), at most its
+// capacity: with storage reserved for the table (ScaleEstimator::objects()->
+// capacity()) nothing is allocated. Heights at `posterior` (the estimator's
+// summary). Empty with the paper model; epoch, frame_id and model are left
+// to the caller.
+void collectObjects(const core::ScaleEstimator& estimator, const core::ScaleSummary& posterior,
+                    ObjectsSnapshot& out);
 
 class Pipeline {
 public:
@@ -241,6 +253,9 @@ private:
     // Posterior copy in doubles for the hub (detection thread).
     std::vector<double> grid_d_;
     std::vector<double> log_p_;
+    // The object table for the hub and the log (detection thread; reserved
+    // for the estimator's table in create()).
+    ObjectsSnapshot objects_;
 
     std::thread capture_thread_;
     std::thread tracking_thread_;
