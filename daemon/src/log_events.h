@@ -92,6 +92,18 @@ public:
         }
         e.obs = std::span<const LogObservation>(obs_.data(), n);
         log_.scaleEvent(e);
+        // The objects this update gave a view to.
+        for (const ObjectReport& o : s.objects) {
+            if (o.last_frame != e.frame_id) {
+                continue;
+            }
+            ObjectEvent oe;
+            oe.frame_id = e.frame_id;
+            oe.t_ns = e.t_ns;
+            oe.epoch = e.epoch;
+            oe.object = &o;
+            log_.objectEvent(oe);
+        }
     }
 
     void onState(DaemonState from, DaemonState to, std::uint64_t epoch, std::int64_t frame_id,

@@ -10,6 +10,7 @@
 
 #include <scaled/daemon/json_write.h>
 #include <scaled/daemon/log_service.h>
+#include <scaled/daemon/protocol.h>
 #include <scaled/drivers/field_log.h>
 
 namespace scaled::daemon {
@@ -186,6 +187,16 @@ void formatEvent(const ScaleEvent& event, std::string& out) {
         out += '}';
     }
     out += "]}";
+}
+
+void formatEvent(const ObjectEvent& event, std::string& out) {
+    begin(out, "OBJECT", event.mono_ns);
+    frameFields(out, event.frame_id, event.t_ns, event.epoch);
+    if (event.object != nullptr) {
+        out += ',';
+        appendObjectMembers(out, *event.object, "object_class", kLogDigits);
+    }
+    out += '}';
 }
 
 void formatEvent(const StateEvent& event, std::string& out) {
@@ -448,6 +459,10 @@ bool LogService::detectionEvent(const DetectionEvent& event) {
     return append(lineBuffer());
 }
 bool LogService::scaleEvent(const ScaleEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::objectEvent(const ObjectEvent& event) {
     formatEvent(event, lineBuffer());
     return append(lineBuffer());
 }

@@ -20,6 +20,7 @@
 #include <scaled/daemon/log_service.h>
 #include <scaled/drivers/field_log.h>
 
+#include "log_events.h"
 #include "temp_dir.h"
 
 namespace scaled::daemon {
@@ -364,6 +365,100 @@ TEST(LogService, ScaleLinesHaveNullsBeforeTheFirstScaleAndCapObservations) {
     EXPECT_DOUBLE_EQ(j["obs"][1]["sigma_D"].get<double>(), 0.02);
     EXPECT_DOUBLE_EQ(j["obs"][1]["local"].get<double>(), 1.2);
     EXPECT_DOUBLE_EQ(j["obs"][1]["weight"].get<double>(), 0.5);
+}
+
+ObjectReport objectAt(int id, const char* name, core::ObjectState state, std::int64_t last_frame) {
+    ObjectReport o;
+    o.id = id;
+    o.setClassName(name);
+    o.state = state;
+    o.anchor = {0.123456789012, -1.5, 2.25};
+    o.anchor_rel_sigma = 0.0625;
+    o.detections = 2 * id;
+    o.views = id;
+    o.views_used = state == core::ObjectState::kUsed ? id : 0;
+    o.first_frame = 100;
+    o.last_frame = last_frame;
+    o.local_estimate = state == core::ObjectState::kUsed ? 1.234567891234 : 0;
+    o.has_height = state == core::ObjectState::kUsed;
+    o.height_m = 0.75;
+    o.height_ci95_lo_m = 0.7;
+    o.height_ci95_hi_m = 0.8125;
+    return o;
+}
+
+// OBJECT: the frame, then the members of an OBJECTS entry with the class as
+// "object_class" (the line's own "class" is OBJECT); 9 significant digits.
+TEST(LogService, ObjectLinesHaveTheMembersOfAnObjectsEntry) {
+    const ObjectReport used = objectAt(3, "chair", core::ObjectState::kUsed, 450);
+    std::string out;
+    formatEvent(
+        ObjectEvent{
+            .frame_id = 450, .t_ns = 15'000'000'000, .epoch = 2, .object = &used, .mono_ns = 77},
+        out);
+    EXPECT_EQ(out.find('\n'), std::string::npos);
+    EXPECT_EQ(parse(out), json::parse(R"({"class":"OBJECT","mono_ns":77,"frame_id":450,
+        "t_ns":15000000000,"epoch":2,"id":3,"object_class":"chair","state":"used",
+        "anchor":[0.123456789,-1.5,2.25],"anchor_rel_sigma":0.0625,"detections":6,"views":3,
+        "views_used":3,"first_frame":100,"last_frame":450,"local_estimate":1.23456789,
+        "height_m":0.75,"height_ci95_m":[0.7,0.8125]})"));
+
+    const ObjectReport tentative = objectAt(4, "cup", core::ObjectState::kTentative, 450);
+    formatEvent(ObjectEvent{.frame_id = 450, .epoch = 2, .object = &tentative}, out);
+    const json j = parse(out);
+    EXPECT_EQ(j["object_class"], "cup");
+    EXPECT_EQ(j["state"], "tentative");
+    for (const char* k :
+         {"anchor", "anchor_rel_sigma", "local_estimate", "height_m", "height_ci95_m"}) {
+        EXPECT_TRUE(j[k].is_null()) << k;
+    }
+}
+
+// After each SCALE line the field log has one OBJECT line per object that
+// received a view in that update (last_frame = the update's frame), none for
+// the others.
+TEST(LogService, ScaleUpdatesLogTheObjectsTheyViewed) {
+    TempDir dir("log");
+    ReportHub hub(16);
+    auto log = make(configIn(dir.path()), hub);
+    ASSERT_TRUE(log);
+    LogEvents events(*log);
+    ScaleReport r;
+    r.frame_id = 450;
+    r.t_ns = 15'000'000'000;
+    r.epoch = 2;
+    r.state = DaemonState::kConverging;
+    const std::vector<ObjectReport> objects = {
+        objectAt(3, "chair", core::ObjectState::kUsed, 450),
+        objectAt(5, "tv", core::ObjectState::kAnchored, 440),
+        objectAt(7, "cup", core::ObjectState::kTentative, 450),
+    };
+    PipelineEvents::Scale e;
+    e.report = &r;
+    e.objects = objects;
+    events.onScale(e);
+    r.frame_id = 460;
+    e.objects = {};  // the paper model: no table, no OBJECT lines
+    events.onScale(e);
+    ASSERT_TRUE(log->flush());
+
+    const auto contents = readAll(dir.path());
+    std::vector<json> lines;
+    for (const auto& l : contents.lines) {
+        lines.push_back(parse(l.text));
+    }
+    ASSERT_EQ(lines.size(), 4U);
+    EXPECT_EQ(lines[0]["class"], "SCALE");
+    EXPECT_EQ(lines[1]["class"], "OBJECT");
+    EXPECT_EQ(lines[1]["id"], 3);
+    EXPECT_EQ(lines[1]["frame_id"], 450);
+    EXPECT_EQ(lines[1]["t_ns"], 15'000'000'000);
+    EXPECT_EQ(lines[1]["epoch"], 2);
+    EXPECT_EQ(lines[1]["object_class"], "chair");
+    EXPECT_EQ(lines[2]["class"], "OBJECT");
+    EXPECT_EQ(lines[2]["id"], 7);
+    EXPECT_EQ(lines[3]["class"], "SCALE");
+    EXPECT_EQ(lines[3]["frame_id"], 460);
 }
 
 TEST(LogService, TextIsEscapedIntoValidJson) {

@@ -133,6 +133,21 @@ inline constexpr std::size_t kMaxLoggedObservations = 64;
 // observations); the caller adds new_observations, detections and obs.
 ScaleEvent scaleEventFrom(const ScaleReport& report);
 
+// OBJECT {frame_id, t_ns, epoch, id, object_class, state, anchor|null,
+// anchor_rel_sigma|null, detections, views, views_used, first_frame,
+// last_frame, local_estimate|null, height_m|null, height_ci95_m|null}: one
+// object of the table after a scale update (the members of an OBJECTS entry,
+// protocol.h appendObjectMembers, with its class as "object_class"). The
+// daemon logs, after each SCALE line, the objects that received a view in
+// that update.
+struct ObjectEvent {
+    std::int64_t frame_id = -1;  // the scale update's frame
+    std::int64_t t_ns = 0;
+    std::uint64_t epoch = 0;
+    const ObjectReport* object = nullptr;  // required
+    std::int64_t mono_ns = 0;
+};
+
 // STATE {from, to, epoch, frame_id, reason}
 struct StateEvent {
     DaemonState from = DaemonState::kInitialising;
@@ -158,6 +173,7 @@ void formatEvent(const StopEvent& event, std::string& out);
 void formatEvent(const FrameEvent& event, std::string& out);
 void formatEvent(const DetectionEvent& event, std::string& out);
 void formatEvent(const ScaleEvent& event, std::string& out);
+void formatEvent(const ObjectEvent& event, std::string& out);
 void formatEvent(const StateEvent& event, std::string& out);
 void formatEvent(const ErrorEvent& event, std::string& out);
 
@@ -211,6 +227,7 @@ public:
     bool frameEvent(const FrameEvent& event);
     bool detectionEvent(const DetectionEvent& event);
     bool scaleEvent(const ScaleEvent& event);
+    bool objectEvent(const ObjectEvent& event);
     bool stateEvent(const StateEvent& event);
     bool errorEvent(const ErrorEvent& event);
 
