@@ -3,6 +3,7 @@
 #include "field_log_report.h"
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -35,6 +36,10 @@ const char* const kUpdatesHeader =
     "rel_error,rel_error_window,run";
 const char* const kObservationsHeader =
     "update,frame,observation,class,score,D,sigma_D,local_estimate,weight";
+const char* const kObjectsHeader =
+    "update,frame,t_s,epoch,id,class,state,detections,views,views_used,first_frame,last_frame,"
+    "local_estimate,height_m,height_ci95_lo_m,height_ci95_hi_m,anchor_x,anchor_y,anchor_z,"
+    "anchor_rel_sigma,run";
 
 std::optional<double> number(const json& j, const char* key) {
     const auto it = j.find(key);
@@ -157,6 +162,8 @@ public:
             }
         } else if (cls == "SCALE") {
             scale(j, where);
+        } else if (cls == "OBJECT") {
+            object(j, where);
         }
     }
 
@@ -268,6 +275,7 @@ private:
                     field(number(o, "local"), 6) + "," + field(number(o, "weight"), 4));
             }
         }
+        last_update_ = LastUpdate{update, *frame_id, *ep, run_};
         FieldLogAnalysis::LastScale last;
         last.frame_id = *frame_id;
         last.epoch = static_cast<std::uint64_t>(std::max<std::int64_t>(*ep, 0));
@@ -279,8 +287,61 @@ private:
         a_.last_scale = last;
     }
 
+    // OBJECT: one row of objects.csv. Its update is the SCALE line of the same
+    // run, epoch and frame just before it (empty when that line is missing).
+    void object(const json& j, const std::string& where) {
+        const auto frame_id = integer(j, "frame_id");
+        const auto ep = integer(j, "epoch");
+        const auto id = integer(j, "id");
+        if (!frame_id || !ep || !id) {
+            ++a_.bad_fields;
+            problem(where + ": OBJECT without frame_id, epoch or id (skipped)");
+            return;
+        }
+        epoch(ep);
+        std::string update;
+        if (last_update_ && last_update_->run == run_ && last_update_->epoch == *ep &&
+            last_update_->frame_id == *frame_id) {
+            update = std::to_string(last_update_->index);
+        }
+        double lo = 0;
+        double hi = 0;
+        const bool has95 = interval(j, "height_ci95_m", lo, hi);
+        const auto opt = [](bool has, double v) {
+            return has ? std::optional<double>(v) : std::nullopt;
+        };
+        std::array<std::optional<double>, 3> anchor{};
+        const auto it = j.find("anchor");
+        if (it != j.end() && it->is_array() && it->size() == 3) {
+            for (std::size_t k = 0; k < 3; ++k) {
+                if ((*it)[k].is_number()) {
+                    anchor.at(k) = (*it)[k].get<double>();
+                }
+            }
+        }
+        a_.object_rows.push_back(
+            update + "," + std::to_string(*frame_id) + "," + tSeconds(integer(j, "t_ns")) + "," +
+            std::to_string(*ep) + "," + std::to_string(*id) + "," +
+            csvText(text(j, "object_class")) + "," + csvText(text(j, "state")) + "," +
+            intField(integer(j, "detections")) + "," + intField(integer(j, "views")) + "," +
+            intField(integer(j, "views_used")) + "," + intField(integer(j, "first_frame")) + "," +
+            intField(integer(j, "last_frame")) + "," + field(number(j, "local_estimate")) + "," +
+            field(number(j, "height_m")) + "," + field(opt(has95, lo)) + "," +
+            field(opt(has95, hi)) + "," + field(anchor[0]) + "," + field(anchor[1]) + "," +
+            field(anchor[2]) + "," + field(number(j, "anchor_rel_sigma"), 5) + "," +
+            std::to_string(run_));
+    }
+
+    struct LastUpdate {
+        std::size_t index = 0;  // row of updates.csv
+        std::int64_t frame_id = -1;
+        std::int64_t epoch = -1;
+        std::size_t run = 0;
+    };
+
     FieldLogAnalysis& a_;
     Current current_;
+    std::optional<LastUpdate> last_update_;
     std::size_t run_ = 0;
     std::set<std::pair<std::size_t, std::int64_t>> epochs_;
     std::optional<std::int64_t> run_first_mono_;
@@ -348,6 +409,7 @@ std::string toJson(const FieldLogAnalysis& a) {
     s += ",\"boxes\":" + std::to_string(a.boxes);
     s += ",\"updates\":" + std::to_string(a.update_rows.size());
     s += ",\"observations_logged\":" + std::to_string(a.observation_rows.size());
+    s += ",\"objects_logged\":" + std::to_string(a.object_rows.size());
     s += ",\"first_mono_ns\":" + (a.first_mono_ns ? std::to_string(*a.first_mono_ns) : "null");
     s += ",\"last_mono_ns\":" + (a.last_mono_ns ? std::to_string(*a.last_mono_ns) : "null");
     s += ",\"time_span_s\":" + jsonNumber(a.time_span_s, 6);
@@ -384,6 +446,8 @@ std::string toText(const FieldLogAnalysis& a) {
     s += "\n" + std::to_string(a.runs) + " run(s), " + std::to_string(a.epochs) + " epoch(s), " +
          std::to_string(a.frame_rows.size()) + " frame lines, " + std::to_string(a.detection_runs) +
          " detector runs, " + std::to_string(a.update_rows.size()) + " scale updates, " +
+         (a.object_rows.empty() ? std::string()
+                                : std::to_string(a.object_rows.size()) + " object lines, ") +
          std::to_string(a.errors) + " errors, " + jsonNumber(a.time_span_s, 6) + " s\n";
     if (a.last_scale && a.last_scale->scale) {
         const auto& l = *a.last_scale;
@@ -435,6 +499,9 @@ Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& 
         return ok;
     }
     if (auto ok = write("observations.csv", kObservationsHeader, a.observation_rows); !ok) {
+        return ok;
+    }
+    if (auto ok = write("objects.csv", kObjectsHeader, a.object_rows); !ok) {
         return ok;
     }
     return write("summary.json", nullptr, {toJson(a)});

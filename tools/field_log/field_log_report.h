@@ -2,7 +2,8 @@
 
 // field-log's work: a field log read back (drivers/field_log.h) turned into
 // scale-eval's CSV shapes (frames.csv, updates.csv, observations.csv, the
-// ground-truth columns left empty) and a summary (docs/field-log.md).
+// ground-truth columns left empty), objects.csv (the object model's OBJECT
+// lines) and a summary (docs/field-log.md).
 
 #include <cstddef>
 #include <cstdint>
@@ -58,6 +59,7 @@ struct FieldLogAnalysis {
     std::vector<std::string> frame_rows;
     std::vector<std::string> update_rows;
     std::vector<std::string> observation_rows;
+    std::vector<std::string> object_rows;  // OBJECT lines (estimator.model = "object")
 };
 
 FieldLogAnalysis analyseFieldLog(const drivers::FieldLogContents& contents, const std::string& log);
@@ -68,7 +70,7 @@ std::string toJson(const FieldLogAnalysis& a);
 // A few lines for a terminal.
 std::string toText(const FieldLogAnalysis& a);
 
-// frames.csv, updates.csv, observations.csv and summary.json into `out_dir`
+// frames.csv, updates.csv, observations.csv, objects.csv and summary.json into `out_dir`
 // (created if needed). Errors name the file.
 core::Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir);
 
