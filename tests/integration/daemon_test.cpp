@@ -774,11 +774,83 @@ TEST_F(DaemonTest, ScalectlAgainstTheDaemon) {
     EXPECT_EQ(post.exit_code, 0) << post.err;
     const Json pj = Json::parse(post.out.substr(0, post.out.find('\n')), nullptr, false);
     EXPECT_TRUE(pj.is_object() && str(pj, "class") == "POSTERIOR") << post.out.substr(0, 200);
+    // The default (paper) model keeps no object table: scalectl objects says so.
+    const auto objects =
+        runCommand(SCALECTL_BIN, {"--socket", sock, "objects"}, tmp_.path(), kReply);
+    EXPECT_EQ(objects.exit_code, 0) << objects.err;
+    EXPECT_EQ(objects.out.rfind("model paper  epoch ", 0), 0U) << objects.out;
+    EXPECT_NE(objects.out.find("no object table"), std::string::npos) << objects.out;
     const auto none =
         runCommand(SCALECTL_BIN, {"--socket", (tmp_.path() / "nonexistent.sock").string(), "get"},
                    tmp_.path(), kReply);
     EXPECT_EQ(none.exit_code, 69) << none.err;
     EXPECT_FALSE(none.err.empty());
+}
+
+// 14. estimator.model = "object": OBJECTS lists the objects of the latest
+// update (scalectl objects prints them), and the field log has, right after a
+// SCALE line, one OBJECT line per object that update gave a view to.
+TEST_F(DaemonTest, ObjectModelServesAndLogsItsObjects) {
+    ASSERT_TRUE(startSim({"--pacing", "fast", "--set", "estimator.model=object", "--set",
+                          "log.fsync_interval_ms=100"}));
+    Client c = client();
+    ASSERT_TRUE(enableWatch(c, true));
+    std::optional<Json> objects;
+    // After a scale update (not a state change), ask for the table; its reply
+    // comes among the watcher's SCALE lines (skipped meanwhile).
+    const auto has_objects = [&](const Json& scale) {
+        const auto age = scale.find("age_s");
+        if (age == scale.end() || age->is_null()) {
+            return false;
+        }
+        objects = c.send(Json{{"cmd", "objects"}}) ? c.readClass("OBJECTS", kReply) : std::nullopt;
+        return isClass(objects, "OBJECTS") && !(*objects)["objects"].empty();
+    };
+    ASSERT_TRUE(watchUntil(c, Millis(60'000), has_objects))
+        << "no object within 60 s: " << c.lastLine().substr(0, 300);
+    ASSERT_TRUE(objects.has_value());
+    EXPECT_EQ(str(*objects, "model"), "object");
+    EXPECT_GE((*objects)["frame_id"].get<std::int64_t>(), 0);
+    for (const Json& o : (*objects)["objects"]) {
+        EXPECT_GE(o["id"].get<int>(), 1) << o.dump();
+        EXPECT_FALSE(str(o, "class").empty()) << o.dump();
+        EXPECT_LE(o["last_frame"].get<std::int64_t>(), (*objects)["frame_id"].get<std::int64_t>());
+    }
+    const std::string sock = paths().socket.string();
+    const auto table = runCommand(SCALECTL_BIN, {"--socket", sock, "objects"}, tmp_.path(), kReply);
+    EXPECT_EQ(table.exit_code, 0) << table.err;
+    EXPECT_EQ(table.out.rfind("model object  epoch ", 0), 0U) << table.out;
+    EXPECT_NE(table.out.find("views/det"), std::string::npos) << table.out;
+
+    const auto code = stop();
+    ASSERT_TRUE(code.has_value());
+    EXPECT_EQ(*code, 0);
+    std::vector<LogLine> log;
+    ASSERT_TRUE(readLogs(paths().log_dir, log));
+    int object_lines = 0;
+    const Json* scale = nullptr;  // the SCALE line the OBJECT lines follow
+    for (const auto& l : log) {
+        const std::string cls = str(l.json, "class");
+        if (cls == "SCALE") {
+            scale = &l.json;
+        } else if (cls == "OBJECT") {
+            ++object_lines;
+            ASSERT_NE(scale, nullptr) << "an OBJECT line before any SCALE line";
+            EXPECT_EQ(l.json["frame_id"], (*scale)["frame_id"]) << l.json.dump();
+            EXPECT_EQ(l.json["epoch"], (*scale)["epoch"]) << l.json.dump();
+            EXPECT_EQ(l.json["last_frame"], l.json["frame_id"]) << l.json.dump();
+            for (const char* k : {"id", "object_class", "state", "anchor", "anchor_rel_sigma",
+                                  "detections", "views", "views_used", "first_frame",
+                                  "local_estimate", "height_m", "height_ci95_m"}) {
+                EXPECT_TRUE(l.json.contains(k)) << k << ": " << l.json.dump();
+            }
+        }
+        // Only the detection thread writes SCALE lines, and it writes an
+        // update's OBJECT lines right after its SCALE: the latest SCALE line
+        // before an OBJECT line is its update (other threads' lines may come
+        // between them).
+    }
+    EXPECT_GT(object_lines, 0);
 }
 
 TEST(DaemonScalectl, RequireConvergedSucceedsOnceConverged) {

@@ -1,12 +1,13 @@
 // scalectl: asks the scaled daemon for the metric scale over its UNIX socket.
 //
 //   scalectl [--socket PATH] [--json] [--timeout SECONDS]
-//            get [--require-converged] | watch [--count N] | status | posterior
+//            get [--require-converged] | watch [--count N] | status | posterior | objects
 //
 // Exit codes (sysexits): 0 ok, 64 usage, 69 the daemon cannot be reached (no
 // socket, refused, no answer within --timeout, closed early), 75 `get
 // --require-converged` and not converged, 76 malformed reply, wrong protocol
-// version or an ERROR reply. The logic is in scalectl.{h,cpp}.
+// version (objects: a daemon older than protocol 1.3) or an ERROR reply. The logic is in
+// scalectl.{h,cpp}.
 
 #include <CLI/CLI.hpp>
 #include <array>
@@ -63,7 +64,8 @@ int main(int argc, char** argv) {
         "scalectl"};
     app.footer(
         "usage: scalectl [--socket PATH] [--json] [--timeout SECONDS]\n"
-        "                get [--require-converged] | watch [--count N] | status | posterior\n");
+        "                get [--require-converged] | watch [--count N] | status | posterior |\n"
+        "                objects\n");
     app.require_subcommand(1);
     app.fallthrough();  // global options may also follow the subcommand
     app.add_option("--socket", options.socket_path,
@@ -85,6 +87,8 @@ int main(int argc, char** argv) {
     auto* status = app.add_subcommand("status", "print the daemon's status");
     auto* posterior =
         app.add_subcommand("posterior", "print the scale posterior as d<TAB>log_p rows");
+    auto* objects = app.add_subcommand(
+        "objects", "print the object table (estimator.model = \"object\"), a row per object");
 
     try {
         app.parse(argc, argv);
@@ -108,6 +112,8 @@ int main(int argc, char** argv) {
         options.command = ctl::Command::kStatus;
     } else if (posterior->parsed()) {
         options.command = ctl::Command::kPosterior;
+    } else if (objects->parsed()) {
+        options.command = ctl::Command::kObjects;
     }
     return ctl::run(options, std::cout, std::cerr);
 }

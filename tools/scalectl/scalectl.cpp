@@ -396,6 +396,72 @@ core::Result<std::string> formatStatus(std::string_view line) {
     return o.str();
 }
 
+core::Result<std::string> formatObjects(std::string_view line) {
+    auto parsed = expectClass(line, "OBJECTS");
+    if (!parsed) {
+        return parsed.error();
+    }
+    const json& j = *parsed;
+    const json* objects = at(j, {"objects"});
+    if (objects == nullptr || !objects->is_array() ||
+        !std::all_of(objects->begin(), objects->end(),
+                     [](const json& o) { return o.is_object(); })) {
+        return parseError("malformed OBJECTS (objects must be an array of objects): " +
+                          std::string(line.substr(0, 200)));
+    }
+    const auto number = [](const json& o, const char* k, int decimals) {
+        const json* v = at(o, {k});
+        return v != nullptr && v->is_number() ? fixed(v->get<double>(), decimals)
+                                              : std::string("-");
+    };
+    const std::string model = show(j, {"model"});
+    std::size_t used = 0;
+    for (const json& o : *objects) {
+        const json* state = at(o, {"state"});
+        if (state != nullptr && state->is_string() && state->get<std::string>() == "used") {
+            ++used;
+        }
+    }
+    std::ostringstream out;
+    out << "model " << model << "  epoch " << show(j, {"epoch"}) << "  frame "
+        << show(j, {"frame_id"}) << "  objects " << objects->size() << "  used " << used << '\n';
+    if (objects->empty()) {
+        out << (model == "paper" ? "no object table: the paper model uses every feature in a box "
+                                   "(estimator.model = \"object\" keeps one)\n"
+                                 : "no objects yet in this epoch\n");
+        return out.str();
+    }
+    std::array<char, 256> row{};
+    std::snprintf(row.data(), row.size(), "%4s  %-14s  %-9s  %9s  %8s  %-22s  %-26s  %9s\n", "id",
+                  "class", "state", "views/det", "local", "height m [95%]", "anchor (map units)",
+                  "rel.sigma");
+    out << row.data();
+    for (const json& o : *objects) {
+        const std::string views = show(o, {"views_used"}) + "/" + show(o, {"detections"});
+        std::string height = number(o, "height_m", 3);
+        const json* ci = at(o, {"height_ci95_m"});
+        if (height != "-" && ci != nullptr && ci->is_array() && ci->size() == 2 &&
+            (*ci)[0].is_number() && (*ci)[1].is_number()) {
+            height += " [" + fixed((*ci)[0].get<double>(), 3) + ", " +
+                      fixed((*ci)[1].get<double>(), 3) + "]";
+        }
+        std::string anchor = "-";
+        const json* a = at(o, {"anchor"});
+        if (a != nullptr && a->is_array() && a->size() == 3 &&
+            std::all_of(a->begin(), a->end(), [](const json& v) { return v.is_number(); })) {
+            anchor = "(" + fixed((*a)[0].get<double>(), 3) + ", " +
+                     fixed((*a)[1].get<double>(), 3) + ", " + fixed((*a)[2].get<double>(), 3) + ")";
+        }
+        std::snprintf(row.data(), row.size(), "%4s  %-14s  %-9s  %9s  %8s  %-22s  %-26s  %9s\n",
+                      show(o, {"id"}).c_str(), show(o, {"class"}).c_str(),
+                      show(o, {"state"}).c_str(), views.c_str(),
+                      number(o, "local_estimate", 4).c_str(), height.c_str(), anchor.c_str(),
+                      number(o, "anchor_rel_sigma", 3).c_str());
+        out << row.data();
+    }
+    return out.str();
+}
+
 std::string formatPosterior(const PosteriorReply& p) {
     std::string out;
     out.reserve(p.d.size() * 24);
@@ -624,6 +690,8 @@ public:
                 return status();
             case Command::kPosterior:
                 return posterior();
+            case Command::kObjects:
+                return objects(*version);
         }
         return kExSoftware;
     }
@@ -723,6 +791,25 @@ private:
             out_ << formatPosterior(*p);
             out_.flush();
         }
+        return 0;
+    }
+
+    int objects(const VersionReply& version) {
+        if (version.proto_minor < kObjectsProtoMinor) {
+            err_ << "scalectl: the daemon speaks protocol " << version.proto_major << "."
+                 << version.proto_minor << "; objects needs 1." << kObjectsProtoMinor << " (scaled "
+                 << version.release << " has no object table)\n";
+            return kExProtocol;
+        }
+        auto line = request(R"({"cmd":"objects"})", "OBJECTS");
+        if (!line) {
+            return fail(line.error(), "before replying");
+        }
+        auto text = formatObjects(*line);
+        if (!text) {
+            return fail(text.error());
+        }
+        print(options_.json ? *line : *text);
         return 0;
     }
 

@@ -8,7 +8,8 @@
 // Exit codes (sysexits): 0 ok; 64 usage; 69 the daemon cannot be reached, does
 // not answer within --timeout or closes the connection early; 75 `get
 // --require-converged` and the state is not converged; 76 a malformed reply, a
-// proto_major other than 1 or an ERROR reply.
+// proto_major other than 1, an ERROR reply or (`objects`) a daemon whose
+// proto_minor is below 3.
 
 #include <chrono>
 #include <cstdint>
@@ -89,6 +90,17 @@ core::Result<std::string> formatStatus(std::string_view line);
 // `d<TAB>log_p` rows, one per grid point, each ending in '\n'.
 std::string formatPosterior(const PosteriorReply& posterior);
 
+// The OBJECTS line (proto_minor 3) as a table (each line ends in '\n'): a
+// header line (model, epoch, frame, counts), then one row per object: id,
+// class, state, views used/detections, local estimate, height with its 95%
+// bounds, anchor (map units) and its relative sigma; `-` for a null. The
+// paper model says it keeps no object table. kParse when `objects` is not an
+// array of objects.
+core::Result<std::string> formatObjects(std::string_view line);
+
+// The protocol minor version that added the `objects` request.
+inline constexpr int kObjectsProtoMinor = 3;
+
 // ---- exit codes -----------------------------------------------------------
 
 // The exit code for a failed request: kParse -> 76 (EX_PROTOCOL),
@@ -150,7 +162,7 @@ private:
 
 // ---- the commands ---------------------------------------------------------
 
-enum class Command : std::uint8_t { kGet, kWatch, kStatus, kPosterior };
+enum class Command : std::uint8_t { kGet, kWatch, kStatus, kPosterior, kObjects };
 
 struct Options {
     std::string socket_path = kDefaultSocket;

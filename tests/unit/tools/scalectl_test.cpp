@@ -56,6 +56,17 @@ constexpr const char* kPosterior =
     R"({"class":"POSTERIOR","epoch":1,"frame_id":510,"observations":137,)"
     R"("d":[0.5,1.0,2.0],"log_p":[-3.5,-0.25,null]})";
 
+constexpr const char* kVersion13 =
+    R"({"class":"VERSION","release":"0.2.0","proto_major":1,"proto_minor":3})";
+constexpr const char* kObjects =
+    R"({"class":"OBJECTS","epoch":1,"frame_id":450,"model":"object","objects":[)"
+    R"({"id":3,"class":"chair","state":"used","anchor":[0.4123457,-0.125,2.5],)"
+    R"("anchor_rel_sigma":0.0431,"detections":12,"views":10,"views_used":9,"first_frame":120,)"
+    R"("last_frame":450,"local_estimate":1.2101,"height_m":0.87,"height_ci95_m":[0.82,0.93]},)"
+    R"({"id":7,"class":"cup","state":"tentative","anchor":null,"anchor_rel_sigma":null,)"
+    R"("detections":1,"views":1,"views_used":0,"first_frame":450,"last_frame":450,)"
+    R"("local_estimate":null,"height_m":null,"height_ci95_m":null,"new_member":1}]})";
+
 // ---- parsing and formatting ----------------------------------------------
 
 TEST(ScalectlParse, ScaleLineWithEveryField) {
@@ -208,6 +219,51 @@ TEST(ScalectlFormat, StatusStageTimes) {
     auto old = ctl::formatStatus(kStatus);
     ASSERT_TRUE(old.ok());
     EXPECT_EQ(old->find("timing"), std::string::npos) << *old;
+}
+
+// OBJECTS (proto_minor 3): a header line, then one aligned row per object;
+// nulls (tentative anchors, no local estimate, no height) print as `-`.
+TEST(ScalectlFormat, ObjectsTable) {
+    auto text = ctl::formatObjects(kObjects);
+    ASSERT_TRUE(text.ok()) << text.error().message;
+    EXPECT_EQ(*text,
+              "model object  epoch 1  frame 450  objects 2  used 1\n"
+              "  id  class           state      views/det     local  height m [95%]        "
+              "  anchor (map units)          rel.sigma\n"
+              "   3  chair           used            9/12    1.2101  0.870 [0.820, 0.930]  "
+              "  (0.412, -0.125, 2.500)          0.043\n"
+              "   7  cup             tentative        0/1         -  -                     "
+              "  -                                   -\n");
+}
+
+TEST(ScalectlFormat, ObjectsOfThePaperModelAndEmptyTables) {
+    auto paper = ctl::formatObjects(
+        R"({"class":"OBJECTS","epoch":2,"frame_id":510,"model":"paper","objects":[]})");
+    ASSERT_TRUE(paper.ok()) << paper.error().message;
+    EXPECT_EQ(*paper,
+              "model paper  epoch 2  frame 510  objects 0  used 0\n"
+              "no object table: the paper model uses every feature in a box "
+              "(estimator.model = \"object\" keeps one)\n");
+    auto empty = ctl::formatObjects(
+        R"({"class":"OBJECTS","epoch":3,"frame_id":-1,"model":"object","objects":[]})");
+    ASSERT_TRUE(empty.ok()) << empty.error().message;
+    EXPECT_EQ(*empty,
+              "model object  epoch 3  frame -1  objects 0  used 0\n"
+              "no objects yet in this epoch\n");
+}
+
+TEST(ScalectlFormat, MalformedObjectsAreParseErrors) {
+    for (const char* line : {
+             R"({"class":"OBJECTS","epoch":1,"frame_id":4,"model":"object"})",
+             R"({"class":"OBJECTS","epoch":1,"frame_id":4,"model":"object","objects":{}})",
+             R"({"class":"OBJECTS","epoch":1,"frame_id":4,"model":"object","objects":[1]})",
+             R"({"class":"STATUS"})",
+             R"({"class":"ERROR","message":"unknown command"})",
+         }) {
+        auto r = ctl::formatObjects(line);
+        ASSERT_FALSE(r.ok()) << line;
+        EXPECT_EQ(r.error().code, ErrorCode::kParse) << line;
+    }
 }
 
 TEST(ScalectlFormat, PosteriorRows) {
@@ -567,6 +623,44 @@ TEST(ScalectlClient, PosteriorTsv) {
     EXPECT_EQ(r.code, 0) << r.err;
     EXPECT_EQ(r.out, "0.5\t-3.5\n1\t-0.25\n2\t-inf\n");
     EXPECT_EQ(daemon.requests(), std::vector<std::string>{R"({"cmd":"posterior"})"});
+}
+
+TEST(ScalectlClient, ObjectsTableAndJson) {
+    const auto script = [](FakeDaemon& d, int fd) {
+        sendAll(fd, std::string(kVersion13) + "\n");
+        d.request(fd);
+        sendAll(fd, std::string(kObjects) + "\n");
+        waitForClose(fd);
+    };
+    {
+        FakeDaemon daemon(script);
+        const auto r = runCtl(optionsFor(daemon, ctl::Command::kObjects));
+        EXPECT_EQ(r.code, 0) << r.err;
+        EXPECT_EQ(r.out, *ctl::formatObjects(kObjects));
+        EXPECT_EQ(daemon.requests(), std::vector<std::string>{R"({"cmd":"objects"})"});
+    }
+    {
+        FakeDaemon daemon(script);
+        auto o = optionsFor(daemon, ctl::Command::kObjects);
+        o.json = true;
+        const auto r = runCtl(o);
+        EXPECT_EQ(r.code, 0) << r.err;
+        EXPECT_EQ(r.out, std::string(kObjects) + "\n");
+    }
+}
+
+// A daemon older than protocol 1.3 has no objects request: scalectl says so
+// instead of sending it (exit 76).
+TEST(ScalectlClient, ObjectsNeedProtocolMinor3) {
+    FakeDaemon daemon([](FakeDaemon& /*d*/, int fd) {
+        sendAll(fd, std::string(kVersion) + "\n");
+        waitForClose(fd);
+    });
+    const auto r = runCtl(optionsFor(daemon, ctl::Command::kObjects));
+    EXPECT_EQ(r.code, 76);
+    EXPECT_NE(r.err.find("protocol 1.0; objects needs 1.3"), std::string::npos) << r.err;
+    EXPECT_TRUE(r.out.empty()) << r.out;
+    EXPECT_TRUE(daemon.requests().empty());
 }
 
 // The watch stream: WATCH acknowledgement, then SCALE lines.
