@@ -16,7 +16,13 @@
 // frame, as a camera driver hands out new buffers) and the sim detector,
 // a stand-in for the DNN. Their counts are printed for information.
 //
-// The run happens once (SetUpTestSuite); the tests check its record:
+// With estimator.model = "object" the same run also publishes the object
+// table as the detection thread does after each update (collectObjects into
+// storage reserved up front, ReportHub::publishObjects, an OBJECT field-log
+// line per object the update saw) and, as the socket thread does, copies it
+// out of the hub and encodes an OBJECTS reply.
+//
+// The run happens once per model (SetUpTestSuite); the tests check its record:
 //   WorkWasReal             one healthy map, features matched and added,
 //                           estimator updates with observations that moved
 //                           the posterior: a zero count is not vacuous;
@@ -40,7 +46,11 @@
 #include <scaled/core/camera/pinhole_radial.h>
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/slam/slam_snapshot.h>
+#include <scaled/daemon/log_service.h>
+#include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pipeline_config.h>
+#include <scaled/daemon/protocol.h>
+#include <scaled/daemon/report.h>
 #include <scaled/detector/object_detector.h>
 #include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/priors_toml.h>
@@ -113,7 +123,7 @@ std::string report(std::span<const Stage> stages) {
 // What the run did and what it allocated.
 struct RunRecord {
     bool completed = false;  // every frame processed (no fatal failure on the way)
-    std::array<Stage, 6> stages{};
+    std::array<Stage, 8> stages{};
     std::string table;
     int counted_frames = 0;
     int frames_not_ok = 0;
@@ -128,10 +138,16 @@ struct RunRecord {
     core::ScaleSummary before_summary;
     core::ScaleSummary after_summary;
     double log_p_change = 0;
+    // The object table (model kObject): its largest size, the objects used
+    // at the end, the OBJECT lines formatted and the OBJECTS replies' bytes.
+    std::size_t max_objects_seen = 0;
+    int objects_used = 0;
+    int object_lines = 0;
+    std::size_t objects_reply_bytes = 0;
 };
 
 // The run; gtest assertions inside stop it early (completed stays false).
-void runPipeline(RunRecord& rec) {
+void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     sim::SimConfig config;  // seed 1, 320 x 240, 30 fps: the daemon's sim defaults
     auto source = sim::openSimSource(config);
     ASSERT_TRUE(source.ok()) << source.error().message;
@@ -139,7 +155,14 @@ void runPipeline(RunRecord& rec) {
     ASSERT_TRUE(detector.ok()) << detector.error().message;
     auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
     ASSERT_TRUE(priors.ok()) << priors.error().message;
-    const daemon::PipelineConfig pc = daemon::defaultPipelineConfig();
+    daemon::PipelineConfig pc = daemon::defaultPipelineConfig();
+    pc.estimator.model = model;
+    if (model == core::EstimatorModel::kObject) {
+        // The sim's camera mostly turns: looser anchors so that objects are
+        // used (and their heights computed) within the run.
+        pc.estimator.objects.max_anchor_rel_sigma = core::Scalar(0.6);
+        pc.estimator.objects.min_parallax_deg = 1;
+    }
     auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
     ASSERT_TRUE(camera.ok());
     auto tracker = vision::MonoTracker::create(*camera, pc.tracker);
@@ -163,16 +186,35 @@ void runPipeline(RunRecord& rec) {
         static_cast<std::size_t>(std::max(1, pc.detector.max_detections)));
     std::vector<core::ObservationRecord> records(512);
     std::vector<double> log_p_out(estimator->posterior().logDensity().size());
+    // The object table's storage (Pipeline::create, ReportHub, the socket
+    // thread's copy and reply buffer, the log's line buffer).
+    const std::size_t table_size =
+        estimator->objects() != nullptr ? estimator->objects()->capacity() : 0;
+    daemon::ReportHub hub(log_p_out.size());
+    hub.setObjectModel(model, table_size);
+    daemon::ObjectsSnapshot objects;
+    objects.model = model;
+    objects.objects.reserve(table_size);
+    daemon::ObjectsSnapshot socket_copy;
+    socket_copy.objects.reserve(table_size);
+    std::string reply;
+    reply.reserve(1 << 16);
+    std::string log_line;
+    log_line.reserve(8192);
     const int every = pc.detection.every_frames;
     ASSERT_GT(every, 0);
 
-    std::array<Stage, 6>& stages = rec.stages;
+    std::array<Stage, 8>& stages = rec.stages;
     Stage& track = stages[0];
     Stage& capture = stages[1];
     Stage& convert = stages[2];
     Stage& update = stages[3];
     Stage& source_stage = stages[4];
     Stage& detect_stage = stages[5];
+    Stage& table_stage = stages[6];
+    Stage& reply_stage = stages[7];
+    table_stage.name = "object table: collect, hub, OBJECT lines";
+    reply_stage.name = "OBJECTS reply (socket thread)";
     track.name = "MonoTracker::processFrame";
     capture.name = "snapshot capture + image hand-over";
     convert.name = "toEstimatorDetections";
@@ -284,7 +326,41 @@ void runPipeline(RunRecord& rec) {
             ++updates;
             observations += u.observations;
         }
-        (void)summary;
+
+        // Detection thread: the table after the update, into the hub and the
+        // field log (LogEvents writes the objects this update saw).
+        c0 = countsNow();
+        daemon::collectObjects(*estimator, summary, objects);
+        objects.epoch = 1;
+        objects.frame_id = job.frameId();
+        hub.publishObjects(objects);
+        int lines = 0;
+        for (const daemon::ObjectReport& o : objects.objects) {
+            if (o.last_frame == objects.frame_id) {
+                daemon::formatEvent(
+                    daemon::ObjectEvent{
+                        .frame_id = objects.frame_id, .t_ns = frame.t_ns, .epoch = 1, .object = &o},
+                    log_line);
+                ++lines;
+            }
+        }
+        if (counting) {
+            table_stage.add(c0, frame.id);
+            rec.object_lines += lines;
+            rec.max_objects_seen = std::max(rec.max_objects_seen, objects.objects.size());
+        }
+        // Socket thread: a copy out of the hub, the reply encoded.
+        c0 = countsNow();
+        hub.objects(socket_copy);
+        reply.clear();
+        daemon::appendObjects(reply, socket_copy);
+        if (counting) {
+            reply_stage.add(c0, frame.id);
+            rec.objects_reply_bytes = std::max(rec.objects_reply_bytes, reply.size());
+        }
+    }
+    for (const daemon::ObjectReport& o : objects.objects) {
+        rec.objects_used += o.state == core::ObjectState::kUsed ? 1 : 0;
     }
 
     rec.after_summary = estimator->summary();
@@ -299,15 +375,19 @@ void runPipeline(RunRecord& rec) {
     rec.table = report(stages);
     const std::string& table = rec.table;
     std::printf(
-        "steady state: %d counted frames after %d warm-up; malloc counted: %s\n"
+        "steady state (model %s): %d counted frames after %d warm-up; malloc counted: %s\n"
         "  tracking: %lld matched, %lld inliers (min %d per frame), %d features added on %d "
         "frames, %d new maps\n"
         "  scale: %d updates, %lld observations; MAP %.4f -> %.4f, observations %d -> %d, "
-        "max |change| of log p %.3g\n%s",
-        counted_frames, kWarmupFrames, test::mallocCountingEnabled() ? "yes" : "no (sanitizer)",
-        matched, inliers, min_inliers, added, frames_adding, new_maps, updates, observations,
+        "max |change| of log p %.3g\n"
+        "  objects: up to %zu in the table, %d used at the end, %d OBJECT lines, replies up to "
+        "%zu bytes\n%s",
+        core::toString(model), counted_frames, kWarmupFrames,
+        test::mallocCountingEnabled() ? "yes" : "no (sanitizer)", matched, inliers, min_inliers,
+        added, frames_adding, new_maps, updates, observations,
         static_cast<double>(before_summary.map), static_cast<double>(after_summary.map),
-        before_summary.observations, after_summary.observations, log_p_change, table.c_str());
+        before_summary.observations, after_summary.observations, log_p_change, rec.max_objects_seen,
+        rec.objects_used, rec.object_lines, rec.objects_reply_bytes, table.c_str());
 
     rec.completed = true;
 }
@@ -316,7 +396,7 @@ class SteadyStateAllocation : public ::testing::Test {
 protected:
     static void SetUpTestSuite() {
         record_ = std::make_unique<RunRecord>();
-        runPipeline(*record_);
+        runPipeline(*record_, core::EstimatorModel::kPaper);
     }
     static void TearDownTestSuite() { record_.reset(); }
 
@@ -361,6 +441,60 @@ TEST_F(SteadyStateAllocation, NoOperatorNew) {
 // Nor any malloc (Eigen's dynamic matrices, cv::fastMalloc). See the top of
 // the file for why it is disabled.
 TEST_F(SteadyStateAllocation, NoMalloc) {
+    if (!test::mallocCountingEnabled()) {
+        GTEST_SKIP() << "malloc is not counted in this build (sanitizer)";
+    }
+    for (const Stage& st : record_->stages) {
+        if (st.asserted) {
+            EXPECT_EQ(st.total.mallocs, 0) << st.name << " called malloc; per stage:\n"
+                                           << record_->table;
+        }
+    }
+}
+
+// The same run with estimator.model = "object" (looser anchors, see
+// runPipeline), with the object table published after every update.
+class SteadyStateAllocationObjects : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() {
+        record_ = std::make_unique<RunRecord>();
+        runPipeline(*record_, core::EstimatorModel::kObject);
+    }
+    static void TearDownTestSuite() { record_.reset(); }
+
+    void SetUp() override {
+        ASSERT_TRUE(record_ != nullptr && record_->completed)
+            << "the pipeline run stopped early (see the failure above)";
+    }
+
+    static std::unique_ptr<RunRecord> record_;
+};
+
+std::unique_ptr<RunRecord> SteadyStateAllocationObjects::record_;
+
+// Objects were tracked, seen in the counted updates (OBJECT lines) and used
+// by the posterior: a zero count is not vacuous.
+TEST_F(SteadyStateAllocationObjects, WorkWasReal) {
+    const RunRecord& r = *record_;
+    EXPECT_EQ(r.counted_frames, kCountedFrames);
+    EXPECT_EQ(r.new_maps, 0);
+    EXPECT_GE(r.updates,
+              kCountedFrames / daemon::defaultPipelineConfig().detection.every_frames - 1);
+    EXPECT_GT(r.max_objects_seen, 0U);
+    EXPECT_GT(r.object_lines, 0);
+    EXPECT_GT(r.objects_used, 0);
+    EXPECT_GT(r.objects_reply_bytes, 100U);
+}
+
+TEST_F(SteadyStateAllocationObjects, NoOperatorNew) {
+    for (const Stage& st : record_->stages) {
+        if (st.asserted) {
+            EXPECT_EQ(st.total.news, 0) << st.name << " allocated; per stage:\n" << record_->table;
+        }
+    }
+}
+
+TEST_F(SteadyStateAllocationObjects, NoMalloc) {
     if (!test::mallocCountingEnabled()) {
         GTEST_SKIP() << "malloc is not counted in this build (sanitizer)";
     }
