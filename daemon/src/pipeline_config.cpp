@@ -231,6 +231,7 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         real("objects", "view_band", &o.view_band, 0, 10, Bound::kOpen),
         real("objects", "view_reference_quantile", &o.view_reference_quantile, 0, 1),
         boolean("objects", "width_model", &o.width_model),
+        boolean("objects", "one_height", &o.one_height),
     };
 }
 

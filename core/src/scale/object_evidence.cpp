@@ -35,6 +35,18 @@ Scalar segmentDistance(const Vec2& q, const Vec2& a, const Vec2& b) {
     return (q - (a + t * ab)).norm();
 }
 
+// Intersection over union of two boxes.
+Scalar overlapOf(const BoundingBox& a, const BoundingBox& b) {
+    const Scalar ix =
+        std::max(Scalar(0), std::min(a.x_max_px, b.x_max_px) - std::max(a.x_min_px, b.x_min_px));
+    const Scalar iy =
+        std::max(Scalar(0), std::min(a.y_max_px, b.y_max_px) - std::max(a.y_min_px, b.y_min_px));
+    const Scalar inter = ix * iy;
+    const Scalar uni = (a.x_max_px - a.x_min_px) * (a.y_max_px - a.y_min_px) +
+                       (b.x_max_px - b.x_min_px) * (b.y_max_px - b.y_min_px) - inter;
+    return uni > 0 ? inter / uni : Scalar(0);
+}
+
 // Tangent of the elevation of p seen from c (up positive).
 Scalar tanElevation(const Vec3& p, const Vec3& c, const Vec3& up_W) {
     const Vec3 e = p - c;
@@ -133,6 +145,7 @@ ObjectEvidence::ObjectEvidence(const ObjectConfig& config, const ExtentConfig& e
              static_cast<std::size_t>(config.max_views)),
       log_l_(static_cast<std::size_t>(config.max_objects) * grid.size(), 0),
       extents_(static_cast<std::size_t>(config.max_views)),
+      view_log_l_(config.one_height ? 0 : grid.size(), 0),
       norm_(static_cast<std::size_t>(config.max_views)),
       norm_sorted_(static_cast<std::size_t>(config.max_views)) {
     candidates_.reserve(static_cast<std::size_t>(kMaxDetections) *
@@ -236,16 +249,18 @@ Scalar ObjectEvidence::associationCost(const Track& t, int slot, const FrameSnap
     const Mat3 R_WtoC = frame.pose.R_CtoW.transpose();
     if (t.anchored) {
         const Vec3 p_C = R_WtoC * (t.p_AinW - frame.pose.p_CinW);
-        const auto px = camera_.project(p_C);
-        if (!px) {
-            return -1;
+        if (const auto px = camera_.project(p_C)) {
+            const auto& k = camera_.intrinsics();
+            const Scalar sigma_px =
+                std::max(k.fx, k.fy) * std::sqrt(std::max(Scalar(0), t.P_AinW.trace())) / p_C.z();
+            const Scalar cost =
+                (*px - c).norm() / (config_.association_gate * half_diag + 2 * sigma_px);
+            if (cost <= 1) {
+                return cost;
+            }
         }
-        const auto& k = camera_.intrinsics();
-        const Scalar sigma_px =
-            std::max(k.fx, k.fy) * std::sqrt(std::max(Scalar(0), t.P_AinW.trace())) / p_C.z();
-        const Scalar cost =
-            (*px - c).norm() / (config_.association_gate * half_diag + 2 * sigma_px);
-        return cost <= 1 ? cost : -1;
+        // A wrong anchor must not lock the object out of its own views: the
+        // epipolar search below still applies to a recently seen object.
     }
     if (updates_ - t.last_update > config_.max_gap_updates || t.stored == 0) {
         return -1;
@@ -280,8 +295,15 @@ Scalar ObjectEvidence::associationCost(const Track& t, int slot, const FrameSnap
         prev = *px;
         have_prev = true;
     }
-    const Scalar cost = best / (config_.association_gate * half_diag);
-    return cost <= 1 ? cost : -1;
+    const Scalar epipolar = best / (config_.association_gate * half_diag);
+    if (!(epipolar <= 1)) {
+        return -1;
+    }
+    // Objects of one class in a row all lie near each other's epipolar line:
+    // the overlap with the last box breaks the tie (views are a fraction of a
+    // second apart), and an anchored object that fell back here ranks after
+    // those whose anchor agrees.
+    return epipolar + (1 - overlapOf(last.box, box)) + (t.anchored ? Scalar(1) : Scalar(0));
 }
 
 int ObjectEvidence::newTrack(int class_index) {
@@ -401,7 +423,31 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
     if (latest == nullptr || parallax_deg < config_.min_parallax_deg || 2 * inside < n) {
         return;
     }
-    const Mat3 P = H.inverse();
+    // A-posteriori variance factor: rays that do not meet as well as their
+    // assumed noise says (the box centre moving on the object, a pose error
+    // of the map) widen the anchor's covariance accordingly.
+    Scalar chi2 = 0;
+    for (int i = 0; i < t.stored; ++i) {
+        const View& v = view(slot, i);
+        if (onBorder(v.box)) {
+            continue;
+        }
+        const auto ray_C = camera_.unproject(centreOf(v.box));
+        if (!ray_C) {
+            continue;
+        }
+        const Vec3 r = v.pose.R_CtoW * ray_C->normalized();
+        const Vec3 e = X - v.pose.p_CinW;
+        const Scalar along = e.dot(r);
+        const Scalar sigma_angle =
+            (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
+        const Scalar s = sigma_angle * along;
+        chi2 += (e - along * r).squaredNorm() / (s * s);
+    }
+    const int dof = 2 * n - 3;
+    const Scalar factor =
+        dof > 0 ? std::max(Scalar(1), chi2 / static_cast<Scalar>(dof)) : Scalar(1);
+    const Mat3 P = H.inverse() * factor;
     const Vec3 e = X - latest->pose.p_CinW;
     const Scalar dist = e.norm();
     const Vec3 dir = e / dist;
@@ -503,8 +549,27 @@ void ObjectEvidence::evaluate(Track& t, int slot) {
     lc.rel_sigma = std::hypot(config_.object_rel_sigma, t.anchor_rel_sigma);
     lc.outlier_weight = likelihood_.robust ? likelihood_.outlier_weight : Scalar(0);
     const std::span<const ObjectViewExtent> used(extents_.data(), kept);
-    if (!evaluateObjectLogLikelihood(used, prior, grid_, lc, cache(slot))) {
-        return;
+    if (config_.one_height) {
+        if (!evaluateObjectLogLikelihood(used, prior, grid_, lc, cache(slot))) {
+            return;
+        }
+    } else {
+        // The ablation: views as independent observations, each with its own
+        // height from the class prior.
+        std::span<Scalar> sum = cache(slot);
+        std::fill(sum.begin(), sum.end(), Scalar(0));
+        for (std::size_t i = 0; i < kept; ++i) {
+            if (!evaluateObjectLogLikelihood(used.subspan(i, 1), prior, grid_, lc, view_log_l_)) {
+                return;
+            }
+            for (std::size_t j = 0; j < sum.size(); ++j) {
+                sum[j] += view_log_l_[j];
+            }
+        }
+        const Scalar top = *std::max_element(sum.begin(), sum.end());
+        for (auto& v : sum) {
+            v -= top;
+        }
     }
     t.used = true;
     t.views_used = static_cast<int>(kept);

@@ -82,6 +82,10 @@ struct ObjectConfig {
     Scalar view_band = Scalar(0.2);
     Scalar view_reference_quantile = Scalar(0.8);
     bool width_model = true;  // the class's width prior (H + kappa w); off: w = 0
+    // One height (and width) for all views of an object (the model). false,
+    // for the ablation only: every view draws its own height from the class
+    // prior, as the paper's observations do.
+    bool one_height = true;
     ApparentHeightPrior::GridSpec height_grid;
 };
 
@@ -220,10 +224,14 @@ private:
     Result<bool> buildPriors(const PriorTable& priors);
 
     [[nodiscard]] View& view(int track, int k) {
-        return views_[static_cast<std::size_t>(track * config_.max_views + k)];
+        return views_[static_cast<std::size_t>(track) *
+                          static_cast<std::size_t>(config_.max_views) +
+                      static_cast<std::size_t>(k)];
     }
     [[nodiscard]] const View& view(int track, int k) const {
-        return views_[static_cast<std::size_t>(track * config_.max_views + k)];
+        return views_[static_cast<std::size_t>(track) *
+                          static_cast<std::size_t>(config_.max_views) +
+                      static_cast<std::size_t>(k)];
     }
     [[nodiscard]] std::span<Scalar> cache(int track) {
         return {log_l_.data() + static_cast<std::size_t>(track) * grid_.size(), grid_.size()};
@@ -254,6 +262,7 @@ private:
     std::vector<View> views_;
     std::vector<Scalar> log_l_;
     std::vector<ObjectViewExtent> extents_;  // scratch, max_views
+    std::vector<Scalar> view_log_l_;         // scratch, grid (one_height = false)
     std::vector<Scalar> norm_;               // scratch, max_views
     std::vector<Scalar> norm_sorted_;        // scratch, max_views
     std::vector<Candidate> candidates_;      // scratch, kMaxDetections * max_objects
