@@ -8,7 +8,9 @@ Usage:
 Reads frames.csv, updates.csv, observations.csv, posterior.csv,
 likelihoods.csv and (if present) summary.json from OUT_DIR and writes
 fig_a_likelihoods.png, fig_b_posterior.png, fig_c_estimates.png and
-fig_d_rel_error.png into OUT_DIR, printing one line per written file.
+fig_d_rel_error.png into OUT_DIR (and fig_e_objects.png, each object's own
+estimate over time, when objects.csv is there), printing one line per
+written file.
 With --no-curves (field-log output: no posterior curves are logged)
 posterior.csv and likelihoods.csv are not read and only figures (c) and (d)
 are drawn.
@@ -50,6 +52,8 @@ UPDATES_COLS = ("update,frame,t_s,epoch,detections,observations,"
                 "scale_true_window,rel_error,rel_error_window").split(",")
 OBS_COLS = ("update,frame,observation,class,score,D,sigma_D,local_estimate,"
             "weight").split(",")
+# objects.csv (model object; optional): the columns figure (e) needs.
+OBJ_COLS = "frame,id,class,state,local_estimate".split(",")
 TEXT_COLS = {"state", "class"}
 PAPER_REL_ERROR_PCT = 2.0
 
@@ -302,6 +306,35 @@ def fig_estimates(ax, upd, obs, conv_frame):
     ax.legend(loc="best", fontsize=8)
 
 
+def fig_objects(ax, objs, upd):
+    """(e) Each object's own scale estimate (the mode of its likelihood
+    alone) over time, with the MAP and the truth."""
+    ax.set_xlabel("frame index")
+    ax.set_ylabel("scale d (m / SLAM unit)")
+    ids = objs["id"]
+    loc = objs["local_estimate"]
+    ok = np.isfinite(loc) & np.isfinite(ids)
+    if not ok.any():
+        note(ax, "no object was used")
+    cmap = plt.get_cmap("tab20")
+    for k, i in enumerate(sorted(set(ids[ok].astype(int)))):
+        sel = ok & (ids == i)
+        cls = objs["class"][int(np.nonzero(sel)[0][0])]
+        ax.plot(objs["frame"][sel], loc[sel], "o-", ms=2.5, lw=1,
+                color=cmap(k % 20), label=f"{i} {cls}")
+    plot_epochs(ax, upd["frame"], upd["scale_est"], upd["epoch"], "MAP",
+                color="tab:blue", lw=2)
+    plot_epochs(ax, upd["frame"], upd["scale_true"], upd["epoch"],
+                "scale_true (cumulative)", color="black", ls="--", lw=1.3)
+    vals = np.concatenate([loc[ok], upd["scale_est"], upd["scale_true"]])
+    vals = vals[np.isfinite(vals) & (vals > 0)]
+    if len(vals):
+        ax.set_yscale("log")
+        lo, hi = np.percentile(vals, [1, 99])
+        ax.set_ylim(lo / 1.3, hi * 1.3)
+    ax.legend(loc="best", fontsize=7, ncol=2)
+
+
 def fig_errors(ax, frames, n_updates, conv_frame):
     ax.set_xlabel("frame index")
     ax.set_ylabel("|relative error| (%)")
@@ -369,6 +402,10 @@ def run(out_dir, extra_title, curves=True):
              lambda ax, fig: fig_errors(ax, frames, n_upd, conv_frame))]
     if not curves:
         figs = figs[2:]
+    if os.path.isfile(path("objects.csv")):
+        objs = read_table(path("objects.csv"), OBJ_COLS)
+        figs.append(("fig_e_objects.png", "(e) Per-object estimates",
+                     lambda ax, fig: fig_objects(ax, objs, upd)))
     for name, title, draw in figs:
         fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
         draw(ax, fig)

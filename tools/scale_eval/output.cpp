@@ -294,13 +294,38 @@ Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
     if (!obs) {
         return obs.error();
     }
-    (*obs)->line("update,frame,observation,class,score,D,sigma_D,local_estimate,weight");
+    (*obs)->line(
+        "update,frame,observation,class,score,D,sigma_D,local_estimate,weight,object_id,kappa");
     for (std::size_t k = 0; k < r.observations.size(); ++k) {
         const auto& o = r.observations[k];
         (*obs)->line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," +
                      std::to_string(k) + "," + o.class_name + "," + jsonNumber(o.score, 4) + "," +
                      jsonNumber(o.D, 7) + "," + jsonNumber(o.sigma_D, 5) + "," +
-                     jsonNumber(o.local_estimate, 6) + "," + jsonNumber(o.weight, 4));
+                     jsonNumber(o.local_estimate, 6) + "," + jsonNumber(o.weight, 4) + "," +
+                     (o.object_id > 0 ? std::to_string(o.object_id) : std::string()) + "," +
+                     (o.object_id > 0 ? jsonNumber(o.kappa, 4) : std::string()));
+    }
+
+    // Every object after every update (model object; empty otherwise).
+    auto objs = open("objects.csv");
+    if (!objs) {
+        return objs.error();
+    }
+    (*objs)->line(
+        "update,frame,id,class,state,detections,views_used,local_estimate,height_m,height_lo_m,"
+        "height_hi_m,anchor_x,anchor_y,anchor_z,anchor_rel_sigma");
+    for (const ObjectRow& o : r.objects) {
+        const bool used = o.state == "used";
+        const auto opt = [&](double v) { return used && v > 0 ? jsonNumber(v, 6) : std::string(); };
+        (*objs)->line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," +
+                      std::to_string(o.id) + "," + o.class_name + "," + o.state + "," +
+                      std::to_string(o.detections) + "," + std::to_string(o.views_used) + "," +
+                      opt(o.local_estimate) + "," + opt(o.height_m) + "," + opt(o.height_lo_m) +
+                      "," + opt(o.height_hi_m) + "," +
+                      jsonNumber(static_cast<double>(o.anchor.x()), 6) + "," +
+                      jsonNumber(static_cast<double>(o.anchor.y()), 6) + "," +
+                      jsonNumber(static_cast<double>(o.anchor.z()), 6) + "," +
+                      jsonNumber(o.anchor_rel_sigma, 4));
     }
 
     auto post = open("posterior.csv");
