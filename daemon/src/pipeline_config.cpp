@@ -499,6 +499,15 @@ PipelineConfig defaultPipelineConfig() {
     c.estimator.likelihood.outlier_weight = core::Scalar(0.05);
     c.estimator.likelihood.partial_visibility = true;
     c.estimator.extent.compensate_roll = true;
+    // Object-level evidence (docs/accuracy.md, issue 18): calibrated on every
+    // run where the paper model's intervals held the truth in 75% of updates.
+    c.estimator.model = core::EstimatorModel::kObject;
+    // The width term is right where the map is (scale-eval --truth-geometry)
+    // but, on the tracker's map, whose geometry around the objects is ~15%
+    // shorter than its motion says, it makes the estimate 20-30% high; off,
+    // the two errors largely cancel on the measured runs. Revisit when the
+    // map's scale holds (issue 19).
+    c.estimator.objects.width_model = false;
     return c;
 }
 

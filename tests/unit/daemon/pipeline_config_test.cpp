@@ -29,8 +29,9 @@ TEST(PipelineConfig, DefaultsAreTheChosenOnes) {
     EXPECT_TRUE(c.estimator.likelihood.partial_visibility);
     EXPECT_TRUE(c.estimator.extent.compensate_roll);
     EXPECT_EQ(c.estimator.posterior.arithmetic, core::PosteriorArithmetic::kFloating);
-    // The object model is opt-in; its settings are ObjectConfig's.
-    EXPECT_EQ(c.estimator.model, core::EstimatorModel::kPaper);
+    // The object model, with ObjectConfig's settings but the width term off
+    // (chosen in docs/accuracy.md).
+    EXPECT_EQ(c.estimator.model, core::EstimatorModel::kObject);
     const core::ObjectConfig o;
     EXPECT_EQ(c.estimator.objects.max_objects, o.max_objects);
     EXPECT_EQ(c.estimator.objects.max_views, o.max_views);
@@ -38,7 +39,8 @@ TEST(PipelineConfig, DefaultsAreTheChosenOnes) {
     EXPECT_EQ(c.estimator.objects.epipolar_depth_min, o.epipolar_depth_min);
     EXPECT_EQ(c.estimator.objects.epipolar_depth_max, o.epipolar_depth_max);
     EXPECT_EQ(c.estimator.objects.view_band, o.view_band);
-    EXPECT_TRUE(c.estimator.objects.width_model);
+    EXPECT_FALSE(c.estimator.objects.width_model);
+    EXPECT_TRUE(c.estimator.objects.one_height);
 }
 
 TEST(PipelineConfig, ReadsTheObjectModelKeys) {
@@ -166,7 +168,7 @@ TEST(PipelineConfig, ObjectModelKeysAreRangeChecked) {
               "max_views, centre_rel_sigma, centre_sigma_px, min_parallax_deg, "
               "max_anchor_rel_sigma, anchor_box_margin, association_gate, epipolar_depth_min, "
               "epipolar_depth_max, max_gap_updates, box_edge_rel_sigma, object_rel_sigma, "
-              "view_band, view_reference_quantile, width_model)");
+              "view_band, view_reference_quantile, width_model, one_height)");
     EXPECT_EQ(applyError("objects = 1\n", c), "test.toml:1: objects: must be a table ([objects])");
     auto bad = applyPipelineOverrides({"objects.max_views=0"}, c);
     ASSERT_FALSE(bad.ok());

@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""The object-model ablation over RANSAC seeds 1-8 and each half of a sequence run alone.
+
+Usage (from the project root, after a release build):
+    tools/scale_ablation.py [--bin build/release/bin] [--data ../shared/data/redkitchen]
+                            [--jobs 2] [--row NAME=K=V,K=V]... [--per-run] [--set K=V]...
+
+Every row is scale-eval with the given --set overrides (on top of --set, which applies to all
+rows) over the ten runs of ../shared/tools/generality.py (tracker.seed 1..8, --frames 0:300,
+--frames 300:600). It prints one markdown table: per row the median of the seeds' median
+relative errors 5 s after the map started and the worst seed's, each half's median, the
+smallest ci95 coverage of the ten runs, the converged updates whose interval excludes the truth
+(summed), the observations per 100 frames (median) and the final 95% width against the
+information limit (medians). With --per-run, one table per row with every run as well.
+Without --row, the rows of docs/accuracy.md's ablation. Nothing here knows a bound.
+"""
+import argparse
+import concurrent.futures as cf
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+RUNS = [("seed %d" % s, ["--set", "tracker.seed=%d" % s]) for s in range(1, 9)] + [
+    ("frames 0:300", ["--frames", "0:300"]),
+    ("frames 300:600", ["--frames", "300:600"]),
+]
+
+DEFAULT_ROWS = [
+    ("paper model (issue 5 defaults)", ["estimator.model=paper"]),
+    ("object model (defaults)", []),
+    ("object, width model on", ["objects.width_model=true"]),
+    ("object, independent heights per view", ["objects.one_height=false"]),
+    ("object, no outlier term", ["estimator.robust=false"]),
+    ("object, no partial visibility", ["estimator.partial_visibility=false"]),
+]
+
+
+def run(exe, data, args):
+    p = subprocess.run([exe, "--dataset", data, "--json"] + args, capture_output=True, text=True)
+    lines = [l for l in p.stdout.splitlines() if l.startswith("{")]
+    if p.returncode != 0 or not lines:
+        return {"_error": (p.stderr.strip().splitlines() or ["exit %d" % p.returncode])[-1]}
+    return json.loads(lines[-1])
+
+
+def fmt(v, pct=False):
+    if v is None:
+        return "-"
+    return ("%.1f%%" % (100 * v)) if pct else ("%.3g" % v)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--bin", default="build/release/bin")
+    ap.add_argument("--data", default=os.path.join(os.environ.get("SCALED_SHARED_DIR", "../shared"),
+                                                   "data/redkitchen"))
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--row", action="append", default=[], help="NAME=K=V,K=V")
+    ap.add_argument("--set", action="append", default=[], help="K=V for every row")
+    ap.add_argument("--flag", action="append", default=[], help="a scale-eval flag for every row")
+    ap.add_argument("--per-run", action="store_true")
+    a = ap.parse_args()
+    exe = os.path.join(a.bin, "scale-eval")
+    if not os.access(exe, os.X_OK):
+        sys.exit("scale_ablation: %s not found (build the release preset first)" % exe)
+    rows = DEFAULT_ROWS
+    if a.row:
+        rows = []
+        for r in a.row:
+            name, _, sets = r.partition("=")
+            rows.append((name, [s for s in sets.split(",") if s]))
+    common = [x for kv in a.set for x in ("--set", kv)] + a.flag
+    jobs = {}
+    with cf.ThreadPoolExecutor(a.jobs) as pool:
+        for name, sets in rows:
+            extra = [x for kv in sets for x in ("--set", kv)]
+            for run_name, args in RUNS:
+                jobs[(name, run_name)] = pool.submit(run, exe, a.data, args + common + extra)
+    print("| row | seeds: median / worst of the medians | 0:300 | 300:600 | min ci95 coverage |"
+          " wrong converged | obs / 100 frames | final 95% width / limit |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, _ in rows:
+        res = {rn: jobs[(name, rn)].result() for rn, _ in RUNS}
+        errs = [res[rn] for rn, _ in RUNS if "_error" in res[rn]]
+        if errs:
+            print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+            continue
+        med = lambda d: d["rel_error_after_5s"]["median"]  # noqa: E731
+        seeds = [med(res["seed %d" % s]) for s in range(1, 9)]
+        seeds_ok = [x for x in seeds if x is not None]
+        cov = [res[rn]["ci95_coverage"] for rn, _ in RUNS if res[rn]["ci95_coverage"] is not None]
+        wrong = sum(res[rn]["wrong_converged_updates"] for rn, _ in RUNS)
+        obs = statistics.median(res[rn]["observations_per_100_frames"] for rn, _ in RUNS)
+        widths = [res[rn]["posterior_final"]["rel_width95"] for rn, _ in RUNS
+                  if res[rn]["posterior_final"]["rel_width95"] is not None]
+        limits = [res[rn]["information_limit"]["rel_width95_final"] for rn, _ in RUNS
+                  if res[rn]["information_limit"]["rel_width95_final"] is not None]
+        print("| %s | %s / %s%s | %s | %s | %s | %d | %s | %s / %s |" % (
+            name,
+            fmt(statistics.median(seeds_ok) if seeds_ok else None, True),
+            fmt(max(seeds_ok) if seeds_ok else None, True),
+            "" if len(seeds_ok) == 8 else " (%d none)" % (8 - len(seeds_ok)),
+            fmt(med(res["frames 0:300"]), True), fmt(med(res["frames 300:600"]), True),
+            fmt(min(cov) if cov else None, True), wrong, fmt(obs),
+            fmt(statistics.median(widths) if widths else None, True),
+            fmt(statistics.median(limits) if limits else None, True)))
+        if a.per_run:
+            for rn, _ in RUNS:
+                d = res[rn]
+                e = d["rel_error_after_5s"]
+                print("|   %s | median %s, max %s | | | %s | %d | %s | %s / %s |" % (
+                    rn, fmt(e["median"], True), fmt(e["max"], True), fmt(d["ci95_coverage"], True),
+                    d["wrong_converged_updates"], fmt(d["observations_per_100_frames"]),
+                    fmt(d["posterior_final"]["rel_width95"], True),
+                    fmt(d["information_limit"]["rel_width95_final"], True)))
+
+
+if __name__ == "__main__":
+    main()
