@@ -194,13 +194,6 @@ TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
     ASSERT_TRUE(hub.posterior(post));
     EXPECT_EQ(post.d.size(), post.log_p.size());
     EXPECT_EQ(post.frame_id, last.frame_id);
-    // The paper model has no object table: OBJECTS is empty and says so.
-    ObjectsSnapshot objects;
-    hub.objects(objects);
-    EXPECT_EQ(objects.model, core::EstimatorModel::kPaper);
-    EXPECT_EQ(objects.epoch, last.epoch);
-    EXPECT_EQ(objects.frame_id, last.frame_id);
-    EXPECT_TRUE(objects.objects.empty());
 
     // initialising -> tracking (epoch 1) -> converging (-> converged maybe).
     const auto states = rec.states();
@@ -274,6 +267,34 @@ TEST(Pipeline, StatusReportsStageTimes) {
     EXPECT_GT(stage_sum, 0.0);
     EXPECT_LE(stage_sum, t.tracking.mean_ms * 1.05 + 0.01);
     EXPECT_DOUBLE_EQ(st.tracking_ms_mean, t.tracking.mean_ms);
+}
+
+// estimator.model = "paper" has no object table: after every update the hub's
+// table is empty, with the update's epoch and frame and the model's name.
+TEST(Pipeline, PaperModelPublishesAnEmptyObjectTable) {
+    DaemonConfig c = config(AtEnd::kExit);
+    c.pipeline.estimator.model = core::EstimatorModel::kPaper;
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    Recorder rec;
+    auto p = Pipeline::create(c, parts(2.0, true), hub, &rec);  // 60 frames
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    (*p)->stop();
+    ASSERT_FALSE((*p)->failure().has_value());
+
+    const ScaleReport last = hub.scale();
+    ASSERT_GT(hub.status().scale_updates, 0U);
+    ObjectsSnapshot objects;
+    hub.objects(objects);
+    EXPECT_EQ(objects.model, core::EstimatorModel::kPaper);
+    EXPECT_EQ(objects.epoch, last.epoch);
+    EXPECT_EQ(objects.frame_id, last.frame_id);
+    EXPECT_TRUE(objects.objects.empty());
+    for (const auto& table : rec.objects()) {
+        EXPECT_TRUE(table.empty());
+    }
 }
 
 // estimator.model = "object": after every scale update the detection thread
