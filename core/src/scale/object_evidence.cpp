@@ -110,6 +110,9 @@ Result<bool> validate(const ObjectConfig& c) {
     if (!in(c.object_rel_sigma, 0, 10)) {
         return invalid("object_rel_sigma", c.object_rel_sigma, "in [0, 10]");
     }
+    if (!in(c.map_rel_sigma, 0, 1)) {
+        return invalid("map_rel_sigma", c.map_rel_sigma, "in [0, 1]");
+    }
     if (!in(c.view_band, 0, 10) || !(c.view_band > 0)) {
         return invalid("view_band", c.view_band, "in (0, 10]");
     }
@@ -734,6 +737,10 @@ int ObjectEvidence::addTo(ScalePosterior& posterior) const {
         }
     }
     posterior.setObservationCount(views);
+    if (objects > 0 && config_.map_rel_sigma > 0) {
+        // d_served = d_map (1 + e): log(1 + e) ~ N(0, map_rel_sigma^2).
+        posterior.diffuse(std::log1p(config_.map_rel_sigma));
+    }
     return objects;
 }
 

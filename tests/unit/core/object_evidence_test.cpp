@@ -453,6 +453,21 @@ TEST(ObjectEvidence, EstimatorRecoversTheScaleFromObjects) {
     est->reset();
     EXPECT_EQ(est->summary().state, ScaleState::kNoData);
     EXPECT_EQ(est->objects()->activeCount(), 0);
+
+    // The map's own error, common to all objects, widens the posterior.
+    ec.objects.map_rel_sigma = Scalar(0.1);
+    auto wide = ScaleEstimator::create(ec, priors, r.cam).value();
+    for (int k = 0; k < 12; ++k) {
+        std::vector<Detection> dets;
+        for (const auto& t : r.things) {
+            dets.push_back({r.boxOf(t, r.pose(k)), t.cls, 0.9});
+        }
+        (void)wide.update(r.snapshot(k), dets, records);
+    }
+    const ScaleSummary w = wide.summary();
+    EXPECT_GT(w.rel_width95, s.rel_width95 + Scalar(0.1));
+    EXPECT_LT(w.ci95.lo, r.d);
+    EXPECT_GT(w.ci95.hi, r.d);
 }
 
 }  // namespace
