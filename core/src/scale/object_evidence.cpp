@@ -786,6 +786,20 @@ std::span<const Scalar> ObjectEvidence::logLikelihood(int k) const {
     return cache(slot);
 }
 
+std::size_t ObjectEvidence::memoryBytes() const {
+    std::size_t bytes = sizeof(*this) + tracks_.capacity() * sizeof(Track) +
+                        views_.capacity() * sizeof(View) + log_l_.capacity() * sizeof(Scalar) +
+                        extents_.capacity() * sizeof(ObjectViewExtent) +
+                        (view_log_l_.capacity() + norm_.capacity() + norm_sorted_.capacity() +
+                         width_ratio_.capacity() + class_spread_.capacity()) *
+                            sizeof(Scalar) +
+                        candidates_.capacity() * sizeof(Candidate) + grid_.size() * sizeof(Scalar);
+    for (const ApparentHeightPrior& a : apparent_) {
+        bytes += sizeof(a) + 3 * a.size() * sizeof(Scalar);
+    }
+    return bytes;
+}
+
 Scalar ObjectEvidence::informationLimitRelWidth95() const {
     double info = 0;
     for (const Track& t : tracks_) {

@@ -158,6 +158,25 @@ bool evaluateObjectLogLikelihood(std::span<const ObjectViewExtent> views,
         return false;
     }
     constexpr double kWindowSigmas2 = 64;  // 8 sigma
+    // A log-spaced bin's variance relative to its height squared.
+    const double bin_var_rel =
+        static_cast<double>(prior.binVariance(0)) /
+        (static_cast<double>(prior.height(0)) * static_cast<double>(prior.height(0)));
+    const double log_h_min = static_cast<double>(prior.logHMin());
+    const double log_step = static_cast<double>(prior.logStep());
+    // The first bin whose height is at least h (h > 0).
+    const auto indexAbove = [&](double h) {
+        const double idx = std::ceil((std::log(h) - log_h_min) / log_step - 1e-9);
+        return static_cast<std::size_t>(std::clamp(idx, 0.0, static_cast<double>(prior.size())));
+    };
+    // log( P(h_m) N(h_m; h*, var_h + h_m^2 rho^2 + bin variance) ), -inf without mass.
+    const auto term = [&](std::size_t m, double h_star, double var_h) {
+        const double lm = static_cast<double>(prior.logMass(m));
+        const double h = static_cast<double>(prior.height(m));
+        const double var = var_h + h * h * rho2 + static_cast<double>(prior.binVariance(m));
+        const double r = h - h_star;
+        return lm - 0.5 * r * r / var - 0.5 * (log_2pi + std::log(var));
+    };
     Scalar top = -std::numeric_limits<Scalar>::infinity();
     for (std::size_t j = 0; j < grid.size(); ++j) {
         const double d = static_cast<double>(grid.d(j));
@@ -186,39 +205,48 @@ bool evaluateObjectLogLikelihood(std::span<const ObjectViewExtent> views,
         const double cst =
             -0.5 * rss - 0.5 * logdet - 0.5 * n_views * log_2pi + 0.5 * (log_2pi - std::log(q2));
         const double var_h = 1 / q2;
-        // Prior terms within 8 sigma of h*; the nearest bin when none is.
+        // Prior terms within 8 sigma of h*. The bins are log-spaced, so a
+        // bin's variance is var_h + h^2 (rho^2 + c2) with c2 the same for all
+        // bins: the window is the solution of (h - h*)^2 <= 64 var(h), an
+        // interval found in closed form (all bins above when the relative
+        // spread reaches 1/8); the nearest bin with mass when it is empty.
+        const double a_rel = 1 - kWindowSigmas2 * (rho2 + bin_var_rel);
+        std::size_t lo = m_first;
+        std::size_t hi = m_last;
+        if (a_rel > 0) {
+            const double root = std::sqrt(
+                std::max(0.0, h_star * h_star * (1 - a_rel) + kWindowSigmas2 * a_rel * var_h));
+            const double h_lo = (h_star - root) / a_rel;
+            const double h_hi = (h_star + root) / a_rel;
+            lo = h_lo > h_floor ? std::max(lo, indexAbove(h_lo)) : lo;
+            hi = h_hi > h_floor ? std::min(hi, indexAbove(h_hi) + 1) : m_first;
+        } else if (h_star - std::sqrt(kWindowSigmas2 * var_h) > h_floor) {
+            lo = std::max(lo, indexAbove(h_star - std::sqrt(kWindowSigmas2 * var_h)) -
+                                  std::min<std::size_t>(indexAbove(h_star), 1));
+        }
+        if (lo >= hi) {
+            // Nothing within 8 sigma: the bin with mass nearest to h* keeps log L finite.
+            const std::size_t m =
+                std::clamp(indexAbove(std::max(h_star, h_floor)), m_first, m_last - 1);
+            lo = m;
+            hi = m + 1;
+        }
+        // One pass: a running log-sum-exp (the sum rescaled when the maximum grows).
         double best = -std::numeric_limits<double>::infinity();
         double sum = 0;
-        double nearest_term = -std::numeric_limits<double>::infinity();
-        double nearest_dist = std::numeric_limits<double>::infinity();
-        for (int pass = 0; pass < 2; ++pass) {
-            for (std::size_t m = m_first; m < m_last; ++m) {
-                const double lm = static_cast<double>(prior.logMass(m));
-                if (!std::isfinite(lm)) {
-                    continue;
-                }
-                const double h = static_cast<double>(prior.height(m));
-                const double var = var_h + h * h * rho2 + static_cast<double>(prior.binVariance(m));
-                const double r2 = (h - h_star) * (h - h_star);
-                if (r2 > kWindowSigmas2 * var) {
-                    if (pass == 0 && r2 / var < nearest_dist) {
-                        nearest_dist = r2 / var;
-                        nearest_term = lm - 0.5 * r2 / var - 0.5 * (log_2pi + std::log(var));
-                    }
-                    continue;
-                }
-                const double t = lm - 0.5 * r2 / var - 0.5 * (log_2pi + std::log(var));
-                if (pass == 0) {
-                    best = std::max(best, t);
-                } else {
-                    sum += std::exp(t - best);
-                }
+        for (std::size_t m = lo; m < hi; ++m) {
+            const double t = term(m, h_star, var_h);
+            if (!std::isfinite(t)) {
+                continue;  // a bin without mass
             }
-            if (!std::isfinite(best)) {
-                break;
+            if (t <= best) {
+                sum += std::exp(t - best);
+            } else {
+                sum = sum * std::exp(best - t) + 1;
+                best = t;
             }
         }
-        const double model = std::isfinite(best) ? cst + best + std::log(sum) : cst + nearest_term;
+        const double model = cst + best + std::log(sum);
         double value = model;
         if (eps > 0) {
             // Unknown height, log-uniform over the height grid: flat in d.

@@ -187,6 +187,10 @@ public:
 
     [[nodiscard]] const ObjectConfig& config() const { return config_; }
 
+    // Bytes held: the table (views and likelihood caches of max_objects), the
+    // classes' apparent-height priors and the scratch buffers.
+    [[nodiscard]] std::size_t memoryBytes() const;
+
 private:
     struct View {
         CameraPose pose;

@@ -61,7 +61,9 @@ struct ObjectViewExtent {
 class ApparentHeightPrior {
 public:
     struct GridSpec {
-        int bins = 384;
+        // 192 bins over 5 mm..20 m: 4.4% apart, each standing for an interval
+        // (its variance is added), below the 5% common error of an object.
+        int bins = 192;
         Scalar h_min_m = Scalar(0.005);
         Scalar h_max_m = 20;
     };
