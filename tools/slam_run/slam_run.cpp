@@ -4,6 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
+
+#include <Eigen/Geometry>
 
 #include <scaled/core/geometry/trajectory_alignment.h>
 
@@ -20,7 +23,36 @@ struct Segment {
     std::vector<std::int64_t> t_ns;
     std::vector<core::CameraPose> poses;
     std::vector<std::optional<Vec3>> gt;
+    std::vector<core::Mat3> gt_R;  // ground-truth attitude (where gt has a value)
 };
+
+// Rotation vector (axis times angle) of R.
+Vec3 rotationVector(const core::Mat3& R) {
+    const Eigen::AngleAxis<double> aa(R.cast<double>());
+    return (aa.axis() * aa.angle()).cast<core::Scalar>();
+}
+
+// Per camera axis, the least-squares gain b of the tracker's rotation over
+// `gap` frames against the ground truth's (rotation vectors in the first
+// camera's frame): 1 when the tracker turns as much as the camera did.
+std::optional<Vec3> rotationGain(const std::vector<core::CameraPose>& poses,
+                                 const std::vector<core::Mat3>& gt_R, std::size_t gap) {
+    if (poses.size() != gt_R.size() || poses.size() <= gap) {
+        return std::nullopt;
+    }
+    Eigen::Vector3d sxy = Eigen::Vector3d::Zero();
+    Eigen::Vector3d sxx = Eigen::Vector3d::Zero();
+    for (std::size_t k = 0; k + gap < poses.size(); ++k) {
+        const Vec3 est = rotationVector(poses[k].R_CtoW.transpose() * poses[k + gap].R_CtoW);
+        const Vec3 gt = rotationVector(gt_R[k].transpose() * gt_R[k + gap]);
+        sxy += (est.cast<double>().array() * gt.cast<double>().array()).matrix();
+        sxx += gt.cast<double>().cwiseAbs2();
+    }
+    if (!(sxx.minCoeff() > 0)) {
+        return std::nullopt;
+    }
+    return sxy.cwiseQuotient(sxx).cast<core::Scalar>();
+}
 
 }  // namespace
 
@@ -90,6 +122,9 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
             seg.poses.push_back(tracker->filter().pose());
             seg.gt.push_back(frame.T_CtoW_gt ? std::optional<Vec3>(frame.T_CtoW_gt->p_CinW)
                                              : std::nullopt);
+            if (frame.T_CtoW_gt) {
+                seg.gt_R.push_back(frame.T_CtoW_gt->R_CtoW);
+            }
         } else {
             // Lost or diverged: the next frame starts a new map (new scale).
             ++result.reinitialisations;
@@ -129,6 +164,9 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
             result.path_length_m = static_cast<double>(core::pathLength(result.gt_positions));
             const auto drift = core::scaleDriftBetweenThirds(est, result.gt_positions);
             result.scale_drift_thirds = drift ? static_cast<double>(*drift) : 0;
+            if (const auto g = rotationGain(longest->poses, longest->gt_R, 30)) {
+                result.rotation_gain_30 = g->cast<double>();
+            }
         }
     }
     return result;
@@ -152,6 +190,11 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
              num(r.path_length_m > 0 ? 100 * r.ate_rmse_m / r.path_length_m : 0);
         s += ",\"scale_to_gt\":" + num(r.scale_to_gt);
         s += ",\"scale_drift_thirds\":" + num(r.scale_drift_thirds);
+        if (r.rotation_gain_30) {
+            const Eigen::Vector3d& g = *r.rotation_gain_30;
+            s += ",\"rotation_gain_30_frames\":[" + num(g.x()) + "," + num(g.y()) + "," +
+                 num(g.z()) + "]";
+        }
     }
     s += ",\"gravity_source\":" + jsonString(r.gravity_source) + "}";
     return s;

@@ -42,7 +42,11 @@ struct SlamRunResult {
     double ate_rmse_m = 0;
     double scale_to_gt = 0;         // metres per SLAM unit of the Sim(3) alignment
     double scale_drift_thirds = 0;  // first-third scale / last-third scale
-    std::string gravity_source;     // where the vertical came from
+    // Per camera axis (x right, y down, z forward), the least-squares gain of
+    // the tracker's rotation over 30 frames against the ground truth's: 1
+    // when it turns as much as the camera did (docs/accuracy.md, issue 18).
+    std::optional<Eigen::Vector3d> rotation_gain_30;
+    std::string gravity_source;  // where the vertical came from
 };
 
 core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
