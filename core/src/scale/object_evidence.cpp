@@ -250,19 +250,24 @@ Scalar ObjectEvidence::associationCost(const Track& t, int slot, const FrameSnap
         return -1;
     }
     const Mat3 R_WtoC = frame.pose.R_CtoW.transpose();
-    if (t.anchored) {
+    if (t.has_estimate) {
+        // The triangulated point, usable or not yet: the box centre must lie
+        // within 3 sigma of its projection, sigma from its covariance (long
+        // along the viewing rays while the parallax is small) and the gate.
         const Vec3 p_C = R_WtoC * (t.p_AinW - frame.pose.p_CinW);
-        if (const auto px = camera_.project(p_C)) {
-            const auto& k = camera_.intrinsics();
-            const Scalar sigma_px =
-                std::max(k.fx, k.fy) * std::sqrt(std::max(Scalar(0), t.P_AinW.trace())) / p_C.z();
-            const Scalar cost =
-                (*px - c).norm() / (config_.association_gate * half_diag + 2 * sigma_px);
-            if (cost <= 1) {
-                return cost;
+        Mat23 J = Mat23::Zero();
+        if (const auto px = camera_.project(p_C, &J)) {
+            const Mat23 J_W = J * R_WtoC;
+            const Scalar g = config_.association_gate * half_diag / 2;
+            const Mat2 S = J_W * t.P_AinW * J_W.transpose() + Mat2::Identity() * (g * g);
+            const Vec2 r = *px - c;
+            const Scalar m2 = r.dot(S.ldlt().solve(r));
+            if (std::isfinite(m2) && m2 <= 9) {
+                // Objects whose anchor is usable rank first.
+                return std::sqrt(m2) / 3 + (t.anchored ? Scalar(0) : Scalar(0.5));
             }
         }
-        // A wrong anchor must not lock the object out of its own views: the
+        // A wrong estimate must not lock the object out of its own views: the
         // epipolar search below still applies to a recently seen object.
     }
     if (updates_ - t.last_update > config_.max_gap_updates || t.stored == 0) {
@@ -306,7 +311,7 @@ Scalar ObjectEvidence::associationCost(const Track& t, int slot, const FrameSnap
     // the overlap with the last box breaks the tie (views are a fraction of a
     // second apart), and an anchored object that fell back here ranks after
     // those whose anchor agrees.
-    return epipolar + (1 - overlapOf(last.box, box)) + (t.anchored ? Scalar(1) : Scalar(0));
+    return epipolar + (1 - overlapOf(last.box, box)) + (t.has_estimate ? Scalar(1) : Scalar(0.5));
 }
 
 int ObjectEvidence::newTrack(int class_index) {
@@ -342,6 +347,7 @@ int ObjectEvidence::newTrack(int class_index) {
 
 void ObjectEvidence::triangulate(Track& t, int slot) {
     t.anchored = false;
+    t.has_estimate = false;
     const auto& k = camera_.intrinsics();
     const Scalar f = (k.fx + k.fy) / 2;
     Vec3 X = Vec3::Zero();
@@ -423,10 +429,9 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
     // parallax from below; pairs among the others are not needed for the gate.
     const Scalar parallax_deg = std::acos(std::clamp(max_angle_cos, Scalar(-1), Scalar(1))) * 180 /
                                 std::numbers::pi_v<Scalar>;
-    if (latest == nullptr || parallax_deg < config_.min_parallax_deg || 2 * inside < n) {
+    if (latest == nullptr) {
         return;
-    }
-    // A-posteriori variance factor: rays that do not meet as well as their
+    }  // A-posteriori variance factor: rays that do not meet as well as their
     // assumed noise says (the box centre moving on the object, a pose error
     // of the map) widen the anchor's covariance accordingly.
     Scalar chi2 = 0;
@@ -461,7 +466,9 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
     t.p_AinW = X;
     t.P_AinW = P;
     t.anchor_rel_sigma = rel;
-    t.anchored = rel <= config_.max_anchor_rel_sigma;
+    t.has_estimate = true;
+    t.anchored = rel <= config_.max_anchor_rel_sigma && parallax_deg >= config_.min_parallax_deg &&
+                 2 * inside >= n;
 }
 
 void ObjectEvidence::evaluate(Track& t, int slot) {

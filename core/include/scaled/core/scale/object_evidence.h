@@ -54,12 +54,18 @@ struct ObjectConfig {
     int max_objects = 32;  // objects tracked at once, in [1, 1024]
     int max_views = 32;    // views kept per object (the oldest is replaced), in [2, 1024]
     // Anchoring: the box centre's noise, a fraction of the box diagonal plus
-    // pixels (the centre of a box is not a fixed point of the object).
-    Scalar centre_rel_sigma = Scalar(0.1);
-    Scalar centre_sigma_px = 3;
-    Scalar min_parallax_deg = 2;                 // between the views an anchor is made of
-    Scalar max_anchor_rel_sigma = Scalar(0.15);  // anchor depth std / distance for use
-    Scalar anchor_box_margin = Scalar(0.15);     // the anchor projects inside the box grown by this
+    // pixels (a priori; the rays' a-posteriori variance factor widens it when
+    // they meet worse than that: the centre of a box is not a fixed point of
+    // the object, and the map's poses have errors).
+    Scalar centre_rel_sigma = Scalar(0.05);
+    Scalar centre_sigma_px = 2;
+    Scalar min_parallax_deg = 2;  // between the views an anchor is made of
+    // An anchor is used once its depth std is below this fraction of its
+    // distance. Its uncertainty is part of the object's likelihood (a common
+    // relative error of its views), so the gate only keeps out anchors that
+    // are barely determined.
+    Scalar max_anchor_rel_sigma = Scalar(0.5);
+    Scalar anchor_box_margin = Scalar(0.15);  // the anchor projects inside the box grown by this
     // Association: a box joins an object whose predicted centre lies within
     // association_gate half-diagonals of the box (plus 2 sigma of the
     // projected anchor); an object without anchor is searched along the
@@ -210,6 +216,7 @@ private:
         std::int64_t first_frame = 0;
         std::int64_t last_frame = 0;
         bool anchored = false;
+        bool has_estimate = false;  // a triangulation exists (anchored or not yet usable)
         Vec3 p_AinW = Vec3::Zero();
         Mat3 P_AinW = Mat3::Zero();
         Scalar anchor_rel_sigma = 0;
