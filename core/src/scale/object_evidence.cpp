@@ -149,6 +149,7 @@ ObjectEvidence::ObjectEvidence(const ObjectConfig& config, const ExtentConfig& e
       log_l_(static_cast<std::size_t>(config.max_objects) * grid.size(), 0),
       extents_(static_cast<std::size_t>(config.max_views)),
       view_log_l_(config.one_height ? 0 : grid.size(), 0),
+      rays_(static_cast<std::size_t>(config.max_views)),
       norm_(static_cast<std::size_t>(config.max_views)),
       norm_sorted_(static_cast<std::size_t>(config.max_views)) {
     candidates_.reserve(static_cast<std::size_t>(kMaxDetections) *
@@ -350,37 +351,47 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
     t.has_estimate = false;
     const auto& k = camera_.intrinsics();
     const Scalar f = (k.fx + k.fy) / 2;
-    Vec3 X = Vec3::Zero();
-    Mat3 H = Mat3::Zero();
+    // The views' box-centre rays (boxes cut by the image border left out:
+    // their centre is not the object's).
     int n = 0;
+    for (int i = 0; i < t.stored; ++i) {
+        const View& v = view(slot, i);
+        if (onBorder(v.box)) {
+            continue;
+        }
+        const auto ray_C = camera_.unproject(centreOf(v.box));
+        if (!ray_C) {
+            continue;
+        }
+        Ray& r = rays_[static_cast<std::size_t>(n++)];
+        r.view = i;
+        r.dir_W = v.pose.R_CtoW * ray_C->normalized();
+        r.sigma_angle =
+            (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
+    }
+    if (n < 2) {
+        return;
+    }
+    const std::span<const Ray> rays(rays_.data(), static_cast<std::size_t>(n));
+    // Weighted least squares: each ray's perpendicular error has std
+    // sigma_angle times the depth along it (the map's depth in view first,
+    // then the solution's).
+    Vec3 X = Vec3::Zero();
+    Eigen::SelfAdjointEigenSolver<Mat3> eig;
     for (int iter = 0; iter < 2; ++iter) {
-        H.setZero();
+        Mat3 H = Mat3::Zero();
         Vec3 b = Vec3::Zero();
-        n = 0;
-        for (int i = 0; i < t.stored; ++i) {
-            const View& v = view(slot, i);
-            if (onBorder(v.box)) {
-                continue;
-            }
-            const auto ray_C = camera_.unproject(centreOf(v.box));
-            if (!ray_C) {
-                continue;
-            }
-            const Vec3 r = v.pose.R_CtoW * ray_C->normalized();
-            const Scalar sigma_angle =
-                (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
+        for (const Ray& r : rays) {
+            const View& v = view(slot, r.view);
             const Scalar dist =
-                iter == 0 ? v.depth_hint : std::max((X - v.pose.p_CinW).dot(r), v.depth_hint / 100);
-            const Scalar s = sigma_angle * dist;
-            const Mat3 A = (Mat3::Identity() - r * r.transpose()) / (s * s);
+                iter == 0 ? v.depth_hint
+                          : std::max((X - v.pose.p_CinW).dot(r.dir_W), v.depth_hint / 100);
+            const Scalar s = r.sigma_angle * dist;
+            const Mat3 A = (Mat3::Identity() - r.dir_W * r.dir_W.transpose()) / (s * s);
             H += A;
             b += A * v.pose.p_CinW;
-            ++n;
         }
-        if (n < 2) {
-            return;
-        }
-        Eigen::SelfAdjointEigenSolver<Mat3> eig(H);
+        eig.compute(H);
         if (eig.info() != Eigen::Success || !(eig.eigenvalues()(0) > 0) ||
             !(eig.eigenvalues()(0) >
               eig.eigenvalues()(2) * std::numeric_limits<Scalar>::epsilon() * 1000)) {
@@ -389,74 +400,43 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
         X = eig.eigenvectors() *
             (eig.eigenvalues().cwiseInverse().asDiagonal() * (eig.eigenvectors().transpose() * b));
     }
-    // Checks: in front of, and inside (a margin around) the views it is made
-    // of; enough parallax between them.
-    Scalar max_angle_cos = 1;
+    // In front of every view; how many boxes it projects into (with a
+    // margin); the rays' chi-square; the largest angle between two rays.
     int inside = 0;
-    Vec3 r_prev = Vec3::Zero();
-    Vec3 r_first = Vec3::Zero();
-    bool have = false;
-    const View* latest = nullptr;
-    for (int i = 0; i < t.stored; ++i) {
-        const View& v = view(slot, i);
-        if (onBorder(v.box)) {
-            continue;
-        }
-        const auto ray_C = camera_.unproject(centreOf(v.box));
-        if (!ray_C) {
-            continue;
-        }
-        const Vec3 r = v.pose.R_CtoW * ray_C->normalized();
-        if ((X - v.pose.p_CinW).dot(r) <= 0) {
+    Scalar chi2 = 0;
+    Scalar min_cos = 1;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        const View& v = view(slot, rays[i].view);
+        const Vec3 e = X - v.pose.p_CinW;
+        const Scalar along = e.dot(rays[i].dir_W);
+        if (!(along > 0)) {
             return;
         }
-        if (!have) {
-            r_first = r;
-            have = true;
-        }
-        max_angle_cos = std::min({max_angle_cos, r.dot(r_first), have ? r.dot(r_prev) : Scalar(1)});
-        r_prev = r;
-        const auto px = camera_.project(v.pose.R_CtoW.transpose() * (X - v.pose.p_CinW));
+        const Scalar s = rays[i].sigma_angle * along;
+        chi2 += (e - along * rays[i].dir_W).squaredNorm() / (s * s);
+        const auto px = camera_.project(v.pose.R_CtoW.transpose() * e);
         const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
         const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
         if (px && px->x() >= v.box.x_min_px - mw && px->x() <= v.box.x_max_px + mw &&
             px->y() >= v.box.y_min_px - mh && px->y() <= v.box.y_max_px + mh) {
             ++inside;
         }
-        latest = &v;
+        for (std::size_t j = 0; j < i; ++j) {
+            min_cos = std::min(min_cos, rays[i].dir_W.dot(rays[j].dir_W));
+        }
     }
-    // The largest angle between the first view and any other bounds the
-    // parallax from below; pairs among the others are not needed for the gate.
-    const Scalar parallax_deg = std::acos(std::clamp(max_angle_cos, Scalar(-1), Scalar(1))) * 180 /
-                                std::numbers::pi_v<Scalar>;
-    if (latest == nullptr) {
-        return;
-    }  // A-posteriori variance factor: rays that do not meet as well as their
+    const Scalar parallax_deg =
+        std::acos(std::clamp(min_cos, Scalar(-1), Scalar(1))) * 180 / std::numbers::pi_v<Scalar>;
+    // A-posteriori variance factor: rays that do not meet as well as their
     // assumed noise says (the box centre moving on the object, a pose error
     // of the map) widen the anchor's covariance accordingly.
-    Scalar chi2 = 0;
-    for (int i = 0; i < t.stored; ++i) {
-        const View& v = view(slot, i);
-        if (onBorder(v.box)) {
-            continue;
-        }
-        const auto ray_C = camera_.unproject(centreOf(v.box));
-        if (!ray_C) {
-            continue;
-        }
-        const Vec3 r = v.pose.R_CtoW * ray_C->normalized();
-        const Vec3 e = X - v.pose.p_CinW;
-        const Scalar along = e.dot(r);
-        const Scalar sigma_angle =
-            (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
-        const Scalar s = sigma_angle * along;
-        chi2 += (e - along * r).squaredNorm() / (s * s);
-    }
     const int dof = 2 * n - 3;
     const Scalar factor =
         dof > 0 ? std::max(Scalar(1), chi2 / static_cast<Scalar>(dof)) : Scalar(1);
-    const Mat3 P = H.inverse() * factor;
-    const Vec3 e = X - latest->pose.p_CinW;
+    const Mat3 P = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
+                   eig.eigenvectors().transpose() * factor;
+    // Its relative depth uncertainty, seen from the latest of those views.
+    const Vec3 e = X - view(slot, rays.back().view).pose.p_CinW;
     const Scalar dist = e.norm();
     const Vec3 dir = e / dist;
     const Scalar rel = std::sqrt(std::max(Scalar(0), dir.dot(P * dir))) / dist;
@@ -797,6 +777,7 @@ std::size_t ObjectEvidence::memoryBytes() const {
     std::size_t bytes = sizeof(*this) + tracks_.capacity() * sizeof(Track) +
                         views_.capacity() * sizeof(View) + log_l_.capacity() * sizeof(Scalar) +
                         extents_.capacity() * sizeof(ObjectViewExtent) +
+                        rays_.capacity() * sizeof(Ray) +
                         (view_log_l_.capacity() + norm_.capacity() + norm_sorted_.capacity() +
                          width_ratio_.capacity() + class_spread_.capacity()) *
                             sizeof(Scalar) +

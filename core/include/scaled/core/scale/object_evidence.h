@@ -230,6 +230,11 @@ private:
         double s_d = 0;
         double s_k = 0;
     };
+    struct Ray {  // a view's box-centre ray, for the triangulation
+        int view = 0;
+        Vec3 dir_W = Vec3::Zero();
+        Scalar sigma_angle = 0;  // radians
+    };
     struct Candidate {
         Scalar cost = 0;
         int detection = 0;
@@ -281,6 +286,7 @@ private:
     std::vector<Scalar> log_l_;
     std::vector<ObjectViewExtent> extents_;  // scratch, max_views
     std::vector<Scalar> view_log_l_;         // scratch, grid (one_height = false)
+    std::vector<Ray> rays_;                  // scratch, max_views
     std::vector<Scalar> norm_;               // scratch, max_views
     std::vector<Scalar> norm_sorted_;        // scratch, max_views
     std::vector<Candidate> candidates_;      // scratch, kMaxDetections * max_objects
