@@ -12,7 +12,10 @@
 
 #include <gtest/gtest.h>
 
+#include <scaled/drivers/priors_toml.h>
 #include <scaled/sim/sim_source.h>
+
+#include "sim_priors.h"
 
 namespace scaled::sim {
 namespace {
@@ -184,6 +187,28 @@ TEST(SimSource, ObjectsHaveThePriorMeansAndStandOnTheFloor) {
             EXPECT_FALSE(o.box.contains(p->p_CinW, Scalar(-0.5))) << o.class_name;
         }
     }
+}
+
+// The test priors that know the sim's objects (tests/support/sim_priors.h):
+// one upright class per upright sim object, its mean the object's height.
+TEST(SimSource, ExactTestPriorsAreTheObjectsHeights) {
+    auto priors = drivers::parsePriors(test::kSimExactPriorsToml, "kSimExactPriorsToml");
+    ASSERT_TRUE(priors.ok()) << priors.error().message;
+    int known = 0;
+    for (const auto& o : simObjects(SimConfig{})) {
+        const core::HeightPrior* p = priors->find(o.class_name);
+        if (o.class_name == "dining table") {  // not upright: the estimator ignores it
+            EXPECT_EQ(p, nullptr);
+            continue;
+        }
+        ASSERT_NE(p, nullptr) << o.class_name;
+        ++known;
+        EXPECT_TRUE(p->upright()) << o.class_name;
+        EXPECT_NEAR(static_cast<double>(p->mean()), o.height_m, 1e-3 * o.height_m) << o.class_name;
+        EXPECT_NEAR(static_cast<double>(p->relativeSpread()), 0.01, 0.002) << o.class_name;
+    }
+    EXPECT_EQ(known, 4);
+    EXPECT_EQ(priors->priors().size(), 4U);
 }
 
 // Every object is reported at some frames of the first loop, each box contains
