@@ -314,9 +314,29 @@ TEST_F(DaemonTest, WatchStreamsScaleInFrameOrderUntilDisabled) {
     EXPECT_TRUE(isClass(next, "STATUS")) << "after watch false: " << c.lastLine();
 }
 
-// 3. The sim converges (fast pacing) to a positive scale inside a narrow ci95.
+// The daemon's path to "converged" (the state, its SCALE line, scalectl's
+// --require-converged) needs a run that converges. The default model
+// (estimator.model = "object") does not on the sim, by design and even with
+// priors that know the sim's objects (tests/support/sim_priors.h) and
+// objects.map_rel_sigma = 0: each object keeps a common relative error
+// (objects.object_rel_sigma, 5%) besides its class's spread, so the sim's
+// four objects allow a 95% width of 10.0% at best (the converged threshold is
+// "narrower than 10%"), and the anchors' depth uncertainty (4-13% of their
+// distance after minutes: the camera's loop is small against the objects'
+// distance) widens it further. Measured with `scaled --source sim --pacing
+// fast --set objects.map_rel_sigma=0` and those priors: 19% wide after 120 s
+// (frame 20840), four objects used, 27-32 views each; tests/unit/sim's
+// ExactPriorsNarrowTheIntervalAroundTheTrueScale. These tests are about the
+// daemon's converged path, not the estimator: they pin the paper model, which
+// converges on the sim within a few seconds.
+const std::vector<std::string> kConvergingModel = {"--set", "estimator.model=paper"};
+
+// 3. The sim converges (fast pacing) to a positive scale inside a narrow ci95
+// (the paper model: see kConvergingModel).
 TEST_F(DaemonTest, SimConvergesFast) {
-    ASSERT_TRUE(startSim({"--pacing", "fast"}));
+    std::vector<std::string> args = {"--pacing", "fast"};
+    args.insert(args.end(), kConvergingModel.begin(), kConvergingModel.end());
+    ASSERT_TRUE(startSim(args));
     Client c = client();
     ASSERT_TRUE(enableWatch(c, true));
     Json last;
@@ -852,12 +872,14 @@ TEST_F(DaemonTest, ObjectModelServesAndLogsItsObjects) {
     EXPECT_GT(object_lines, 0);
 }
 
+// The paper model: see kConvergingModel.
 TEST(DaemonScalectl, RequireConvergedSucceedsOnceConverged) {
     TempDir tmp("d");
     DaemonUnderTest daemon(SCALED_BIN, tmp.path());
     writeFile(daemon.paths().config, daemonConfigText(daemon.paths(), kPriors));
     DaemonOptions opt;
     opt.args = {"--source", "sim", "--pacing", "fast"};
+    opt.args.insert(opt.args.end(), kConvergingModel.begin(), kConvergingModel.end());
     ASSERT_TRUE(daemon.start(opt));
     auto c = daemon.client();
     ASSERT_TRUE(c.has_value());
