@@ -451,6 +451,49 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
                  2 * inside >= n;
 }
 
+std::optional<ObjectViewExtent> ObjectEvidence::measureView(const Vec3& p_AinW,
+                                                            const CameraPose& pose,
+                                                            const Vec3& up_W,
+                                                            const BoundingBox& box) const {
+    const auto px = camera_.project(pose.R_CtoW.transpose() * (p_AinW - pose.p_CinW));
+    if (!px) {
+        return std::nullopt;
+    }
+    const Scalar mw = config_.anchor_box_margin * (box.x_max_px - box.x_min_px);
+    const Scalar mh = config_.anchor_box_margin * (box.y_max_px - box.y_min_px);
+    if (px->x() < box.x_min_px - mw || px->x() > box.x_max_px + mw || px->y() < box.y_min_px - mh ||
+        px->y() > box.y_max_px + mh) {
+        return std::nullopt;  // not this object's box, as the anchor sees it
+    }
+    // The vertical line through the anchor, moved into the box (at the
+    // anchor's depth) when the anchor projects into the margin around it.
+    VerticalExtent ve;
+    ExtentStatus status = computeVerticalExtent(camera_, pose, up_W, p_AinW, box, extent_, &ve);
+    if (status == ExtentStatus::kOutsideBox) {
+        const Vec2 q(std::clamp(px->x(), box.x_min_px + 1, box.x_max_px - 1),
+                     std::clamp(px->y(), box.y_min_px + 1, box.y_max_px - 1));
+        const auto ray_C = camera_.unproject(q);
+        if (!ray_C) {
+            return std::nullopt;
+        }
+        const Scalar depth = (pose.R_CtoW.transpose() * (p_AinW - pose.p_CinW)).z();
+        const Vec3 p = pose.p_CinW + pose.R_CtoW * (*ray_C * depth);
+        status = computeVerticalExtent(camera_, pose, up_W, p, box, extent_, &ve);
+    }
+    if (status != ExtentStatus::kOk) {
+        return std::nullopt;
+    }
+    const Scalar h_px = (ve.pi_t_px - ve.pi_d_px).norm();
+    const Scalar edge = std::max(extent_.box_edge_sigma_px, config_.box_edge_rel_sigma * h_px);
+    ObjectViewExtent x;
+    x.D = ve.D;
+    x.kappa = (std::abs(tanElevation(ve.p_t_W, pose.p_CinW, up_W)) +
+               std::abs(tanElevation(ve.p_d_W, pose.p_CinW, up_W))) /
+              2;
+    x.sigma_D = ve.D * std::sqrt(Scalar(2)) * edge / std::max(h_px, Scalar(1));
+    return x;
+}
+
 void ObjectEvidence::evaluate(Track& t, int slot) {
     t.dirty = false;
     t.used = false;
@@ -465,47 +508,11 @@ void ObjectEvidence::evaluate(Track& t, int slot) {
     std::size_t n = 0;
     for (int i = 0; i < t.stored; ++i) {
         const View& v = view(slot, i);
-        const auto px = camera_.project(v.pose.R_CtoW.transpose() * (t.p_AinW - v.pose.p_CinW));
-        if (!px) {
-            continue;
+        if (const auto x = measureView(t.p_AinW, v.pose, v.up_W, v.box)) {
+            extents_[n] = *x;
+            norm_[n] = x->D / (1 + x->kappa * ratio);
+            ++n;
         }
-        const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
-        const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
-        if (px->x() < v.box.x_min_px - mw || px->x() > v.box.x_max_px + mw ||
-            px->y() < v.box.y_min_px - mh || px->y() > v.box.y_max_px + mh) {
-            continue;  // not this object's box, as the anchor sees it
-        }
-        // The vertical line through the anchor, moved into the box when the
-        // anchor projects into the margin around it.
-        Vec3 p = t.p_AinW;
-        VerticalExtent ve;
-        ExtentStatus status =
-            computeVerticalExtent(camera_, v.pose, v.up_W, p, v.box, extent_, &ve);
-        if (status == ExtentStatus::kOutsideBox) {
-            const Vec2 q(std::clamp(px->x(), v.box.x_min_px + 1, v.box.x_max_px - 1),
-                         std::clamp(px->y(), v.box.y_min_px + 1, v.box.y_max_px - 1));
-            const auto ray_C = camera_.unproject(q);
-            if (!ray_C) {
-                continue;
-            }
-            const Scalar depth = (v.pose.R_CtoW.transpose() * (t.p_AinW - v.pose.p_CinW)).z();
-            p = v.pose.p_CinW + v.pose.R_CtoW * (*ray_C * depth);
-            status = computeVerticalExtent(camera_, v.pose, v.up_W, p, v.box, extent_, &ve);
-        }
-        if (status != ExtentStatus::kOk) {
-            continue;
-        }
-        const Scalar h_px = (ve.pi_t_px - ve.pi_d_px).norm();
-        const Scalar edge = std::max(extent_.box_edge_sigma_px, config_.box_edge_rel_sigma * h_px);
-        ObjectViewExtent x;
-        x.D = ve.D;
-        x.kappa = (std::abs(tanElevation(ve.p_t_W, v.pose.p_CinW, v.up_W)) +
-                   std::abs(tanElevation(ve.p_d_W, v.pose.p_CinW, v.up_W))) /
-                  2;
-        x.sigma_D = ve.D * std::sqrt(Scalar(2)) * edge / std::max(h_px, Scalar(1));
-        extents_[n] = x;
-        norm_[n] = x.D / (1 + x.kappa * ratio);
-        ++n;
     }
     if (n == 0) {
         return;
@@ -683,18 +690,11 @@ ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
             r.local_estimate = t.local_estimate;
             r.weight = 1;
             // The view just added, measured with the current anchor.
-            VerticalExtent ve;
-            if (computeVerticalExtent(camera_, frame.pose, frame.up_W, t.p_AinW,
-                                      detections[static_cast<std::size_t>(di)].box, extent_,
-                                      &ve) == ExtentStatus::kOk) {
-                r.D = ve.D;
-                const Scalar h_px = (ve.pi_t_px - ve.pi_d_px).norm();
-                const Scalar edge =
-                    std::max(extent_.box_edge_sigma_px, config_.box_edge_rel_sigma * h_px);
-                r.sigma_D_box = ve.D * std::sqrt(Scalar(2)) * edge / std::max(h_px, Scalar(1));
-                r.kappa = (std::abs(tanElevation(ve.p_t_W, frame.pose.p_CinW, frame.up_W)) +
-                           std::abs(tanElevation(ve.p_d_W, frame.pose.p_CinW, frame.up_W))) /
-                          2;
+            if (const auto x = measureView(t.p_AinW, frame.pose, frame.up_W,
+                                           detections[static_cast<std::size_t>(di)].box)) {
+                r.D = x->D;
+                r.sigma_D_box = x->sigma_D;
+                r.kappa = x->kappa;
             }
         }
     }

@@ -33,6 +33,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -271,6 +272,13 @@ private:
                                          const BoundingBox& box, Scalar depth_hint) const;
     int newTrack(int class_index);
     void triangulate(Track& t, int slot);
+    // One view measured on the vertical through the anchor: nullopt when the
+    // anchor does not project into (a margin around) the box or the geometry
+    // gives no extent.
+    [[nodiscard]] std::optional<ObjectViewExtent> measureView(const Vec3& p_AinW,
+                                                              const CameraPose& pose,
+                                                              const Vec3& up_W,
+                                                              const BoundingBox& box) const;
     void evaluate(Track& t, int slot);
 
     ObjectConfig config_;
