@@ -9,8 +9,9 @@ Reads frames.csv, updates.csv, observations.csv, posterior.csv,
 likelihoods.csv and (if present) summary.json from OUT_DIR and writes
 fig_a_likelihoods.png, fig_b_posterior.png, fig_c_estimates.png and
 fig_d_rel_error.png into OUT_DIR (and fig_e_objects.png, each object's own
-estimate over time, when objects.csv is there), printing one line per
-written file.
+estimate over time, when objects.csv is there; fig_f_map_scale.png, the
+map's ground-truth scale so far and over the sliding window), printing one
+line per written file.
 With --no-curves (field-log output: no posterior curves are logged)
 posterior.csv and likelihoods.csv are not read and only figures (c) and (d)
 are drawn.
@@ -369,6 +370,36 @@ def fig_errors(ax, frames, n_updates, conv_frame):
     ax.legend(loc="best", fontsize=8)
 
 
+def fig_map_scale(ax, frames, summary):
+    """The map's own scale: the Sim(3) scale of the epoch so far and of the
+    sliding window, per frame; where they part, the map drifts (issue 19)."""
+    ax.set_xlabel("frame index")
+    ax.set_ylabel("ground-truth scale (m per SLAM unit)")
+    x, ep = frames["frame"], frames["epoch"]
+    window = summary.get("window_frames")
+    plot_epochs(ax, x, frames["scale_true"], ep, "epoch so far",
+                color="tab:blue", lw=2)
+    plot_epochs(ax, x, frames["scale_true_window"], ep,
+                f"last {window} frames" if window else "sliding window",
+                color="tab:cyan", lw=1.2)
+    plot_epochs(ax, x, frames["scale_est"], ep, "served estimate (MAP)",
+                color="0.4", lw=1, ls=":")
+    if not np.isfinite(frames["scale_true"]).any():
+        note(ax, "no ground truth")
+        return
+    rng = number(summary.get("scale_true_window_range"))
+    dev = number(summary.get("scale_true_window_max_dev"))
+    if rng is not None and dev is not None:
+        ax.text(0.02, 0.97, f"window range (max/min) {rng:.3f}\n"
+                f"window vs so far: at most {100 * dev:.1f}%",
+                transform=ax.transAxes, va="top", fontsize=9,
+                bbox=dict(facecolor="white", edgecolor="0.7", alpha=0.9))
+    y = np.concatenate([frames["scale_true"], frames["scale_true_window"]])
+    y = y[np.isfinite(y)]
+    ax.set_ylim(0.8 * float(np.min(y)), 1.2 * float(np.max(y)))
+    ax.legend(loc="lower right", fontsize=8)
+
+
 def run(out_dir, extra_title, curves=True):
     warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows etc.
     if not os.path.isdir(out_dir):
@@ -402,6 +433,8 @@ def run(out_dir, extra_title, curves=True):
              lambda ax, fig: fig_errors(ax, frames, n_upd, conv_frame))]
     if not curves:
         figs = figs[2:]
+    figs.append(("fig_f_map_scale.png", "(f) The map's scale",
+                 lambda ax, fig: fig_map_scale(ax, frames, summary)))
     if os.path.isfile(path("objects.csv")):
         objs = read_table(path("objects.csv"), OBJ_COLS)
         figs.append(("fig_e_objects.png", "(e) Per-object estimates",

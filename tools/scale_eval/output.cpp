@@ -158,6 +158,11 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
     s += ",\"scale_true_final\":" + num(truth, 7);
     s += ",\"scale_true_window\":" + num(lastTruth(r, true), 7);
     s += ",\"window_frames\":" + std::to_string(options.window_frames);
+    {
+        const MapScaleDrift drift = mapScaleDrift(r.frame_rows, r.updates);
+        s += ",\"scale_true_window_range\":" + num(drift.window_range, 5);
+        s += ",\"scale_true_window_max_dev\":" + num(drift.window_max_dev, 5);
+    }
     const ErrorStats e = relativeErrors(r.updates, statsFrom(r), false);
     const ErrorStats ew = relativeErrors(r.updates, statsFrom(r), true);
     s += ",\"rel_error\":" + (converged ? stats(e) : "null");

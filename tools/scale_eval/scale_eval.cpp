@@ -160,6 +160,38 @@ Calibration calibration(std::span<const UpdateRow> updates, double settle_s) {
     return c;
 }
 
+MapScaleDrift mapScaleDrift(std::span<const FrameRow> frames, std::span<const UpdateRow> updates) {
+    MapScaleDrift d;
+    std::optional<int> epoch;
+    double lo = 0;
+    double hi = 0;
+    const auto close = [&] {
+        if (epoch && lo > 0) {
+            d.window_range = std::max(d.window_range.value_or(1.0), hi / lo);
+        }
+    };
+    for (const FrameRow& f : frames) {
+        if (!f.window_full || !f.scale_true_window || !(*f.scale_true_window > 0)) {
+            continue;
+        }
+        if (!epoch || *epoch != f.epoch) {
+            close();
+            epoch = f.epoch;
+            lo = hi = *f.scale_true_window;
+        }
+        lo = std::min(lo, *f.scale_true_window);
+        hi = std::max(hi, *f.scale_true_window);
+    }
+    close();
+    for (const UpdateRow& u : updates) {
+        if (u.scale_true && u.scale_true_window && *u.scale_true > 0) {
+            const double dev = std::abs(*u.scale_true_window / *u.scale_true - 1);
+            d.window_max_dev = std::max(d.window_max_dev.value_or(0.0), dev);
+        }
+    }
+    return d;
+}
+
 ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window) {
     std::vector<double> e;
     for (std::size_t i = first; i < updates.size(); ++i) {
@@ -314,6 +346,7 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             const std::size_t w = std::min<std::size_t>(
                 track.est.size(), static_cast<std::size_t>(options.window_frames));
             const std::size_t from = track.est.size() - w;
+            row.window_full = w == static_cast<std::size_t>(options.window_frames);
             row.scale_true_window =
                 options.truth_geometry
                     ? std::optional<double>(1.0)

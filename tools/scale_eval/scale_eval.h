@@ -65,6 +65,7 @@ struct FrameRow {
     core::ScaleSummary scale;                 // the estimate after this frame
     std::optional<double> scale_true;         // cumulative Sim(3) scale of this epoch so far
     std::optional<double> scale_true_window;  // the same over the last window_frames
+    bool window_full = false;                 // the epoch has window_frames tracked frames
     std::optional<double> baseline_constant;  // this epoch's constant-scale baseline
     std::optional<double> baseline_single;    // this epoch's single-early-detection scale
 };
@@ -190,6 +191,17 @@ struct Calibration {
     ErrorStats after_settle_window;  // the same against the sliding-window truth
 };
 Calibration calibration(std::span<const UpdateRow> updates, double settle_s);
+
+// How far the map's own scale wanders (issue 19), from the frames' truths.
+struct MapScaleDrift {
+    // max/min of scale_true_window over the frames whose window is full, the
+    // largest of that over the epochs (a new map has a new scale).
+    std::optional<double> window_range;
+    // max over the updates of |scale_true_window / scale_true - 1|: the map's
+    // recent scale against its average so far.
+    std::optional<double> window_max_dev;
+};
+MapScaleDrift mapScaleDrift(std::span<const FrameRow> frames, std::span<const UpdateRow> updates);
 
 // |estimate / truth - 1| of every update from `first` on that has a truth.
 ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window);

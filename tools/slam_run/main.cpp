@@ -42,14 +42,16 @@ void usage(std::FILE* out) {
         "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
         "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
         "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
-        "                [--seed N] [--set KEY=VALUE]... [--verbose]\n"
+        "                [--seed N] [--set KEY=VALUE]... [--window N] [--verbose]\n"
         "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, a folder of\n"
         "images or a video file, writes the trajectory (TUM format, SLAM units, world = first\n"
         "camera) and prints a summary.\n"
         "  --camera FILE  intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt format);\n"
         "                 overrides the dataset's\n"
         "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
-        "                 container has none (default 30)\n",
+        "                 container has none (default 30)\n"
+        "  --window N     tracked frames of the sliding-window Sim(3) scale whose range\n"
+        "                 (max/min) --json reports as window_scale (default 150)\n",
         out);
 }
 
@@ -207,6 +209,8 @@ int main(int argc, char** argv) {
             ok = parseNumber(*v, ropt.tracker.slam.max_measured);
         } else if (a == "--set") {
             ok = setParameter(*v, ropt.tracker);
+        } else if (a == "--window") {
+            ok = parseNumber(*v, ropt.window_frames) && ropt.window_frames >= 3;
         } else if (a == "--seed") {
             ok = parseNumber(*v, ropt.tracker.slam.seed);
         } else {

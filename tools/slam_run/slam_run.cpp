@@ -164,6 +164,10 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
             result.path_length_m = static_cast<double>(core::pathLength(result.gt_positions));
             const auto drift = core::scaleDriftBetweenThirds(est, result.gt_positions);
             result.scale_drift_thirds = drift ? static_cast<double>(*drift) : 0;
+            if (auto w =
+                    core::slidingWindowScales(est, result.gt_positions, options.window_frames)) {
+                result.window_scale = std::move(*w);
+            }
             if (const auto g = rotationGain(longest->poses, longest->gt_R, 30)) {
                 result.rotation_gain_30 = g->cast<double>();
             }
@@ -190,6 +194,12 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
              num(r.path_length_m > 0 ? 100 * r.ate_rmse_m / r.path_length_m : 0);
         s += ",\"scale_to_gt\":" + num(r.scale_to_gt);
         s += ",\"scale_drift_thirds\":" + num(r.scale_drift_thirds);
+        if (r.window_scale) {
+            const core::WindowScales& w = *r.window_scale;
+            s += ",\"window_scale\":{\"frames\":" + std::to_string(w.window) +
+                 ",\"windows\":" + std::to_string(w.valid) + ",\"min\":" + num(w.min) +
+                 ",\"max\":" + num(w.max) + ",\"range\":" + num(w.range) + "}";
+        }
         if (r.rotation_gain_30) {
             const Eigen::Vector3d& g = *r.rotation_gain_30;
             s += ",\"rotation_gain_30_frames\":[" + num(g.x()) + "," + num(g.y()) + "," +

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/result.h>
 #include <scaled/drivers/frame_source.h>
 #include <scaled/vision/mono_tracker.h>
@@ -20,6 +21,7 @@ struct SlamRunOptions {
     vision::TrackerConfig tracker;
     std::size_t first_frame = 0;
     std::optional<std::size_t> end_frame;  // exclusive
+    int window_frames = 150;               // the sliding-window scale's window (tracked frames)
     // Called after every frame (progress display); may be empty.
     std::function<void(std::size_t done, std::size_t total, const vision::TrackStats&)> progress;
 };
@@ -42,6 +44,9 @@ struct SlamRunResult {
     double ate_rmse_m = 0;
     double scale_to_gt = 0;         // metres per SLAM unit of the Sim(3) alignment
     double scale_drift_thirds = 0;  // first-third scale / last-third scale
+    // The Sim(3) scale over every window of window_frames tracked frames and
+    // its range max/min: how far the map's scale wanders (issue 19).
+    std::optional<core::WindowScales> window_scale;
     // Per camera axis (x right, y down, z forward), the least-squares gain of
     // the tracker's rotation over 30 frames against the ground truth's: 1
     // when it turns as much as the camera did (docs/accuracy.md, issue 18).

@@ -1,4 +1,6 @@
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include <Eigen/Geometry>
@@ -78,6 +80,42 @@ Result<Scalar> scaleDriftBetweenThirds(std::span<const Vec3> est, std::span<cons
         return last.error();
     }
     return first->scale / last->scale;
+}
+
+Result<WindowScales> slidingWindowScales(std::span<const Vec3> est, std::span<const Vec3> gt,
+                                         int window) {
+    if (window < 3) {
+        return makeError(
+            ErrorCode::kInvalidArgument,
+            "window scale: window of " + std::to_string(window) + " positions, needs at least 3");
+    }
+    const auto w = static_cast<size_t>(window);
+    if (est.size() != gt.size() || est.size() < w) {
+        return makeError(ErrorCode::kDegenerate,
+                         "window scale: needs " + std::to_string(window) +
+                             " matched positions, got " +
+                             std::to_string(std::min(est.size(), gt.size())));
+    }
+    WindowScales out;
+    out.window = window;
+    out.scale.assign(est.size() - w + 1, std::numeric_limits<Scalar>::quiet_NaN());
+    for (size_t k = 0; k < out.scale.size(); ++k) {
+        const auto a = alignTrajectories(est.subspan(k, w), gt.subspan(k, w));
+        if (!a || !(a->scale > 0)) {
+            continue;
+        }
+        out.scale[k] = a->scale;
+        out.min = out.valid == 0 ? a->scale : std::min(out.min, a->scale);
+        out.max = out.valid == 0 ? a->scale : std::max(out.max, a->scale);
+        ++out.valid;
+    }
+    if (out.valid == 0) {
+        return makeError(ErrorCode::kDegenerate,
+                         "window scale: the estimate does not move in any window of " +
+                             std::to_string(window) + " positions");
+    }
+    out.range = out.max / out.min;
+    return out;
 }
 
 }  // namespace scaled::core

@@ -59,6 +59,36 @@ TEST(ScaleEvalMetrics, RelativeErrorsFromAnUpdateOn) {
     EXPECT_NEAR(*describe({3, 1, 2, 10}).median, 2.5, 1e-12);
 }
 
+FrameRow frameRow(int epoch, std::optional<double> window, bool full) {
+    FrameRow f;
+    f.epoch = epoch;
+    f.scale_true_window = window;
+    f.window_full = full;
+    return f;
+}
+
+TEST(ScaleEvalMetrics, MapScaleDriftPerEpochAndAgainstTheAverage) {
+    // Epoch 0: full windows from 1.0 to 1.2 (range 1.2); the partial window
+    // of 0.5 before it counts for nothing. Epoch 1 starts a new map at 3.0
+    // and wanders to 3.3 (range 1.1): the run's range is the larger, 1.2.
+    const std::vector<FrameRow> f = {frameRow(0, 0.5, false),        frameRow(0, 1.0, true),
+                                     frameRow(0, 1.2, true),         frameRow(0, 1.1, true),
+                                     frameRow(1, 3.0, true),         frameRow(1, 3.3, true),
+                                     frameRow(1, std::nullopt, true)};
+    std::vector<UpdateRow> u = {update(1, 0.5, 1.0), update(1, 0.5, 2.0),
+                                update(1, 0.5, std::nullopt)};
+    u[1].scale_true_window = 1.7;  // 15% under the average (the others 10% over)
+    const MapScaleDrift d = mapScaleDrift(f, u);
+    ASSERT_TRUE(d.window_range && d.window_max_dev);
+    EXPECT_NEAR(*d.window_range, 1.2, 1e-12);
+    EXPECT_NEAR(*d.window_max_dev, 0.15, 1e-12);
+    // No full window, no truth: nothing to report.
+    const MapScaleDrift none =
+        mapScaleDrift(std::vector<FrameRow>{frameRow(0, 1.0, false)}, std::vector<UpdateRow>{});
+    EXPECT_FALSE(none.window_range.has_value());
+    EXPECT_FALSE(none.window_max_dev.has_value());
+}
+
 TEST(ScaleEvalMetrics, TruthScaleOfASimilarTrajectory) {
     // The ground truth is the estimate rotated, scaled by 2.5 and shifted.
     std::vector<core::Vec3> est;
