@@ -12,8 +12,9 @@ trap 'rm -rf "$tmp"' EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
 
 "$render" --out "$tmp/seq" --frames 90 --seed 1 >/dev/null
-json=$("$run" --dataset "$tmp/seq" --out "$tmp/traj.txt" --json)
-python3 - "$json" "$tmp/traj.txt" <<'PY' || fail "summary or trajectory does not meet the contract: $json"
+json=$("$run" --dataset "$tmp/seq" --out "$tmp/traj.txt" --json --window 30 \
+  --window-out "$tmp/window.csv")
+python3 - "$json" "$tmp/traj.txt" "$tmp/window.csv" <<'PY' || fail "summary or trajectory does not meet the contract: $json"
 import json, sys
 d = json.loads(sys.argv[1])
 for key in ("frames", "tracked_frames", "reinitialisations", "mean_features_measured",
@@ -24,7 +25,22 @@ assert d["mean_features_measured"] > 20, d
 assert d["ate_rmse_m"] < 0.01 * d["path_length_m"], d
 rows = [l.split() for l in open(sys.argv[2]) if l.strip() and not l.startswith("#")]
 assert len(rows) == 90 and all(len(r) == 8 for r in rows), len(rows)
+# The map's scale over every window of 30 frames: 61 windows, the range is
+# max/min of what the CSV holds, and a rendered room's map barely drifts.
+w = d["window_scale"]
+assert w["frames"] == 30 and w["windows"] == 61, w
+lines = open(sys.argv[3]).read().splitlines()
+assert lines[0] == "t_s,scale" and len(lines) == 62, lines[:3]
+scales = [float(l.split(",")[1]) for l in lines[1:]]
+assert abs(max(scales) / min(scales) - w["range"]) < 1e-3 * w["range"], (w, max(scales), min(scales))
+assert 1 <= w["range"] < 1.2, w
+nis = d["nis_by_feature_age"]
+assert sum(nis["matches"]) > 1000 and all(0 < m < 9.21 for m in nis["mean"] if m), nis
 PY
+set +e
+err=$("$run" --dataset "$tmp/seq" --window 2 2>&1 >/dev/null); rc=$?
+set -e
+[[ $rc -eq 64 ]] || fail "--window 2: exit $rc ($err)"
 
 # The first 30 rendered frames as a plain image folder: no index, no intrinsics.
 mkdir "$tmp/folder"

@@ -42,7 +42,8 @@ void usage(std::FILE* out) {
         "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
         "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
         "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
-        "                [--seed N] [--set KEY=VALUE]... [--window N] [--verbose]\n"
+        "                [--seed N] [--set KEY=VALUE]... [--window N]\n"
+        "                [--window-out CSV] [--verbose]\n"
         "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, a folder of\n"
         "images or a video file, writes the trajectory (TUM format, SLAM units, world = first\n"
         "camera) and prints a summary.\n"
@@ -51,7 +52,9 @@ void usage(std::FILE* out) {
         "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
         "                 container has none (default 30)\n"
         "  --window N     tracked frames of the sliding-window Sim(3) scale whose range\n"
-        "                 (max/min) --json reports as window_scale (default 150)\n",
+        "                 (max/min) --json reports as window_scale (default 150)\n"
+        "  --window-out F that scale per window as CSV (t_s of the window's last frame, scale),\n"
+        "                 for tools/plot_window_scale.py\n",
         out);
 }
 
@@ -139,6 +142,7 @@ bool setParameter(std::string_view kv, scaled::vision::TrackerConfig& c) {
 int main(int argc, char** argv) {
     std::filesystem::path dataset;
     std::filesystem::path out;
+    std::filesystem::path window_out;
     bool json = false;
     bool verbose = false;
     scaled::drivers::DatasetOptions dopt;
@@ -179,6 +183,9 @@ int main(int argc, char** argv) {
             dataset = std::string(*v);
         } else if (a == "--out") {
             out = std::string(*v);
+        } else if (a == "--window-out") {
+            window_out = std::string(*v);
+            ok = !window_out.empty();
         } else if (a == "--format") {
             if (*v == "tum") {
                 dopt.format = scaled::drivers::DatasetFormat::kTum;
@@ -318,6 +325,19 @@ int main(int argc, char** argv) {
     }
     if (!out.empty()) {
         if (auto w = scaled::drivers::writeTumTrajectory(out, result->t_ns, result->poses); !w) {
+            std::fprintf(stderr, "slam-run: %s\n", w.error().message.c_str());
+            return kExCantCreat;
+        }
+    }
+    if (!window_out.empty()) {
+        if (!result->window_scale) {
+            std::fprintf(stderr,
+                         "slam-run: %s: no window scale to write (it needs ground truth for "
+                         "every tracked frame and at least --window frames)\n",
+                         window_out.c_str());
+            return kExDataErr;
+        }
+        if (auto w = scaled::tools::writeWindowScales(window_out, *result); !w) {
             std::fprintf(stderr, "slam-run: %s\n", w.error().message.c_str());
             return kExCantCreat;
         }

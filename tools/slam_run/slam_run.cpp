@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <optional>
 
 #include <Eigen/Geometry>
@@ -116,6 +117,10 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
                 ++result.tracked_frames;
             }
             measured_sum += stats.inliers + stats.rescued;
+            for (std::size_t b = 0; b < result.nis_by_age.size(); ++b) {
+                result.nis_by_age[b] += static_cast<double>(stats.nis_sum[b]);
+                result.nis_by_age_count[b] += stats.nis_count[b];
+            }
             map_sum += stats.features;
             Segment& seg = segments.back();
             seg.t_ns.push_back(frame.t_ns);
@@ -135,6 +140,11 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
         if (options.progress) {
             options.progress(i + 1 - options.first_frame, end - options.first_frame, stats);
         }
+    }
+    for (std::size_t b = 0; b < result.nis_by_age.size(); ++b) {
+        result.nis_by_age[b] = result.nis_by_age_count[b] > 0
+                                   ? result.nis_by_age[b] / double(result.nis_by_age_count[b])
+                                   : 0;
     }
     result.ms_per_frame = result.frames > 0 ? ms_sum / double(result.frames) : 0;
     result.mean_features_measured =
@@ -176,6 +186,32 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
     return result;
 }
 
+core::Result<bool> writeWindowScales(const std::filesystem::path& path, const SlamRunResult& r) {
+    if (!r.window_scale) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               path.string() + ": the run has no window scale");
+    }
+    std::ofstream f(path);
+    if (!f) {
+        return core::makeError(core::ErrorCode::kIo, path.string() + ": cannot create");
+    }
+    f << "t_s,scale\n";
+    const core::WindowScales& w = *r.window_scale;
+    for (std::size_t k = 0; k < w.scale.size(); ++k) {
+        const std::size_t last = k + static_cast<std::size_t>(w.window) - 1;
+        f << jsonNumber(static_cast<double>(r.t_ns[last]) * 1e-9) << ",";
+        if (std::isfinite(static_cast<double>(w.scale[k]))) {
+            f << jsonNumber(static_cast<double>(w.scale[k]));
+        }
+        f << "\n";
+    }
+    f.flush();
+    if (!f) {
+        return core::makeError(core::ErrorCode::kIo, path.string() + ": write failed");
+    }
+    return true;
+}
+
 std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     const auto num = [](double v) { return jsonNumber(v); };
     std::string s = "{\"dataset\":" + jsonString(dataset);
@@ -187,6 +223,15 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"ms_per_frame\":" + num(r.ms_per_frame);
     s += ",\"ms_per_frame_max\":" + num(r.ms_per_frame_max);
     s += ",\"trajectory_frames\":" + std::to_string(r.poses.size());
+    s += ",\"nis_by_feature_age\":{\"searches\":[\"1-4\",\"5-14\",\"15-49\",\"50+\"],\"mean\":[";
+    for (std::size_t b = 0; b < r.nis_by_age.size(); ++b) {
+        s += (b > 0 ? "," : "") + num(r.nis_by_age[b]);
+    }
+    s += "],\"matches\":[";
+    for (std::size_t b = 0; b < r.nis_by_age.size(); ++b) {
+        s += (b > 0 ? "," : "") + std::to_string(r.nis_by_age_count[b]);
+    }
+    s += "]}";
     if (r.has_gt) {
         s += ",\"path_length_m\":" + num(r.path_length_m);
         s += ",\"ate_rmse_m\":" + num(r.ate_rmse_m);

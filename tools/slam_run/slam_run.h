@@ -4,7 +4,9 @@
 // evaluates the trajectory against ground truth: the library behind slam-run,
 // also used by the integration tests.
 
+#include <array>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <optional>
 #include <string>
@@ -51,12 +53,21 @@ struct SlamRunResult {
     // the tracker's rotation over 30 frames against the ground truth's: 1
     // when it turns as much as the camera did (docs/accuracy.md, issue 18).
     std::optional<Eigen::Vector3d> rotation_gain_30;
+    // Mean normalised innovation squared of the accepted matches per feature
+    // age bin (searches so far: [1, 5), [5, 15), [15, 50), 50+; 2 = consistent)
+    // and the matches in each: is a young feature as trustworthy as its S says?
+    std::array<double, 4> nis_by_age{};
+    std::array<long, 4> nis_by_age_count{};
     std::string gravity_source;  // where the vertical came from
 };
 
 core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
                                     const core::PinholeRadialCamera& camera,
                                     const SlamRunOptions& options);
+
+// The sliding-window scale as CSV: `t_s,scale` (the time of each window's
+// last frame; an empty scale where the window was degenerate).
+core::Result<bool> writeWindowScales(const std::filesystem::path& path, const SlamRunResult& r);
 
 // The JSON summary slam-run prints (one object, one line).
 std::string toJson(const SlamRunResult& r, const std::string& dataset);

@@ -390,6 +390,7 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
         if (!projectSlot(x_, c.slot, true, c.proj)) {
             continue;
         }
+        c.pred_px = c.proj.h_px;
         cand_.push_back(c);
     }
     const int nc = static_cast<int>(cand_.size());
@@ -486,9 +487,14 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
 
     for (int j = 0; j < nc; ++j) {
         if (accepted_[static_cast<size_t>(j)] != 0) {
-            FeatureInfo& f = features_[static_cast<size_t>(cand_[static_cast<size_t>(j)].slot)];
+            const Candidate& c = cand_[static_cast<size_t>(j)];
+            FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
             ++f.matches;
             f.measured = true;
+            const Vec2 nu = c.z - c.pred_px;
+            const int bin = f.attempts < 5 ? 0 : f.attempts < 15 ? 1 : f.attempts < 50 ? 2 : 3;
+            report.nis_sum[static_cast<size_t>(bin)] += nu.dot(c.S.inverse() * nu);
+            ++report.nis_count[static_cast<size_t>(bin)];
         }
     }
     const int accepted = report.low_innovation_inliers + report.rescued;

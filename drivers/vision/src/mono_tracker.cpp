@@ -199,6 +199,7 @@ int MonoTracker::addFeatures(const cv::Mat& gray, int wanted, bool new_map) {
     cc.max_corners = new_map ? wanted : std::min(wanted, config_.max_new_per_frame);
     cc.min_distance_px = std::max(cc.min_distance_px, config_.free_radius_px);
     detectCorners(gray, mask_, cc, corners_);
+
     if (slam_.makeRoom(static_cast<int>(corners_.size())) > 0) {
         dropDeletedAppearances();  // their patch buffers serve the new features
     }
@@ -290,6 +291,8 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
     stats.matched = report.matched;
     stats.inliers = report.low_innovation_inliers;
     stats.rescued = report.rescued;
+    stats.nis_sum = report.nis_sum;
+    stats.nis_count = report.nis_count;
     stats.health = slam_.manageMap();
     dropDeletedAppearances();
     stats.visible = slam_.visibleCount();

@@ -18,6 +18,7 @@
 // unknown scale. Every buffer is sized at create(); the per-frame steps do not
 // allocate.
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -106,6 +107,13 @@ struct UpdateReport {
     int rescued = 0;
     int hypotheses = 0;
     bool bad_frame = false;
+    // Consistency by feature age (issue 19): for the accepted matches, the
+    // normalised innovation squared nu^T S^-1 nu at the predicted state (2 on
+    // average for a consistent filter, 2 dof), summed per bin of the
+    // feature's searches so far: [1, 5), [5, 15), [15, 50), 50 and more.
+    static constexpr int kAgeBins = 4;
+    std::array<Scalar, kAgeBins> nis_sum{};
+    std::array<int, kAgeBins> nis_count{};
 };
 
 // What the scale estimator needs about one map point.
@@ -196,7 +204,8 @@ private:
     struct Candidate {
         int slot = 0;
         Vec2 z = Vec2::Zero();
-        Mat2 S = Mat2::Zero();  // innovation covariance of the prediction
+        Mat2 S = Mat2::Zero();        // innovation covariance of the prediction
+        Vec2 pred_px = Vec2::Zero();  // the prediction, before this frame's update
         FeatureProjection proj;
     };
 

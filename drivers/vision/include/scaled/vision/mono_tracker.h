@@ -9,6 +9,7 @@
 // min_visible are in view. The first frame (and the first after reset())
 // starts a new map: world = that camera frame, unit = the initial depth guess.
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <opencv2/core.hpp>
@@ -47,6 +48,9 @@ struct TrackStats {
     int features = 0;            // map size after the frame
     int visible = 0;             // predicted in view
     int search_evaluations = 0;  // NCC evaluations (front-end cost)
+    // The update's normalised innovations by feature age (UpdateReport).
+    std::array<core::Scalar, core::slam::UpdateReport::kAgeBins> nis_sum{};
+    std::array<int, core::slam::UpdateReport::kAgeBins> nis_count{};
 
     // Wall time of each stage of processFrame() on this frame, microseconds
     // (std::chrono::steady_clock; core stays clock-free, so the tracker times
