@@ -177,6 +177,19 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
          ",\"median_abs_m\":" + num(r.distance.median_abs_m) +
          ",\"median_rel\":" + num(r.distance.median_rel) +
          ",\"p90_rel\":" + num(r.distance.p90_rel) + "}";
+    {
+        const auto dist = [&](const DistanceErrors& d) {
+            return "{\"pairs\":" + std::to_string(d.pairs) + ",\"median_rel\":" +
+                   num(d.median_rel) + ",\"p90_rel\":" + num(d.p90_rel) +
+                   ",\"median_abs_m\":" + num(d.median_abs_m) + "}";
+        };
+        const MetricTrajectory& m = r.metric;
+        s += ",\"metric_trajectory\":{\"frames\":" + std::to_string(m.frames) +
+             ",\"ate_m\":" + num(m.ate_m) +
+             ",\"ate_percent_of_path\":" + num(m.ate_percent_of_path) +
+             ",\"distance_error_1s\":" + dist(m.distance_1s) +
+             ",\"distance_error_5s\":" + dist(m.distance_5s) + "}";
+    }
     s += ",\"depth_check\":{\"features\":" + std::to_string(r.depth.features) +
          ",\"median_rel\":" + num(r.depth.median_rel) +
          ",\"median_abs_m\":" + num(r.depth.median_abs_m) +

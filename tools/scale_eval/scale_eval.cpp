@@ -160,6 +160,91 @@ Calibration calibration(std::span<const UpdateRow> updates, double settle_s) {
     return c;
 }
 
+MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m) {
+    MetricTrajectory m;
+    const auto served = [](const FrameRow& f) {
+        return f.has_position && f.scale.state != core::ScaleState::kNoData &&
+               f.scale.map > 0;
+    };
+    const auto metric = [](const FrameRow& f) -> Vec3 {
+        return f.scale.map * f.p_map;
+    };
+    double sq = 0;
+    double path = 0;
+    std::vector<Vec3> est;
+    std::vector<Vec3> gt;
+    const auto closeEpoch = [&] {
+        if (est.size() >= 3) {
+            if (auto a = core::alignTrajectories(est, gt, false)) {
+                const double e = static_cast<double>(a->ate_rmse);
+                sq += e * e * static_cast<double>(est.size());
+                path += static_cast<double>(core::pathLength(gt));
+                m.frames += static_cast<int>(est.size());
+            }
+        }
+        est.clear();
+        gt.clear();
+    };
+    std::optional<int> epoch;
+    for (const FrameRow& f : rows) {
+        if (!served(f)) {
+            continue;
+        }
+        if (epoch && *epoch != f.epoch) {
+            closeEpoch();
+        }
+        epoch = f.epoch;
+        est.push_back(metric(f));
+        gt.push_back(f.p_gt);
+    }
+    closeEpoch();
+    if (m.frames > 0) {
+        m.ate_m = std::sqrt(sq / m.frames);
+        if (path > 0) {
+            m.ate_percent_of_path = 100 * *m.ate_m / path;
+        }
+    }
+    // Displacements between a served frame and the first served frame of the
+    // same epoch at least dt later, against the truth's.
+    const auto distances = [&](double dt_s) {
+        DistanceErrors d;
+        std::vector<double> abs_m;
+        std::vector<double> rel;
+        std::size_t j = 0;
+        for (std::size_t i = 0; i < rows.size(); ++i) {
+            if (!served(rows[i])) {
+                continue;
+            }
+            j = std::max(j, i + 1);
+            while (j < rows.size() &&
+                   (rows[j].epoch == rows[i].epoch && rows[j].t_s - rows[i].t_s < dt_s)) {
+                ++j;
+            }
+            if (j >= rows.size() || rows[j].epoch != rows[i].epoch || !served(rows[j])) {
+                continue;
+            }
+            const double gt_dist = static_cast<double>((rows[j].p_gt - rows[i].p_gt).norm());
+            if (gt_dist < min_distance_m) {
+                continue;
+            }
+            const double est_dist =
+                static_cast<double>((metric(rows[j]) - metric(rows[i])).norm());
+            abs_m.push_back(std::abs(est_dist - gt_dist));
+            rel.push_back(std::abs(est_dist / gt_dist - 1));
+        }
+        d.pairs = static_cast<int>(rel.size());
+        if (!rel.empty()) {
+            d.median_abs_m = median(abs_m);
+            d.median_rel = median(rel);
+            d.p90_rel = quantile(rel, 0.9);
+        }
+        return d;
+    };
+    m.distance_1s = distances(1.0);
+    m.distance_5s = distances(5.0);
+    return m;
+}
+
 MapScaleDrift mapScaleDrift(std::span<const FrameRow> frames, std::span<const UpdateRow> updates) {
     MapScaleDrift d;
     std::optional<int> epoch;
@@ -337,6 +422,9 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             r.has_ground_truth = true;
             track.est.push_back(slam.pose().p_CinW);
             track.gt.push_back(frame.T_CtoW_gt->p_CinW);
+            row.has_position = true;
+            row.p_map = slam.pose().p_CinW;
+            row.p_gt = frame.T_CtoW_gt->p_CinW;
             track.t_s.push_back(row.t_s);
             track_rows.push_back(r.frame_rows.size());
             row.scale_true = truthScale(track.est, track.gt, options.min_truth_path_m);
@@ -530,6 +618,9 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
     }
     r.converged_update =
         convergedAt(r.updates, static_cast<double>(config.estimator.posterior.converged_rel_width));
+    if (!options.truth_geometry) {
+        r.metric = metricTrajectory(r.frame_rows, options.min_distance_m);
+    }
 
     if (r.converged_update) {
         const std::int64_t from_frame = r.updates[*r.converged_update].frame;

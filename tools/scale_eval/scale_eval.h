@@ -66,6 +66,11 @@ struct FrameRow {
     std::optional<double> scale_true;         // cumulative Sim(3) scale of this epoch so far
     std::optional<double> scale_true_window;  // the same over the last window_frames
     bool window_full = false;                 // the epoch has window_frames tracked frames
+    // The camera's position in the map (SLAM units) and the ground truth's
+    // (metres), when the frame was tracked and has ground truth.
+    bool has_position = false;
+    core::Vec3 p_map = core::Vec3::Zero();
+    core::Vec3 p_gt = core::Vec3::Zero();
     std::optional<double> baseline_constant;  // this epoch's constant-scale baseline
     std::optional<double> baseline_single;    // this epoch's single-early-detection scale
 };
@@ -132,6 +137,18 @@ struct DistanceErrors {
     std::optional<double> p90_rel;
 };
 
+// What a user of the served pose gets (issue 20): the trajectory scaled by
+// the estimate served at each frame (no scale fitted to the ground truth),
+// aligned to the ground truth by a rotation and translation per epoch only.
+struct MetricTrajectory {
+    int frames = 0;  // tracked, with ground truth and a served estimate
+    std::optional<double> ate_m;
+    std::optional<double> ate_percent_of_path;
+    DistanceErrors distance_1s;  // |served displacement| vs the truth's, frames 1 s apart
+    DistanceErrors distance_5s;
+};
+MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m);
+
 struct DepthCheck {
     int features = 0;
     std::optional<double> median_rel;
@@ -164,6 +181,7 @@ struct EvalResult {
     std::optional<double> baseline_constant_scale;
     std::optional<double> baseline_single_scale;
     DistanceErrors distance;
+    MetricTrajectory metric;
     DepthCheck depth;
 
     double ms_per_frame = 0;  // tracker + detector + estimator, image decoding excluded

@@ -89,6 +89,58 @@ TEST(ScaleEvalMetrics, MapScaleDriftPerEpochAndAgainstTheAverage) {
     EXPECT_FALSE(none.window_max_dev.has_value());
 }
 
+// A straight-ish walk at 0.5 m/s (30 frames a second) seen by a map at half
+// the scale; the estimate served at each frame is `served` (0: none yet).
+std::vector<FrameRow> walk(int frames, double served, int epoch_break = -1) {
+    std::vector<FrameRow> rows;
+    for (int k = 0; k < frames; ++k) {
+        FrameRow f;
+        f.frame = k;
+        f.t_s = k / 30.0;
+        f.epoch = epoch_break >= 0 && k >= epoch_break ? 1 : 0;
+        f.has_position = true;
+        const double t = f.t_s;
+        f.p_gt = core::Vec3(static_cast<core::Scalar>(0.5 * t),
+                            static_cast<core::Scalar>(0.1 * std::sin(t)), 0);
+        f.p_map = f.p_gt / 2;
+        if (served > 0) {
+            f.scale.state = core::ScaleState::kConverging;
+            f.scale.map = static_cast<core::Scalar>(served);
+        }
+        rows.push_back(f);
+    }
+    return rows;
+}
+
+TEST(ScaleEvalMetrics, MetricTrajectoryUsesTheServedScaleNotAFittedOne) {
+    // Served exactly: no error at all.
+    const MetricTrajectory exact = metricTrajectory(walk(300, 2.0), 0.05);
+    EXPECT_EQ(exact.frames, 300);
+    ASSERT_TRUE(exact.ate_m && exact.distance_1s.median_rel && exact.distance_5s.median_rel);
+    EXPECT_LT(*exact.ate_m, 1e-5);
+    EXPECT_LT(*exact.distance_1s.median_rel, 1e-5);
+    // 10% too large: every displacement 10% long, and an ATE no Sim(3) fit
+    // would show (only rotation and translation are fitted).
+    const MetricTrajectory over = metricTrajectory(walk(300, 2.2), 0.05);
+    ASSERT_TRUE(over.ate_m && over.ate_percent_of_path);
+    EXPECT_NEAR(*over.distance_1s.median_rel, 0.1, 1e-4);
+    EXPECT_NEAR(*over.distance_5s.median_rel, 0.1, 1e-4);
+    EXPECT_EQ(over.distance_1s.pairs, 300 - 30);
+    EXPECT_EQ(over.distance_5s.pairs, 300 - 150);
+    EXPECT_GT(*over.ate_m, 0.05);  // 10% of a 5 m walk, half of it at the ends
+    EXPECT_GT(*over.ate_percent_of_path, 1.0);
+    // Nothing served: nothing to report.
+    const MetricTrajectory none = metricTrajectory(walk(300, 0), 0.05);
+    EXPECT_EQ(none.frames, 0);
+    EXPECT_FALSE(none.ate_m.has_value());
+    EXPECT_EQ(none.distance_1s.pairs, 0);
+    // A new map at frame 200: no pair spans it, each epoch aligned alone.
+    const MetricTrajectory split = metricTrajectory(walk(300, 2.0, 200), 0.05);
+    EXPECT_EQ(split.frames, 300);
+    EXPECT_EQ(split.distance_5s.pairs, 200 - 150);  // the second epoch lasts 3.3 s
+    EXPECT_EQ(split.distance_1s.pairs, (200 - 30) + (100 - 30));
+}
+
 TEST(ScaleEvalMetrics, TruthScaleOfASimilarTrajectory) {
     // The ground truth is the estimate rotated, scaled by 2.5 and shifted.
     std::vector<core::Vec3> est;
