@@ -46,9 +46,14 @@ struct SyntheticRun {
 // Renders and tracks n frames. known_depth: the first map's features get their
 // true depth (scale fixed, metric) with a 2% prior.
 SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
-                          const vision::TrackerConfig& base = {}) {
+                          const vision::TrackerConfig& base = {}, Scalar tracker_focal_scale = 1) {
     SyntheticRun out;
     const auto cam = syntheticCamera();
+    // The camera the tracker believes in (the renderer always uses cam).
+    core::CameraIntrinsics believed = cam.intrinsics();
+    believed.fx *= tracker_focal_scale;
+    believed.fy *= tracker_focal_scale;
+    const auto tracker_cam = core::PinholeRadialCamera::create(believed).value();
     auto scene = synth::Scene::create();
     EXPECT_TRUE(scene.ok());
     synth::RenderOptions ro;
@@ -61,7 +66,7 @@ SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
 
     vision::TrackerConfig config = base;
     config.slam.seed = seed;
-    auto tracker = vision::MonoTracker::create(cam, config);
+    auto tracker = vision::MonoTracker::create(tracker_cam, config);
     EXPECT_TRUE(tracker.ok());
     const core::CameraPose T0 = seq.front().pose_CtoW;
     tracker->setGravityDownC(T0.R_CtoW.transpose() * synth::gravityDirectionW());
@@ -116,6 +121,31 @@ TEST(SlamSynthetic, TrajectoryErrorBelowOnePercentOfThePath) {
                 r.mean_measured);
     EXPECT_GT(len, 2.0);
     EXPECT_LT(a->ate_rmse, Scalar(0.01) * len);
+}
+
+// Issue 19: the map's scale holds on the rendered room when the camera model
+// is right (600 frames, seeds 1 and 2: thirds within 8%, the 150-frame window
+// scale within 15%), and it does not when the focal length the tracker
+// believes is 12% long, the kind of error the shared redkitchen's camera.txt
+// appears to carry (docs/slam.md): the same filter then drifts like it does
+// on redkitchen. What the tracker's scale needs first is a right camera.
+TEST(SlamSynthetic, TheMapsScaleHoldsWhenTheCameraModelIsRight) {
+    for (const std::uint64_t seed : {std::uint64_t{1}, std::uint64_t{2}}) {
+        const auto r = runSynthetic(600, seed, false);
+        EXPECT_EQ(r.lost_frames, 0);
+        const auto thirds = core::scaleDriftBetweenThirds(r.est, r.gt);
+        const auto w = core::slidingWindowScales(r.est, r.gt, 150);
+        ASSERT_TRUE(thirds && w);
+        std::printf("synthetic seed %d: thirds %.3f, window range %.3f\n", int(seed),
+                    double(*thirds), double(w->range));
+        EXPECT_NEAR(*thirds, 1, 0.08) << "seed " << seed;
+        EXPECT_LT(w->range, 1.15) << "seed " << seed;
+    }
+    const auto off = runSynthetic(600, 1, false, {}, Scalar(1.12));
+    const auto w = core::slidingWindowScales(off.est, off.gt, 150);
+    ASSERT_TRUE(w);
+    std::printf("synthetic, focal 12%% long: window range %.3f\n", double(w->range));
+    EXPECT_GT(w->range, 1.15);
 }
 
 double meanPoseNees(const vision::TrackerConfig& config) {
