@@ -870,5 +870,21 @@ TEST(ParsePriorsFuzz, MutatedShippedFileGivesOkOrALocatedError) {
     EXPECT_GT(n_error, 30);
 }
 
+// The daemon's fallback when /etc/scaled/priors.toml is missing: exactly the
+// repository's config/priors.toml of this build, and it parses to the same table.
+TEST(BuiltinPriors, AreTheShippedFileAndParse) {
+    const std::string shipped = readFile(shippedPath());
+    EXPECT_EQ(builtinPriorsToml(), shipped);
+    const auto builtin = parsePriors(builtinPriorsToml(), "built-in config/priors.toml");
+    const auto file = loadPriorsFile(shippedPath());
+    ASSERT_TRUE(builtin) << builtin.error().message;
+    ASSERT_TRUE(file) << file.error().message;
+    ASSERT_EQ(builtin->priors().size(), file->priors().size());
+    for (std::size_t i = 0; i < file->priors().size(); ++i) {
+        EXPECT_EQ(builtin->priors()[i].className(), file->priors()[i].className());
+        EXPECT_EQ(builtin->priors()[i].mean(), file->priors()[i].mean());
+    }
+}
+
 }  // namespace
 }  // namespace scaled::drivers

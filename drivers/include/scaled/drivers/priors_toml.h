@@ -18,4 +18,9 @@ core::Result<core::PriorTable> loadPriorsFile(const std::filesystem::path& path)
 core::Result<core::PriorTable> parsePriors(std::string_view toml_text,
                                            std::string_view source_name);
 
+// The text of config/priors.toml in the source tree this binary was built
+// from: what the daemon falls back to when the installed default
+// (/etc/scaled/priors.toml) is missing, e.g. run from a build tree.
+std::string_view builtinPriorsToml();
+
 }  // namespace scaled::drivers
