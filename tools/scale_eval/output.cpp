@@ -179,8 +179,8 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
          ",\"p90_rel\":" + num(r.distance.p90_rel) + "}";
     {
         const auto dist = [&](const DistanceErrors& d) {
-            return "{\"pairs\":" + std::to_string(d.pairs) + ",\"median_rel\":" +
-                   num(d.median_rel) + ",\"p90_rel\":" + num(d.p90_rel) +
+            return "{\"pairs\":" + std::to_string(d.pairs) +
+                   ",\"median_rel\":" + num(d.median_rel) + ",\"p90_rel\":" + num(d.p90_rel) +
                    ",\"median_abs_m\":" + num(d.median_abs_m) + "}";
         };
         const MetricTrajectory& m = r.metric;

@@ -163,12 +163,9 @@ Calibration calibration(std::span<const UpdateRow> updates, double settle_s) {
 MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m) {
     MetricTrajectory m;
     const auto served = [](const FrameRow& f) {
-        return f.has_position && f.scale.state != core::ScaleState::kNoData &&
-               f.scale.map > 0;
+        return f.has_position && f.scale.state != core::ScaleState::kNoData && f.scale.map > 0;
     };
-    const auto metric = [](const FrameRow& f) -> Vec3 {
-        return f.scale.map * f.p_map;
-    };
+    const auto metric = [](const FrameRow& f) -> Vec3 { return f.scale.map * f.p_map; };
     double sq = 0;
     double path = 0;
     std::vector<Vec3> est;
@@ -227,8 +224,7 @@ MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_dis
             if (gt_dist < min_distance_m) {
                 continue;
             }
-            const double est_dist =
-                static_cast<double>((metric(rows[j]) - metric(rows[i])).norm());
+            const double est_dist = static_cast<double>((metric(rows[j]) - metric(rows[i])).norm());
             abs_m.push_back(std::abs(est_dist - gt_dist));
             rel.push_back(std::abs(est_dist / gt_dist - 1));
         }
