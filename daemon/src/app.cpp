@@ -3,6 +3,7 @@
 #include <csignal>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <pthread.h>
@@ -114,7 +115,19 @@ Result<core::PriorTable> openPriors(const DaemonConfig& config) {
                          "estimator.priors: not set (the height priors file, e.g. "
                          "/etc/scaled/priors.toml)");
     }
-    return drivers::loadPriorsFile(config.pipeline.priors_path);
+    // The installed default missing (e.g. the daemon run from a build tree):
+    // the repository's config/priors.toml, built into this binary. A priors
+    // file configured anywhere else, or an installed one, always wins.
+    std::error_code ec;
+    const auto& path = config.pipeline.priors_path;
+    if (path == defaultDaemonConfig().pipeline.priors_path &&
+        !std::filesystem::exists(path, ec)) {
+        printInfo(path.string() +
+                  " not found: using the priors built into this binary (config/priors.toml of "
+                  "its source tree)");
+        return drivers::parsePriors(drivers::builtinPriorsToml(), "built-in config/priors.toml");
+    }
+    return drivers::loadPriorsFile(path);
 }
 
 std::optional<Failure> openDetectorAndPriors(const DaemonConfig& config, PipelineParts& parts);
@@ -312,7 +325,14 @@ int Daemon::run() {
     // 4. The socket.
     auto sock = SocketService::create(config_.socket, *hub_, version());
     if (!sock) {
-        printError("socket: " + sock.error().message);
+        // The default directory is made by systemd (RuntimeDirectory=scaled);
+        // say how to run without it rather than leave the user guessing.
+        const bool default_dir = config_.socket.path.parent_path() ==
+                                 defaultDaemonConfig().socket.path.parent_path();
+        printError("socket: " + sock.error().message +
+                   (default_dir ? " (the service's unit creates it; to run by hand, "
+                                  "--socket PATH in a directory you can write)"
+                                : ""));
         events_->onError("socket", sock.error().message);
         teardown("socket failed");
         return EX_CANTCREAT;

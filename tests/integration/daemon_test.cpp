@@ -633,6 +633,31 @@ TEST_F(DaemonTest, CheckConfigAcceptsTheExampleAndNamesTheBrokenKey) {
     }
 }
 
+// Run from a build tree: no priors configured and none installed at
+// /etc/scaled/priors.toml, the daemon serves with the priors built into it
+// (config/priors.toml of its source tree) and says so.
+TEST_F(DaemonTest, WithoutInstalledPriorsItUsesTheBuiltInOnes) {
+    if (fs::exists("/etc/scaled/priors.toml")) {
+        GTEST_SKIP() << "/etc/scaled/priors.toml is installed here: it would win";
+    }
+    std::string text;
+    text += "[socket]\npath = \"" + paths().socket.string() + "\"\n\n";
+    text += "[log]\ndir = \"" + paths().log_dir.string() + "\"\n";
+    writeFile(paths().config, text);
+    DaemonOptions opt;
+    opt.args = {"--source", "sim"};
+    ASSERT_TRUE(daemon_.start(opt));
+    Client c = client();
+    ASSERT_TRUE(c.send(Json{{"cmd", "status"}}));
+    ASSERT_TRUE(c.readClass("STATUS", kReply).has_value());
+    EXPECT_EQ(stop(), std::optional<int>(0));
+    const std::string err = readFile(paths().err);
+    EXPECT_NE(
+        err.find("/etc/scaled/priors.toml not found: using the priors built into this binary"),
+        std::string::npos)
+        << err;
+}
+
 // Missing replay directory: 66; a live camera in this build: 69; bad --set: 78.
 TEST_F(DaemonTest, StartupFailuresExitWithSysexitsCodes) {
     writeFile(paths().config, daemonConfigText(paths(), kPriors));
