@@ -156,6 +156,7 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         integer("socket", "max_clients", &k.max_clients, 1, 1024),
         integer("socket", "max_request_bytes", &k.max_request_bytes, 64, 1 << 20),
         integer("socket", "client_buffer_bytes", &k.client_buffer_bytes, 4096, 1 << 30),
+        real("socket", "pose_rate_hz", &k.pose_rate_hz, 0, 1000),
         boolean("log", "enabled", &l.enabled),
         path("log", "dir", &l.dir),
         integer("log", "frame_every", &l.frame_every, 0, 1000000),

@@ -4,6 +4,7 @@
 #include <utility>
 
 #include <scaled/daemon/pipeline.h>
+#include <scaled/daemon/pose.h>
 
 namespace scaled::daemon {
 
@@ -519,6 +520,13 @@ void Pipeline::trackingLoop() {
             status_.epoch = epoch;
         }
         ++fps_window_frames_;
+        if (ok) {
+            // POSE: fixed-size arithmetic and a copy into the hub, no allocation.
+            const core::slam::EkfSlam& filter = tracker.filter();
+            hub_.publishPose(makePoseReport(filter.pose(), filter.velocityW(),
+                                            filter.poseCovariance(), filter.upW(), epoch, frame.id,
+                                            frame.t_ns));
+        }
 
         // Hand a frame to the detector: every Nth frame of a map, or by period.
         if (ok && frames_in_map > 1) {

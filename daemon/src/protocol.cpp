@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <span>
 
+#include <scaled/daemon/pose.h>
 #include <scaled/daemon/protocol.h>
 
 namespace scaled::daemon {
@@ -27,6 +28,43 @@ void appendArray(std::string& out, std::span<const double> values) {
             out += ',';
         }
         appendJsonNumber(out, values[i]);
+    }
+    out += ']';
+}
+
+// [x,y,z] (or [w,x,y,z]) with `digits` significant digits, or null.
+template <std::size_t N>
+void appendVector(std::string& out, bool present, const std::array<double, N>& v, int digits) {
+    if (!present) {
+        out += "null";
+        return;
+    }
+    out += '[';
+    for (std::size_t i = 0; i < N; ++i) {
+        if (i > 0) {
+            out += ',';
+        }
+        appendJsonNumber(out, v[i], digits);
+    }
+    out += ']';
+}
+
+// A row-major 3x3 matrix as [[a,b,c],[d,e,f],[g,h,i]], or null.
+void appendMatrix(std::string& out, bool present, const std::array<double, 9>& m, int digits) {
+    if (!present) {
+        out += "null";
+        return;
+    }
+    out += '[';
+    for (std::size_t r = 0; r < 3; ++r) {
+        out += r == 0 ? "[" : ",[";
+        for (std::size_t c = 0; c < 3; ++c) {
+            if (c > 0) {
+                out += ',';
+            }
+            appendJsonNumber(out, m[3 * r + c], digits);
+        }
+        out += ']';
     }
     out += ']';
 }
@@ -112,6 +150,8 @@ const char* toString(Command command) {
             return "set_gravity";
         case Command::kObjects:
             return "objects";
+        case Command::kPose:
+            return "pose";
     }
     return "";
 }
@@ -316,9 +356,49 @@ void appendObjects(std::string& out, const ObjectsSnapshot& s) {
     out += "]}\n";
 }
 
-void appendWatch(std::string& out, bool enable) {
+void appendPose(std::string& out, const PoseReport& pose, const ScaleReport& scale) {
+    // 7 significant digits: 0.1 mm at 1 km, far below what the map knows.
+    constexpr int kDigits = 7;
+    const bool has_pose = pose.frame_id >= 0;
+    const MetricPose m = metricPose(pose, scale);
+    out += R"({"class":"POSE","epoch":)";
+    appendJsonInt(out, pose.epoch);
+    key(out, "frame_id");
+    appendJsonInt(out, has_pose ? pose.frame_id : -1);
+    key(out, "t_ns");
+    appendJsonInt(out, has_pose ? pose.t_ns : 0);
+    key(out, "time");
+    appendJsonNumber(out, has_pose ? static_cast<double>(pose.t_ns) * 1e-9 : 0.0);
+    key(out, "state");
+    appendJsonString(out, toString(scale.state));
+    key(out, "scale");
+    appendJsonNumberOr(out, m.has_scale, m.scale);
+    key(out, "scale_sigma");
+    appendJsonNumberOr(out, m.has_scale, m.scale_sigma, kDigits);
+    key(out, "position");
+    appendVector(out, m.has_scale, m.position_m, kDigits);
+    key(out, "velocity");
+    appendVector(out, m.has_scale, m.velocity_mps, kDigits);
+    key(out, "position_cov");
+    appendMatrix(out, m.has_scale, m.position_cov_m2, kDigits);
+    key(out, "orientation");
+    appendVector(out, has_pose, pose.orientation_wxyz, kDigits);
+    key(out, "attitude_cov");
+    appendMatrix(out, has_pose, pose.attitude_cov_rad2, kDigits);
+    key(out, "position_map");
+    appendVector(out, has_pose, pose.position_map, kDigits);
+    key(out, "velocity_map");
+    appendVector(out, has_pose, pose.velocity_map, kDigits);
+    key(out, "position_map_cov");
+    appendMatrix(out, has_pose, pose.position_cov_map, kDigits);
+    out += "}\n";
+}
+
+void appendWatch(std::string& out, bool enable, bool pose) {
     out += R"({"class":"WATCH","enable":)";
     appendBool(out, enable);
+    key(out, "pose");
+    appendBool(out, pose);
     out += "}\n";
 }
 
@@ -364,6 +444,8 @@ Request parseRequest(std::string_view line) {
         r.command = Command::kPosterior;
     } else if (r.cmd == "objects") {
         r.command = Command::kObjects;
+    } else if (r.cmd == "pose") {
+        r.command = Command::kPose;
     } else if (r.cmd == "watch") {
         const auto it = doc.find("enable");
         if (it != doc.end()) {
@@ -371,6 +453,13 @@ Request parseRequest(std::string_view line) {
                 return invalid(r.cmd, "\"enable\" must be true or false");
             }
             r.enable = it->get<bool>();
+        }
+        const auto pose_it = doc.find("pose");
+        if (pose_it != doc.end()) {
+            if (!pose_it->is_boolean()) {
+                return invalid(r.cmd, "\"pose\" must be true or false");
+            }
+            r.pose = pose_it->get<bool>();
         }
         r.command = Command::kWatch;
     } else if (r.cmd == "set_gravity") {
@@ -398,9 +487,9 @@ Request parseRequest(std::string_view line) {
         }
         r.command = Command::kSetGravity;
     } else {
-        return invalid(r.cmd,
-                       "unknown command \"" + r.cmd +
-                           "\" (known: poll, watch, status, posterior, objects, set_gravity)");
+        return invalid(
+            r.cmd, "unknown command \"" + r.cmd +
+                       "\" (known: poll, watch, status, posterior, objects, pose, set_gravity)");
     }
     return r;
 }

@@ -49,6 +49,8 @@ void StageTiming::add(double ms) {
 
 // publishObjects() copies within reserved storage only while this holds.
 static_assert(std::is_trivially_copyable_v<ObjectReport>);
+// publishPose() and pose() copy without allocating.
+static_assert(std::is_trivially_copyable_v<PoseReport>);
 
 std::string_view ObjectReport::className() const {
     return {class_name.data(), std::find(class_name.begin(), class_name.end(), '\0')};
@@ -111,6 +113,10 @@ void ReportHub::publishScale(const ScaleReport& report, std::span<const double> 
         }
     }
     scale_seq_.fetch_add(1);
+    wake();
+}
+
+void ReportHub::wake() const {
     if (wake_fd_ >= 0) {
         const std::uint64_t one = 1;
         // Non-blocking: a full counter (never in practice) only means "already awake".
@@ -145,6 +151,20 @@ void ReportHub::publishObjects(const ObjectsSnapshot& objects) {
     const std::size_t n = std::min(objects.objects.size(), objects_.objects.capacity());
     objects_.objects.assign(objects.objects.begin(),
                             objects.objects.begin() + static_cast<std::ptrdiff_t>(n));
+}
+
+void ReportHub::publishPose(const PoseReport& pose) {
+    {
+        const std::lock_guard lock(mutex_);
+        pose_ = pose;
+    }
+    pose_seq_.fetch_add(1);
+    wake();
+}
+
+PoseReport ReportHub::pose() const {
+    const std::lock_guard lock(mutex_);
+    return pose_;
 }
 
 ScaleReport ReportHub::scale() const {

@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <poll.h>
 #include <pthread.h>
@@ -48,14 +49,17 @@ struct SocketService::Loop {
         bool discarding = false;  // skipping the rest of an oversize line
         std::string out;          // unsent output: out[out_off, size)
         std::size_t out_off = 0;
-        bool watching = false;
+        bool watching = false;       // SCALE stream
+        bool watching_pose = false;  // POSE stream
         bool dead = false;
         [[nodiscard]] std::size_t pending() const { return out.size() - out_off; }
     };
 
-    explicit Loop(SocketService& s) : svc(s), read_buffer(kReadChunk) {
+    explicit Loop(SocketService& s)
+        : svc(s), read_buffer(kReadChunk), pose_limiter(s.config_.pose_rate_hz) {
         reply.reserve(1 << 16);
         scale_line.reserve(1024);
+        pose_line.reserve(2048);
         clients.reserve(static_cast<std::size_t>(std::max(s.config_.max_clients, 1)) + 1);
         fds.reserve(clients.capacity() + 3);
     }
@@ -68,12 +72,17 @@ struct SocketService::Loop {
     std::string scale_line;  // the SCALE for the watchers, built once per publish
     ScaleReport latest;      // the report the watchers saw last
     std::uint64_t seen_seq = 0;
+    std::string pose_line;   // the POSE for the pose watchers, built once per admitted pose
+    PoseReport latest_pose;  // the hub's latest pose as this loop saw it
+    std::uint64_t seen_pose_seq = 0;
+    PoseRateLimiter pose_limiter;
     PosteriorSnapshot posterior;
     ObjectsSnapshot objects;  // the hub's table, copied for an OBJECTS reply
     bool accept_paused = false;
 
     void run();
     void refreshScale();
+    void refreshPose();
     void acceptAll();
     void readClient(Client& c);
     void consume(Client& c, const char* data, std::size_t n);
@@ -126,6 +135,7 @@ void SocketService::Loop::run() {
             svc.hub_.consumeWake();
         }
         refreshScale();
+        refreshPose();
         for (std::size_t i = 0; i < polled_clients; ++i) {
             Client& c = *clients[i];
             const short re = fds[first_client + i].revents;
@@ -171,6 +181,34 @@ void SocketService::Loop::refreshScale() {
                 appendScale(scale_line, latest, monotonicNowNs());
             }
             queue(*c, scale_line);
+        }
+    }
+}
+
+void SocketService::Loop::refreshPose() {
+    const std::uint64_t seq = svc.hub_.poseSequence();
+    if (seq == seen_pose_seq) {
+        return;
+    }
+    seen_pose_seq = seq;
+    const PoseReport pose = svc.hub_.pose();
+    if (pose.frame_id == latest_pose.frame_id && pose.epoch == latest_pose.epoch &&
+        pose.t_ns == latest_pose.t_ns) {
+        return;  // a racing publish already seen
+    }
+    latest_pose = pose;
+    const bool any = std::any_of(clients.begin(), clients.end(),
+                                 [](const auto& c) { return c->watching_pose && !c->dead; });
+    if (!any || !pose_limiter.admit(pose.epoch, pose.t_ns)) {
+        return;
+    }
+    pose_line.clear();
+    // The scale as refreshScale() just read it: the newest SCALE goes out first.
+    appendPose(pose_line, latest_pose, latest);
+    svc.poses_streamed_.fetch_add(1);
+    for (auto& c : clients) {
+        if (c->watching_pose && !c->dead) {
+            queue(*c, pose_line);
         }
     }
 }
@@ -296,10 +334,17 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
             break;
         case Command::kWatch:
             c.watching = req.enable;
-            appendWatch(reply, req.enable);
+            c.watching_pose = req.pose;
+            appendWatch(reply, req.enable, req.pose);
             if (req.enable) {
                 appendScale(reply, latest, monotonicNowNs());
             }
+            if (req.pose && latest_pose.frame_id >= 0) {
+                appendPose(reply, latest_pose, latest);
+            }
+            break;
+        case Command::kPose:
+            appendPose(reply, svc.hub_.pose(), svc.hub_.scale());
             break;
         case Command::kStatus: {
             const ClientCounts counts{svc.connected_.load(), svc.config_.max_clients,
@@ -443,6 +488,11 @@ core::Result<std::unique_ptr<SocketService>> SocketService::create(const SocketC
                          "socket: max_clients, max_request_bytes and client_buffer_bytes must "
                          "be positive");
     }
+    if (!(config.pose_rate_hz >= 0) || !std::isfinite(config.pose_rate_hz)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "socket: pose_rate_hz must be a finite number >= 0 (got " +
+                             std::to_string(config.pose_rate_hz) + ")");
+    }
     drivers::UniqueFd stop_fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
     if (!stop_fd.isValid()) {
         return makeError(ErrorCode::kIo,
@@ -503,8 +553,37 @@ void SocketService::run() {
 }
 
 SocketServiceStats SocketService::stats() const {
-    return {connected_.load(), accepted_.load(), rejected_.load(),
-            detached_.load(),  requests_.load(), errors_.load()};
+    return {connected_.load(), accepted_.load(), rejected_.load(),      detached_.load(),
+            requests_.load(),  errors_.load(),   poses_streamed_.load()};
+}
+
+// --- PoseRateLimiter ------------------------------------------------------------
+
+PoseRateLimiter::PoseRateLimiter(double rate_hz)
+    : period_ns_(rate_hz > 0 && std::isfinite(rate_hz)
+                     ? static_cast<std::int64_t>(std::llround(1e9 / rate_hz))
+                     : 0) {}
+
+bool PoseRateLimiter::admit(std::uint64_t epoch, std::int64_t t_ns) {
+    const bool restart = !started_ || epoch != epoch_ || t_ns < last_t_ns_;
+    last_t_ns_ = t_ns;
+    if (restart) {
+        started_ = true;
+        epoch_ = epoch;
+        origin_ns_ = t_ns;
+        last_slot_ = 0;
+        return true;
+    }
+    if (period_ns_ <= 0) {
+        return true;
+    }
+    // t_ns >= origin here: the division rounds down.
+    const std::int64_t slot = (t_ns - origin_ns_ + period_ns_ / 2) / period_ns_;
+    if (slot <= last_slot_) {
+        return false;
+    }
+    last_slot_ = slot;
+    return true;
 }
 
 }  // namespace scaled::daemon

@@ -87,7 +87,8 @@ text = open(doc_path).read()
 for block in re.findall(r"```json\n(.*?)```", text, re.S):
     lines += [("docs/protocol.md", l) for l in block.splitlines() if l.strip()]
 for req in ['{"cmd":"poll"}', '{"cmd":"watch","enable":false}', '{"cmd":"status"}',
-            '{"cmd":"posterior"}', '{"cmd":"objects"}', '{"cmd":"set_gravity","down":[0,1,0]}']:
+            '{"cmd":"posterior"}', '{"cmd":"objects"}', '{"cmd":"pose"}',
+            '{"cmd":"watch","enable":false,"pose":true}', '{"cmd":"set_gravity","down":[0,1,0]}']:
     lines.append(("request", req))
 with tempfile.TemporaryDirectory() as tmp:
     samples = os.path.join(tmp, "samples.jsonl")
@@ -112,12 +113,14 @@ for origin, line in lines:
 for bad in ['{"class":"SCALE"}', '{"class":"WATCH","enable":1}', '{"class":"NOPE"}',
             '{"cmd":"set_gravity","down":[0,1]}',
             '{"class":"OBJECTS","epoch":0,"frame_id":-1,"model":"paper"}',
-            '{"class":"OBJECTS","epoch":0,"frame_id":-1,"model":"other","objects":[]}']:
+            '{"class":"OBJECTS","epoch":0,"frame_id":-1,"model":"other","objects":[]}',
+            '{"cmd":"watch","pose":1}',
+            '{"class":"WATCH","enable":true,"pose":"yes"}']:
     if not validate(json.loads(bad)):
         failed += 1
         print(f"accepted a bad line: {bad}")
-missing = {"VERSION", "SCALE", "STATUS", "POSTERIOR", "OBJECTS", "WATCH", "ACK", "ERROR",
-           "request"} - classes
+missing = {"VERSION", "SCALE", "STATUS", "POSTERIOR", "OBJECTS", "POSE", "WATCH", "ACK",
+           "ERROR", "request"} - classes
 if missing:
     failed += 1
     print("no sample of", sorted(missing))

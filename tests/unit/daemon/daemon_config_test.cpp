@@ -42,6 +42,7 @@ TEST(DaemonConfig, Defaults) {
     EXPECT_EQ(c.source.kind, SourceKind::kSim);
     EXPECT_EQ(c.socket.path, std::filesystem::path("/run/scaled/scaled.sock"));
     EXPECT_EQ(c.socket.mode, 0660U);
+    EXPECT_DOUBLE_EQ(c.socket.pose_rate_hz, 30.0);
     EXPECT_EQ(c.log.dir, std::filesystem::path("/var/log/scaled"));
     EXPECT_EQ(c.pipeline.detector.model_path,
               std::filesystem::path("/usr/share/scaled/models/yolox_nano.onnx"));
@@ -115,6 +116,7 @@ TEST(DaemonConfig, KeysAreThePipelinesAndTheDaemons) {
                           "socket.max_clients",
                           "socket.max_request_bytes",
                           "socket.client_buffer_bytes",
+                          "socket.pose_rate_hz",
                           "log.enabled",
                           "log.dir",
                           "log.frame_every",
@@ -164,6 +166,7 @@ path = "run/s.sock"
 mode = 0o640
 group = "scaled"
 max_clients = 1024
+pose_rate_hz = 12.5
 [log]
 enabled = false
 dir = ""
@@ -187,6 +190,7 @@ period_s = 0.5
     EXPECT_EQ(c.socket.mode, 0640U);
     EXPECT_EQ(c.socket.group, "scaled");
     EXPECT_EQ(c.socket.max_clients, 1024);
+    EXPECT_DOUBLE_EQ(c.socket.pose_rate_hz, 12.5);
     EXPECT_FALSE(c.log.enabled);
     EXPECT_TRUE(c.log.dir.empty());
     EXPECT_EQ(c.log.max_total_bytes, 4096U);
@@ -273,6 +277,10 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
         {"[log]\nenabled = \"yes\"\n", "2: log.enabled: must be true or false (got \"yes\")"},
         {"[log]\ndir = 3\n", "2: log.dir: must be a path string (got 3)"},
         {"[socket]\ngroup = false\n", "2: socket.group: must be a string (got false)"},
+        {"[socket]\npose_rate_hz = -1\n",
+         "2: socket.pose_rate_hz: must be a number in [0, 1000] (got -1)"},
+        {"[socket]\npose_rate_hz = \"fast\"\n",
+         "2: socket.pose_rate_hz: must be a number in [0, 1000] (got \"fast\")"},
         {"[source]\nspeed = 0\n", "2: source.speed: must be a number in (0, 1000] (got 0)"},
         {"[pipeline]\nstatus_interval_ms = 10\n",
          "2: pipeline.status_interval_ms: must be an integer in [100, 60000] (got 10)"},

@@ -9,9 +9,12 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
+#include <vector>
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include <scaled/daemon/pose.h>
 #include <scaled/daemon/protocol.h>
 
 namespace scaled::daemon {
@@ -52,7 +55,7 @@ TEST(Protocol, Version) {
     appendVersion(out, "0.1.0");
     EXPECT_EQ(out,
               "{\"class\":\"VERSION\",\"release\":\"0.1.0\",\"proto_major\":1,"
-              "\"proto_minor\":3}\n");
+              "\"proto_minor\":4}\n");
 }
 
 // Three objects, one of each state: what OBJECTS and the field log's OBJECT
@@ -384,17 +387,201 @@ TEST(Protocol, Posterior) {
 
 TEST(Protocol, WatchAckError) {
     std::string out;
-    appendWatch(out, true);
-    appendWatch(out, false);
+    appendWatch(out, true, false);
+    appendWatch(out, false, false);
     appendAck(out, "set_gravity");
     appendError(out, "bad", "");
     appendError(out, "worse", "watch");
     EXPECT_EQ(out,
-              "{\"class\":\"WATCH\",\"enable\":true}\n"
-              "{\"class\":\"WATCH\",\"enable\":false}\n"
+              "{\"class\":\"WATCH\",\"enable\":true,\"pose\":false}\n"
+              "{\"class\":\"WATCH\",\"enable\":false,\"pose\":false}\n"
               "{\"class\":\"ACK\",\"cmd\":\"set_gravity\"}\n"
               "{\"class\":\"ERROR\",\"message\":\"bad\"}\n"
               "{\"class\":\"ERROR\",\"message\":\"worse\",\"cmd\":\"watch\"}\n");
+}
+
+// --- POSE (proto_minor 4) -------------------------------------------------------
+
+// A pose of epoch 2 (sampleReport's) at p_map = (0, 0, 2) with a diagonal
+// position covariance.
+PoseReport samplePose() {
+    PoseReport p;
+    p.epoch = 2;
+    p.frame_id = 512;
+    p.t_ns = 1'700'000'000'190'000'000;
+    p.position_map = {0, 0, 2};
+    p.velocity_map = {0.5, -0.25, 0};
+    p.orientation_wxyz = {1, 0, 0, 0};
+    p.position_cov_map = {0.01, 0, 0, 0, 0.02, 0, 0, 0, 0.03};
+    p.attitude_cov_rad2 = {1e-4, 0, 0, 0, 2e-4, 0, 0, 0, 3e-4};
+    return p;
+}
+
+std::vector<double> matrix(const json& m) {
+    std::vector<double> out;
+    EXPECT_TRUE(m.is_array() && m.size() == 3) << m;
+    for (const json& row : m) {
+        EXPECT_TRUE(row.is_array() && row.size() == 3) << m;
+        for (const json& v : row) {
+            out.push_back(v.get<double>());
+        }
+    }
+    return out;
+}
+
+TEST(Protocol, PoseBeforeTheFirstPoseIsAllNull) {
+    std::string out;
+    appendPose(out, PoseReport{}, sampleReport());
+    const json j = parseLine(out);
+    EXPECT_EQ(j["class"], "POSE");
+    EXPECT_EQ(j["frame_id"], -1);
+    EXPECT_EQ(j["t_ns"], 0);
+    EXPECT_EQ(j["state"], "converging");
+    for (const char* k :
+         {"scale", "scale_sigma", "position", "velocity", "position_cov", "orientation",
+          "attitude_cov", "position_map", "velocity_map", "position_map_cov"}) {
+        ASSERT_TRUE(j.contains(k)) << k;
+        EXPECT_TRUE(j[k].is_null()) << k << ": " << j[k];
+    }
+}
+
+TEST(Protocol, PoseWithoutAScaleHasOnlyItsMapPart) {
+    std::string out;
+    ScaleReport none;  // initialising, no scale
+    none.epoch = 2;
+    none.state = DaemonState::kTracking;
+    appendPose(out, samplePose(), none);
+    const json j = parseLine(out);
+    EXPECT_EQ(j["epoch"], 2);
+    EXPECT_EQ(j["frame_id"], 512);
+    EXPECT_EQ(j["t_ns"], 1'700'000'000'190'000'000);
+    EXPECT_DOUBLE_EQ(j["time"].get<double>(), 1700000000.19);
+    EXPECT_EQ(j["state"], "tracking");
+    for (const char* k : {"scale", "scale_sigma", "position", "velocity", "position_cov"}) {
+        EXPECT_TRUE(j[k].is_null()) << k << ": " << j[k];
+    }
+    EXPECT_EQ(j["position_map"], json::parse("[0,0,2]"));
+    EXPECT_EQ(j["velocity_map"], json::parse("[0.5,-0.25,0]"));
+    EXPECT_EQ(j["orientation"], json::parse("[1,0,0,0]"));
+    EXPECT_EQ(matrix(j["position_map_cov"]),
+              (std::vector<double>{0.01, 0, 0, 0, 0.02, 0, 0, 0, 0.03}));
+    EXPECT_EQ(matrix(j["attitude_cov"]), (std::vector<double>{1e-4, 0, 0, 0, 2e-4, 0, 0, 0, 3e-4}));
+
+    // A scale of another epoch (the map before a loss) is not this map's.
+    out.clear();
+    ScaleReport old = sampleReport();
+    old.epoch = 1;
+    appendPose(out, samplePose(), old);
+    const json k = parseLine(out);
+    EXPECT_TRUE(k["scale"].is_null());
+    EXPECT_TRUE(k["position"].is_null());
+    EXPECT_FALSE(k["position_map"].is_null());
+}
+
+// p_map = (0, 0, 2) units, d = 1.5 m/unit, ci68 = [1.4, 1.6] (sigma_d 0.1):
+// position (0, 0, 3) m; variance along z = d^2 0.03 + sigma_d^2 2^2 = 0.1075
+// m^2, across it only d^2 Sigma (the scale moves the camera along p).
+TEST(Protocol, PoseCovarianceIncludesTheScale) {
+    ScaleReport s = sampleReport();
+    s.scale = 1.5;
+    s.ci68_lo = 1.4;
+    s.ci68_hi = 1.6;
+    std::string out;
+    appendPose(out, samplePose(), s);
+    const json j = parseLine(out);
+    EXPECT_DOUBLE_EQ(j["scale"].get<double>(), 1.5);
+    EXPECT_NEAR(j["scale_sigma"].get<double>(), 0.1, 1e-7);
+    EXPECT_EQ(j["position"], json::parse("[0,0,3]"));
+    EXPECT_EQ(j["velocity"], json::parse("[0.75,-0.375,0]"));
+    const std::vector<double> c = matrix(j["position_cov"]);
+    EXPECT_NEAR(c[0], 2.25 * 0.01, 1e-9);
+    EXPECT_NEAR(c[4], 2.25 * 0.02, 1e-9);
+    EXPECT_NEAR(c[8], 2.25 * 0.03 + 0.01 * 4, 1e-9);
+    for (int i : {1, 2, 3, 5, 6, 7}) {
+        EXPECT_EQ(c[static_cast<std::size_t>(i)], 0) << i;
+    }
+    // Off the axes the scale term couples them: p = (1, 0, 2) gives
+    // sigma_d^2 * 1 * 2 between x and z.
+    PoseReport p = samplePose();
+    p.position_map = {1, 0, 2};
+    const MetricPose m = metricPose(p, s);
+    ASSERT_TRUE(m.has_scale);
+    EXPECT_NEAR(m.position_cov_m2[2], 0.02, 1e-12);
+    EXPECT_NEAR(m.position_cov_m2[6], 0.02, 1e-12);
+    EXPECT_NEAR(m.position_cov_m2[0], 2.25 * 0.01 + 0.01, 1e-12);
+    // Never NaN: a non-finite covariance entry is written as null.
+    p.position_cov_map[4] = std::nan("");
+    out.clear();
+    appendPose(out, p, s);
+    EXPECT_TRUE(parseLine(out)["position_cov"][1][1].is_null()) << out;
+}
+
+// G from the tracker's world W (the first camera: x right, y down, z
+// forward): a level first camera gives x_G = its optical axis, y_G = its
+// left (-x_W), z_G = up (-y_W).
+TEST(Protocol, PoseFrameIsGravityAlignedAlongTheFirstOpticalAxis) {
+    const Eigen::Matrix3d level = gravityAlignedFromMap(Eigen::Vector3d(0, -1, 0));
+    Eigen::Matrix3d expected;
+    expected << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+    EXPECT_TRUE(level.isApprox(expected, 1e-12)) << level;
+    // A first camera pitched down by 30 degrees: up in its frame is
+    // (0, -cos 30, -sin 30)... its optical axis projected onto the
+    // horizontal is still x_G, and G is a rotation.
+    const double a = 30.0 * M_PI / 180.0;
+    const Eigen::Vector3d up(0, -std::cos(a), -std::sin(a));
+    const Eigen::Matrix3d pitched = gravityAlignedFromMap(3 * up);
+    EXPECT_TRUE((pitched * pitched.transpose()).isIdentity(1e-12));
+    EXPECT_NEAR(pitched.determinant(), 1, 1e-12);
+    EXPECT_TRUE((pitched * up).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+    const Eigen::Vector3d fwd = pitched * Eigen::Vector3d::UnitZ();
+    EXPECT_NEAR(fwd.y(), 0, 1e-12);
+    EXPECT_GT(fwd.x(), 0);
+    EXPECT_NEAR(std::atan2(fwd.z(), fwd.x()), -a, 1e-12);  // looks 30 degrees down
+    // Looking straight down: x_G is the image's up direction (-y_W).
+    const Eigen::Matrix3d down = gravityAlignedFromMap(Eigen::Vector3d(0, 0, -1));
+    EXPECT_TRUE((down * -Eigen::Vector3d::UnitY()).isApprox(Eigen::Vector3d::UnitX(), 1e-12));
+    EXPECT_TRUE((down * Eigen::Vector3d(0, 0, -1)).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+}
+
+// makePoseReport: position, velocity, orientation and both covariances in G.
+TEST(Protocol, PoseReportFromTheFiltersPose) {
+    core::CameraPose pose;
+    // The camera turned 90 degrees left (about up = -y_W) and moved 2 units
+    // forward and 1 up.
+    pose.R_CtoW = Eigen::AngleAxis<core::Scalar>(core::Scalar(-M_PI / 2), core::Vec3::UnitY())
+                      .toRotationMatrix();
+    pose.p_CinW = core::Vec3(0, -1, 2);
+    Eigen::Matrix<core::Scalar, 6, 6> cov = Eigen::Matrix<core::Scalar, 6, 6>::Zero();
+    cov.diagonal() << 1, 2, 3, 4, 5, 6;  // x_W, y_W, z_W; delta about x_C, y_C, z_C
+    const PoseReport r =
+        makePoseReport(pose, core::Vec3(1, 0, 0), cov, core::Vec3(0, -1, 0), 7, 99, 123);
+    EXPECT_EQ(r.epoch, 7U);
+    EXPECT_EQ(r.frame_id, 99);
+    EXPECT_EQ(r.t_ns, 123);
+    const auto near3 = [](const std::array<double, 3>& v, double x, double y, double z) {
+        return std::abs(v[0] - x) < 1e-6 && std::abs(v[1] - y) < 1e-6 && std::abs(v[2] - z) < 1e-6;
+    };
+    EXPECT_TRUE(near3(r.position_map, 2, 0, 1));   // forward 2, up 1
+    EXPECT_TRUE(near3(r.velocity_map, 0, -1, 0));  // x_W is right: -y_G
+    // The optical axis now points along +y_G (left of the first one).
+    const Eigen::Quaterniond q(r.orientation_wxyz[0], r.orientation_wxyz[1], r.orientation_wxyz[2],
+                               r.orientation_wxyz[3]);
+    EXPECT_NEAR(q.norm(), 1, 1e-9);
+    EXPECT_GE(q.w(), 0);
+    EXPECT_TRUE((q * Eigen::Vector3d::UnitZ()).isApprox(Eigen::Vector3d::UnitY(), 1e-6));
+    EXPECT_TRUE((q * Eigen::Vector3d::UnitY()).isApprox(-Eigen::Vector3d::UnitZ(), 1e-6));
+    // Position covariance: x_G = z_W, y_G = -x_W, z_G = -y_W.
+    EXPECT_NEAR(r.position_cov_map[0], 3, 1e-6);
+    EXPECT_NEAR(r.position_cov_map[4], 1, 1e-6);
+    EXPECT_NEAR(r.position_cov_map[8], 2, 1e-6);
+    // Attitude: after the left turn the camera's x (right) is +x_G, its y
+    // (down) -z_G, its z (optical axis) +y_G.
+    EXPECT_NEAR(r.attitude_cov_rad2[0], 4, 1e-6);
+    EXPECT_NEAR(r.attitude_cov_rad2[4], 6, 1e-6);
+    EXPECT_NEAR(r.attitude_cov_rad2[8], 5, 1e-6);
+    for (int i : {1, 2, 3, 5, 6, 7}) {
+        EXPECT_NEAR(r.attitude_cov_rad2[static_cast<std::size_t>(i)], 0, 1e-6) << i;
+    }
 }
 
 TEST(Protocol, StringsAreEscapedAndValidUtf8) {
@@ -433,9 +620,20 @@ TEST(Protocol, ParsesEveryCommand) {
     Request w = parseRequest(R"( {"cmd":"watch"} )");
     EXPECT_EQ(w.command, Command::kWatch);
     EXPECT_TRUE(w.enable);
+    EXPECT_FALSE(w.pose);
     w = parseRequest(R"({"cmd":"watch","enable":false})");
     EXPECT_EQ(w.command, Command::kWatch);
     EXPECT_FALSE(w.enable);
+    EXPECT_FALSE(w.pose);
+    w = parseRequest(R"({"cmd":"watch","enable":false,"pose":true})");
+    EXPECT_EQ(w.command, Command::kWatch);
+    EXPECT_FALSE(w.enable);
+    EXPECT_TRUE(w.pose);
+    w = parseRequest(R"({"cmd":"watch","pose":true})");
+    EXPECT_TRUE(w.enable);
+    EXPECT_TRUE(w.pose);
+    EXPECT_EQ(parseRequest(R"({"cmd":"pose"})").command, Command::kPose);
+    EXPECT_STREQ(toString(Command::kPose), "pose");
     const Request g = parseRequest(R"({"cmd":"set_gravity","down":[0,3,4]})");
     ASSERT_EQ(g.command, Command::kSetGravity) << g.error;
     EXPECT_DOUBLE_EQ(g.down[0], 0);
@@ -459,9 +657,13 @@ TEST(Protocol, RejectsBadRequests) {
         {"{}", "request has no \"cmd\"", ""},
         {"{\"cmd\":3}", "\"cmd\" must be a string", ""},
         {"{\"cmd\":\"fly\"}",
-         "unknown command \"fly\" (known: poll, watch, status, posterior, objects, set_gravity)",
+         "unknown command \"fly\" (known: poll, watch, status, posterior, objects, pose, "
+         "set_gravity)",
          "fly"},
         {"{\"cmd\":\"watch\",\"enable\":1}", "\"enable\" must be true or false", "watch"},
+        {"{\"cmd\":\"watch\",\"pose\":\"yes\"}", "\"pose\" must be true or false", "watch"},
+        {"{\"cmd\":\"watch\",\"enable\":true,\"pose\":null}", "\"pose\" must be true or false",
+         "watch"},
         {"{\"cmd\":\"set_gravity\"}", "\"down\" must be an array of 3 finite numbers, not all zero",
          "set_gravity"},
         {"{\"cmd\":\"set_gravity\",\"down\":[0,0,0]}",
@@ -514,8 +716,11 @@ TEST(ProtocolSamples, Write) {
     appendPosterior(out, p);
     appendObjects(out, ObjectsSnapshot{});
     appendObjects(out, sampleObjects());
-    appendWatch(out, true);
-    appendWatch(out, false);
+    appendWatch(out, true, false);
+    appendWatch(out, false, true);
+    appendPose(out, PoseReport{}, ScaleReport{});
+    appendPose(out, samplePose(), ScaleReport{});
+    appendPose(out, samplePose(), sampleReport());
     appendAck(out, "set_gravity");
     appendError(out, "request is not valid JSON");
     appendError(out, "unknown command \"x\"", "x");

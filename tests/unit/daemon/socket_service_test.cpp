@@ -3,6 +3,7 @@
 // buffer), the socket file's life (stale, live, mode, group, removal) and
 // socket activation. Clients wait with poll() and a timeout, never sleep.
 
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fcntl.h>
@@ -177,7 +178,7 @@ TEST_F(SocketServiceTest, SendsVersionOnConnect) {
     TestClient c(config_.path);
     const json v = c.readJson();
     EXPECT_EQ(v, json::parse(R"({"class":"VERSION","release":"0.1.0","proto_major":1,
-        "proto_minor":3})"));
+        "proto_minor":4})"));
     EXPECT_EQ(svc->stats().accepted, 1U);
     EXPECT_EQ(svc->stats().connected, 1);
 }
@@ -212,7 +213,7 @@ TEST_F(SocketServiceTest, WatchStreamsEveryPublishAndStops) {
     hub_.publishScale(reportAt(1));
     auto c = connect();
     ASSERT_TRUE(c->send("{\"cmd\":\"watch\",\"enable\":true}\n"));
-    EXPECT_EQ(c->readJson(), json::parse(R"({"class":"WATCH","enable":true})"));
+    EXPECT_EQ(c->readJson(), json::parse(R"({"class":"WATCH","enable":true,"pose":false})"));
     json s = c->readJson();
     EXPECT_EQ(s["class"], "SCALE");
     EXPECT_EQ(s["frame_id"], 1);
@@ -229,7 +230,7 @@ TEST_F(SocketServiceTest, WatchStreamsEveryPublishAndStops) {
     EXPECT_EQ(c->readJson()["state"], "lost");
 
     EXPECT_EQ(c->request(R"({"cmd":"watch","enable":false})"),
-              json::parse(R"({"class":"WATCH","enable":false})"));
+              json::parse(R"({"class":"WATCH","enable":false,"pose":false})"));
     hub_.publishScale(reportAt(31));
     // Had the stream continued, a SCALE would come before the STATUS.
     EXPECT_EQ(c->request(R"({"cmd":"status"})")["class"], "STATUS");
@@ -258,6 +259,185 @@ TEST_F(SocketServiceTest, CoalescedPublishesStillIncrease) {
         last = f;
     }
     EXPECT_EQ(last, 199);  // the latest always arrives
+}
+
+// --- POSE (proto_minor 4) -------------------------------------------------------
+
+// A pose of epoch 1 (reportAt's) at frame f, t_ns = t_ns.
+PoseReport poseAt(std::int64_t frame_id, std::int64_t t_ns, std::uint64_t epoch = 1) {
+    PoseReport p;
+    p.epoch = epoch;
+    p.frame_id = frame_id;
+    p.t_ns = t_ns;
+    p.position_map = {0.01 * static_cast<double>(frame_id), 0, 2};
+    p.position_cov_map = {1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4};
+    p.attitude_cov_rad2 = {1e-5, 0, 0, 0, 1e-5, 0, 0, 0, 1e-5};
+    return p;
+}
+
+TEST_F(SocketServiceTest, PoseAnswersTheLatestPoseWithTheScale) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    json p = c->request(R"({"cmd":"pose"})");
+    EXPECT_EQ(p["class"], "POSE");
+    EXPECT_EQ(p["frame_id"], -1);
+    EXPECT_TRUE(p["position_map"].is_null());
+    EXPECT_TRUE(p["position"].is_null());
+
+    // A pose before a scale: map units only.
+    hub_.publishPose(poseAt(5, 5 * 33'333'333));
+    p = c->request(R"({"cmd":"pose"})");
+    EXPECT_EQ(p["frame_id"], 5);
+    EXPECT_EQ(p["position_map"], json::parse("[0.05,0,2]"));
+    EXPECT_TRUE(p["position"].is_null());
+    EXPECT_TRUE(p["scale"].is_null());
+
+    // With a scale of the same epoch: metres, and the scale's variance along p.
+    const ScaleReport r = reportAt(5);
+    hub_.publishScale(r);
+    p = c->request(R"({"cmd":"pose"})");
+    ASSERT_FALSE(p["position"].is_null()) << p;
+    EXPECT_EQ(p["scale"].get<double>(), r.scale);
+    EXPECT_NEAR(p["position"][2].get<double>(), 2 * r.scale, 1e-6);
+    const double sigma = (r.ci68_hi - r.ci68_lo) / 2;
+    EXPECT_NEAR(p["position_cov"][2][2].get<double>(), r.scale * r.scale * 1e-4 + sigma * sigma * 4,
+                1e-9);
+    EXPECT_EQ(p["state"], "converging");
+    EXPECT_EQ(svc->stats().poses_streamed, 0U);  // nobody watches poses
+}
+
+TEST_F(SocketServiceTest, WatchWithPoseStreamsPosesAndNonBooleanPoseIsAnError) {
+    config_.pose_rate_hz = 0;  // every pose
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    hub_.publishScale(reportAt(1));
+    hub_.publishPose(poseAt(1, 33'333'333));
+    auto c = connect();
+    json e = c->request(R"({"cmd":"watch","pose":"yes"})");
+    EXPECT_EQ(e["class"], "ERROR");
+    EXPECT_EQ(e["message"], "\"pose\" must be true or false");
+    EXPECT_EQ(e["cmd"], "watch");
+    // Poses only: WATCH, then the latest POSE at once.
+    ASSERT_TRUE(c->send("{\"cmd\":\"watch\",\"enable\":false,\"pose\":true}\n"));
+    EXPECT_EQ(c->readJson(), json::parse(R"({"class":"WATCH","enable":false,"pose":true})"));
+    json p = c->readJson();
+    EXPECT_EQ(p["class"], "POSE");
+    EXPECT_EQ(p["frame_id"], 1);
+    for (std::int64_t f = 2; f <= 20; ++f) {
+        hub_.publishPose(poseAt(f, f * 33'333'333));
+        p = c->readJson();
+        ASSERT_EQ(p["class"], "POSE");
+        ASSERT_EQ(p["frame_id"], f);
+    }
+    // Both streams: a new scale comes as SCALE, the next pose uses it.
+    ASSERT_TRUE(c->send("{\"cmd\":\"watch\",\"pose\":true}\n"));
+    EXPECT_EQ(c->readJson(), json::parse(R"({"class":"WATCH","enable":true,"pose":true})"));
+    EXPECT_EQ(c->readJson()["class"], "SCALE");
+    EXPECT_EQ(c->readJson()["frame_id"], 20);  // the latest POSE
+    hub_.publishScale(reportAt(21));
+    EXPECT_EQ(c->readJson()["class"], "SCALE");
+    hub_.publishPose(poseAt(21, 21 * 33'333'333));
+    p = c->readJson();
+    EXPECT_EQ(p["class"], "POSE");
+    EXPECT_EQ(p["scale"].get<double>(), reportAt(21).scale);
+    // `watch` without "pose" stops the pose stream: the next line after a
+    // publish is the STATUS reply.
+    EXPECT_EQ(c->request(R"({"cmd":"watch","enable":false})"),
+              json::parse(R"({"class":"WATCH","enable":false,"pose":false})"));
+    hub_.publishPose(poseAt(22, 22 * 33'333'333));
+    EXPECT_EQ(c->request(R"({"cmd":"status"})")["class"], "STATUS");
+    EXPECT_EQ(svc->stats().poses_streamed, 20U);  // frames 2..21
+}
+
+// socket.pose_rate_hz = 10 with poses every 10 ms of frame time: one per
+// 100 ms slot (slots centred on 0, 100, 200, ... ms after the first pose).
+// Each publish is followed by a poll, whose SCALE reply comes after any POSE
+// of that publish (the server reads the hub before the request), so the
+// count is exact without waiting for time to pass.
+TEST_F(SocketServiceTest, PoseRateLimitCountsFrameTime) {
+    config_.pose_rate_hz = 10;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    c->request(R"({"cmd":"watch","enable":false,"pose":true})");  // no pose yet: WATCH only
+    constexpr std::int64_t kStepNs = 10'000'000;                  // 100 Hz
+    std::vector<std::int64_t> sent;
+    const auto publishAndCount = [&](const PoseReport& pose) {
+        hub_.publishPose(pose);
+        ASSERT_TRUE(c->send("{\"cmd\":\"poll\"}\n"));
+        for (;;) {
+            const json j = c->readJson();
+            ASSERT_TRUE(j.is_object());
+            if (j["class"] == "SCALE") {
+                return;
+            }
+            ASSERT_EQ(j["class"], "POSE") << j;
+            sent.push_back(j["frame_id"].get<std::int64_t>());
+        }
+    };
+    for (std::int64_t f = 0; f < 100; ++f) {  // 1 s of frames
+        publishAndCount(poseAt(f, 5'000'000'000 + f * kStepNs));
+    }
+    // 11 poses within 0.95 s: at most 10 * 0.95 + 2.
+    EXPECT_EQ(sent, (std::vector<std::int64_t>{0, 5, 15, 25, 35, 45, 55, 65, 75, 85, 95}));
+    EXPECT_EQ(svc->stats().poses_streamed, 11U);
+
+    // A new epoch restarts at once; poses at the rate itself all pass with
+    // jitter below half a period, a second one within a slot does not.
+    sent.clear();
+    const std::int64_t t0 = 1'000'000'000;
+    const std::int64_t jitter_ms[] = {0, -30, 20, -10, 40, -40, 10};
+    for (std::int64_t i = 0; i < 7; ++i) {
+        publishAndCount(poseAt(200 + i, t0 + i * 100'000'000 + jitter_ms[i] * 1'000'000, 2));
+    }
+    publishAndCount(poseAt(207, t0 + 620'000'000, 2));  // slot 6 again
+    publishAndCount(poseAt(208, t0 + 660'000'000, 2));  // slot 7
+    EXPECT_EQ(sent, (std::vector<std::int64_t>{200, 201, 202, 203, 204, 205, 206, 208}));
+    // Time going back (a replay restarted) restarts the slots too.
+    sent.clear();
+    publishAndCount(poseAt(0, t0, 2));
+    publishAndCount(poseAt(1, t0 + kStepNs, 2));
+    EXPECT_EQ(sent, (std::vector<std::int64_t>{0}));
+}
+
+TEST(PoseRateLimiter, BoundsTheRateOverAnyWindow) {
+    PoseRateLimiter limiter(30);
+    // 60 fps with +-5 ms of jitter for 10 s: about 300 admitted, never more
+    // than 30 * T + 2 within any window of T seconds.
+    std::vector<std::int64_t> admitted;
+    std::uint64_t rng = 12345;
+    for (std::int64_t i = 0; i < 600; ++i) {
+        rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
+        const auto jitter_ns = static_cast<std::int64_t>((rng >> 33) % 10'000'000) - 5'000'000;
+        const std::int64_t t = 100'000'000 + i * 16'666'667 + jitter_ns;
+        if (limiter.admit(1, t)) {
+            admitted.push_back(t);
+        }
+    }
+    EXPECT_GE(admitted.size(), 295U);
+    EXPECT_LE(admitted.size(), 301U);
+    for (std::size_t a = 0; a < admitted.size(); ++a) {
+        for (std::size_t b = a + 1; b < admitted.size(); ++b) {
+            const double window_s = static_cast<double>(admitted[b] - admitted[a]) * 1e-9;
+            ASSERT_LE(static_cast<double>(b - a + 1), 30 * window_s + 2) << a << ", " << b;
+        }
+    }
+    // Every frame of a 30 fps source with up to 7 ms of jitter (14 ms relative to
+    // the first frame, under half of 33 ms) passes a 30 Hz limit.
+    PoseRateLimiter same(30);
+    int n = 0;
+    for (std::int64_t i = 0; i < 300; ++i) {
+        const std::int64_t jitter_ns = (i % 3 - 1) * 7'000'000;
+        const std::int64_t t = std::llround(static_cast<double>(i) * 1e9 / 30) + jitter_ns;
+        n += same.admit(1, 1'000'000'000 + t) ? 1 : 0;
+    }
+    EXPECT_EQ(n, 300);
+    // 0: no limit.
+    PoseRateLimiter none(0);
+    EXPECT_TRUE(none.admit(1, 0));
+    EXPECT_TRUE(none.admit(1, 1));
+    EXPECT_TRUE(none.admit(1, 1));
 }
 
 TEST_F(SocketServiceTest, StatusAndPosterior) {

@@ -86,6 +86,7 @@ struct SocketConfig {
     int max_clients = 16;                      // the next one gets an ERROR and is closed
     std::size_t max_request_bytes = 4096;      // a longer line is an ERROR (and discarded)
     std::size_t client_buffer_bytes = 262144;  // unsent output per client before it is detached
+    double pose_rate_hz = 30;  // POSE lines to watchers per second of frame time (0: every frame)
 };
 
 // [log]

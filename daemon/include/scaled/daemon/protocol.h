@@ -19,7 +19,8 @@
 namespace scaled::daemon {
 
 inline constexpr int kProtoMajor = 1;
-inline constexpr int kProtoMinor = 3;  // 1: STATUS.camera; 2: STATUS.timing; 3: OBJECTS
+// 1: STATUS.camera; 2: STATUS.timing; 3: OBJECTS; 4: POSE (pose, watch "pose")
+inline constexpr int kProtoMinor = 4;
 
 // The service's own client counters, for STATUS.
 struct ClientCounts {
@@ -30,7 +31,7 @@ struct ClientCounts {
     std::uint64_t detached = 0;
 };
 
-// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":3}
+// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":4}
 void appendVersion(std::string& out, std::string_view release);
 // SCALE; age_s is measured against `now_mono_ns` (CLOCK_MONOTONIC).
 void appendScale(std::string& out, const ScaleReport& report, std::int64_t now_mono_ns);
@@ -47,7 +48,14 @@ void appendObjects(std::string& out, const ObjectsSnapshot& objects);
 // without a height.
 void appendObjectMembers(std::string& out, const ObjectReport& object, std::string_view class_key,
                          int digits);
-void appendWatch(std::string& out, bool enable);
+// POSE (proto_minor 4): `pose` in the gravity-aligned frame G, with its
+// metric part (position, velocity, position_cov) at the scale of `scale`
+// when that report has one of the pose's epoch (metricPose, pose.h), else
+// null; `state` is the scale report's. Numbers with 7 significant digits.
+// Before the first pose (frame_id -1) every pose member is null.
+void appendPose(std::string& out, const PoseReport& pose, const ScaleReport& scale);
+// {"class":"WATCH","enable":true,"pose":false}
+void appendWatch(std::string& out, bool enable, bool pose);
 void appendAck(std::string& out, std::string_view cmd);
 // ERROR; `cmd` is included when non-empty.
 void appendError(std::string& out, std::string_view message, std::string_view cmd = {});
@@ -62,6 +70,7 @@ enum class Command : std::uint8_t {
     kPosterior,
     kSetGravity,
     kObjects,
+    kPose,
 };
 const char* toString(Command command);
 
@@ -70,7 +79,8 @@ struct Request {
     // The "cmd" the client gave (also for unknown commands; empty when none),
     // echoed in ERROR replies.
     std::string cmd;
-    bool enable = true;                   // watch
+    bool enable = true;                   // watch: the SCALE stream
+    bool pose = false;                    // watch: the POSE stream (proto_minor 4)
     std::array<double, 3> down{0, 0, 0};  // set_gravity: unit vector (normalised here)
     std::string error;                    // kInvalid: the ERROR message
 };

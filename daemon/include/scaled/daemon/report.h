@@ -1,9 +1,9 @@
 #pragma once
 
 // What the daemon tells the outside world: the scale report, the pipeline's
-// health, the posterior grid and the object table, and ReportHub, the one place the pipeline
-// publishes them and every reader (socket, field log, status line, sd_notify)
-// takes them from.
+// health, the posterior grid, the object table and the camera pose, and ReportHub, the one place
+// the pipeline publishes them and every reader (socket, field log, status line, sd_notify) takes
+// them from.
 //
 // Threads: the pipeline's threads publish; the socket thread, the main thread
 // and the log read. Every call is thread-safe and short (a mutex around a copy
@@ -188,6 +188,28 @@ struct ObjectsSnapshot {
     std::vector<ObjectReport> objects;  // empty with the paper model
 };
 
+// One camera pose of the tracking thread (protocol class POSE, proto_minor 4),
+// in map units: the tracker knows no scale. The encoder combines it with the
+// latest ScaleReport into metres (appendPose, metricPose in pose.h). The
+// frame G is gravity-aligned (z up), its origin the first camera of the
+// epoch, its x axis the horizontal projection of that camera's optical axis,
+// y = z cross x (docs/protocol.md, POSE). Fixed size: copies never allocate.
+struct PoseReport {
+    std::uint64_t epoch = 0;
+    std::int64_t frame_id = -1;                   // the tracked frame (-1: no pose yet)
+    std::int64_t t_ns = 0;                        // its timestamp (source clock)
+    std::array<double, 3> position_map{0, 0, 0};  // p_CinG, SLAM units
+    std::array<double, 3> velocity_map{0, 0, 0};  // SLAM units per second, G axes
+    // R_CtoG as a unit quaternion [w, x, y, z] (w >= 0); the camera frame is
+    // x right, y down, z forward (optical axis).
+    std::array<double, 4> orientation_wxyz{1, 0, 0, 0};
+    // Row-major 3x3 covariances in G axes: the position's (SLAM units^2) and
+    // the attitude's (rad^2, of the small rotation e with
+    // R_CtoG,true = Exp(e) R_CtoG).
+    std::array<double, 9> position_cov_map{};
+    std::array<double, 9> attitude_cov_rad2{};
+};
+
 class ReportHub {
 public:
     // grid_bins: size of the posterior grid (buffers are reserved for it).
@@ -214,6 +236,9 @@ public:
     // to setObjectModel() are left out. A later publishScale() of another
     // epoch empties it (its objects belonged to the old map).
     void publishObjects(const ObjectsSnapshot& objects);
+    // The pose of a tracked frame (the tracking thread, every tracked frame).
+    // Bumps poseSequence() and makes wakeFd() readable. Never allocates.
+    void publishPose(const PoseReport& pose);
 
     // --- readers ------------------------------------------------------------
     [[nodiscard]] ScaleReport scale() const;
@@ -226,8 +251,12 @@ public:
     void objects(ObjectsSnapshot& out) const;
     // Increases with every publishScale().
     [[nodiscard]] std::uint64_t scaleSequence() const { return scale_seq_.load(); }
+    // The latest pose (frame_id -1 before the first).
+    [[nodiscard]] PoseReport pose() const;
+    // Increases with every publishPose().
+    [[nodiscard]] std::uint64_t poseSequence() const { return pose_seq_.load(); }
 
-    // An eventfd that becomes readable after publishScale(); a poll() loop
+    // An eventfd that becomes readable after publishScale() and publishPose(); a poll() loop
     // waits on it and calls consumeWake() before reading. -1 if eventfd failed
     // (then readers must poll scaleSequence()). It has ONE reader, the socket
     // service: a second consumer would steal its wakes. Others (the main
@@ -241,6 +270,8 @@ public:
     std::optional<core::Vec3> takeGravityRequest();
 
 private:
+    void wake() const;
+
     mutable std::mutex mutex_;
     ScaleReport scale_;
     PipelineStatus status_;
@@ -248,8 +279,10 @@ private:
     PosteriorSnapshot posterior_;
     bool has_posterior_ = false;
     ObjectsSnapshot objects_;
+    PoseReport pose_;
     std::optional<core::Vec3> gravity_request_;
     std::atomic<std::uint64_t> scale_seq_{0};
+    std::atomic<std::uint64_t> pose_seq_{0};
     int wake_fd_ = -1;
 };
 

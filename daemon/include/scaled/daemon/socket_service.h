@@ -8,7 +8,8 @@
 // SocketConfig::client_buffer_bytes is detached (closed and counted), so a
 // watcher that never reads never stalls the loop or the pipeline. Replies are
 // built in one reused buffer; a SCALE for the watchers is built once per
-// publish and written to each of them.
+// publish and written to each of them; so is a POSE for the pose watchers
+// (thinned by PoseRateLimiter to SocketConfig::pose_rate_hz).
 //
 // The listening socket is made in create() (or inherited through systemd
 // socket activation, LISTEN_FDS), so configuration errors appear before the
@@ -28,13 +29,37 @@
 
 namespace scaled::daemon {
 
+// Thins the POSE stream to `rate_hz` per second of frame time (the frames'
+// t_ns, not the wall clock). Frame time is cut into slots of one period
+// centred on the instants origin + k / rate_hz, the origin being the first
+// pose's t_ns; the first pose of each slot is admitted, the others in it are
+// not. So frames at the rate itself all pass while their timing error
+// (against the first pose's) stays below half a period, and over any T seconds of frames at most
+// rate_hz * T + 2 poses are admitted. The first pose, the first of a new epoch and one whose t_ns
+// went back (a replay restarted) are admitted and set a new origin.
+// rate_hz <= 0 admits every pose.
+class PoseRateLimiter {
+public:
+    explicit PoseRateLimiter(double rate_hz);
+    bool admit(std::uint64_t epoch, std::int64_t t_ns);
+
+private:
+    std::int64_t period_ns_ = 0;
+    bool started_ = false;
+    std::uint64_t epoch_ = 0;
+    std::int64_t origin_ns_ = 0;
+    std::int64_t last_t_ns_ = 0;
+    std::int64_t last_slot_ = 0;
+};
+
 struct SocketServiceStats {
-    int connected = 0;           // clients connected now
-    std::uint64_t accepted = 0;  // connections accepted since start
-    std::uint64_t rejected = 0;  // refused because max_clients were connected
-    std::uint64_t detached = 0;  // closed because their output buffer overflowed
-    std::uint64_t requests = 0;  // request lines handled (blank lines not counted)
-    std::uint64_t errors = 0;    // ERROR replies sent
+    int connected = 0;                 // clients connected now
+    std::uint64_t accepted = 0;        // connections accepted since start
+    std::uint64_t rejected = 0;        // refused because max_clients were connected
+    std::uint64_t detached = 0;        // closed because their output buffer overflowed
+    std::uint64_t requests = 0;        // request lines handled (blank lines not counted)
+    std::uint64_t errors = 0;          // ERROR replies sent
+    std::uint64_t poses_streamed = 0;  // POSE lines built for the pose watchers
 };
 
 class SocketService {
@@ -84,6 +109,7 @@ private:
     std::atomic<std::uint64_t> detached_{0};
     std::atomic<std::uint64_t> requests_{0};
     std::atomic<std::uint64_t> errors_{0};
+    std::atomic<std::uint64_t> poses_streamed_{0};
 };
 
 }  // namespace scaled::daemon
