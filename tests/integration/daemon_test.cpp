@@ -824,6 +824,22 @@ TEST_F(DaemonTest, ScalectlAgainstTheDaemon) {
         runCommand(SCALECTL_BIN, {"--socket", sock, "objects"}, tmp_.path(), kReply);
     EXPECT_EQ(objects.exit_code, 0) << objects.err;
     EXPECT_EQ(objects.out.rfind("model ", 0), 0U) << objects.out;
+    // The camera pose (protocol 1.4): one line, and a stream of them.
+    const auto pose = runCommand(SCALECTL_BIN, {"--socket", sock, "pose"}, tmp_.path(), kReply);
+    EXPECT_EQ(pose.exit_code, 0) << pose.err;
+    EXPECT_EQ(pose.out.rfind("pose ", 0), 0U) << pose.out;
+    EXPECT_EQ(std::count(pose.out.begin(), pose.out.end(), '\n'), 1) << pose.out;
+    const auto poses = runCommand(
+        SCALECTL_BIN, {"--socket", sock, "--timeout", "10", "watch", "--pose", "--count", "5"},
+        tmp_.path(), kReply);
+    EXPECT_EQ(poses.exit_code, 0) << poses.err;
+    std::istringstream pose_lines(poses.out);
+    int n = 0;
+    for (std::string line; std::getline(pose_lines, line); ++n) {
+        EXPECT_EQ(line.rfind("pose ", 0), 0U) << line;
+        EXPECT_NE(line.find(" ypr "), std::string::npos) << line;  // a tracked pose
+    }
+    EXPECT_EQ(n, 5) << poses.out;
     const auto none =
         runCommand(SCALECTL_BIN, {"--socket", (tmp_.path() / "nonexistent.sock").string(), "get"},
                    tmp_.path(), kReply);

@@ -1,12 +1,14 @@
 // scalectl: asks the scaled daemon for the metric scale over its UNIX socket.
 //
 //   scalectl [--socket PATH] [--json] [--timeout SECONDS]
-//            get [--require-converged] | watch [--count N] | status | posterior | objects
+//            get [--require-converged] | watch [--count N] [--pose] | status | posterior |
+//            objects | pose
 //
 // Exit codes (sysexits): 0 ok, 64 usage, 69 the daemon cannot be reached (no
 // socket, refused, no answer within --timeout, closed early), 75 `get
 // --require-converged` and not converged, 76 malformed reply, wrong protocol
-// version (objects: a daemon older than protocol 1.3) or an ERROR reply. The logic is in
+// version (objects: a daemon older than protocol 1.3; pose, watch --pose: 1.4) or an ERROR
+// reply. The logic is in
 // scalectl.{h,cpp}.
 
 #include <CLI/CLI.hpp>
@@ -64,8 +66,8 @@ int main(int argc, char** argv) {
         "scalectl"};
     app.footer(
         "usage: scalectl [--socket PATH] [--json] [--timeout SECONDS]\n"
-        "                get [--require-converged] | watch [--count N] | status | posterior |\n"
-        "                objects\n");
+        "                get [--require-converged] | watch [--count N] [--pose] | status |\n"
+        "                posterior | objects | pose\n");
     app.require_subcommand(1);
     app.fallthrough();  // global options may also follow the subcommand
     app.add_option("--socket", options.socket_path,
@@ -84,11 +86,18 @@ int main(int argc, char** argv) {
     std::int64_t count = 0;
     auto* count_opt = watch->add_option("--count", count, "stop after N lines")
                           ->check(CLI::Range(std::int64_t{1}, std::int64_t{1000000000}));
+    watch->add_flag("--pose", options.pose,
+                    "stream the camera pose (POSE, a line per tracked frame up to "
+                    "socket.pose_rate_hz) instead of the scale");
     auto* status = app.add_subcommand("status", "print the daemon's status");
     auto* posterior =
         app.add_subcommand("posterior", "print the scale posterior as d<TAB>log_p rows");
     auto* objects = app.add_subcommand(
         "objects", "print the object table (estimator.model = \"object\"), a row per object");
+    auto* pose = app.add_subcommand(
+        "pose",
+        "print the latest camera pose: position (m) and its 1-sigma, yaw/pitch/roll, "
+        "velocity, scale state (one line)");
 
     try {
         app.parse(argc, argv);
@@ -114,6 +123,8 @@ int main(int argc, char** argv) {
         options.command = ctl::Command::kPosterior;
     } else if (objects->parsed()) {
         options.command = ctl::Command::kObjects;
+    } else if (pose->parsed()) {
+        options.command = ctl::Command::kPose;
     }
     return ctl::run(options, std::cout, std::cerr);
 }

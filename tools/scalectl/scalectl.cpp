@@ -332,7 +332,149 @@ core::Result<PosteriorReply> parsePosterior(std::string_view line) {
     return p;
 }
 
+namespace {
+
+// A fixed-length array of numbers, or absent (null or missing); false when
+// present with another shape.
+template <std::size_t N>
+bool readNumbers(const json& doc, const char* key, std::optional<std::array<double, N>>& out) {
+    const auto it = doc.find(key);
+    if (it == doc.end() || it->is_null()) {
+        out.reset();
+        return true;
+    }
+    if (!it->is_array() || it->size() != N) {
+        return false;
+    }
+    std::array<double, N> v{};
+    for (std::size_t i = 0; i < N; ++i) {
+        if (!(*it)[i].is_number()) {
+            return false;
+        }
+        v[i] = (*it)[i].get<double>();
+    }
+    out = v;
+    return true;
+}
+
+// A 3x3 matrix (rows of three numbers), row-major, or absent.
+bool readMatrix3(const json& doc, const char* key, std::optional<std::array<double, 9>>& out) {
+    const auto it = doc.find(key);
+    if (it == doc.end() || it->is_null()) {
+        out.reset();
+        return true;
+    }
+    if (!it->is_array() || it->size() != 3) {
+        return false;
+    }
+    std::array<double, 9> m{};
+    for (std::size_t r = 0; r < 3; ++r) {
+        const json& row = (*it)[r];
+        if (!row.is_array() || row.size() != 3) {
+            return false;
+        }
+        for (std::size_t c = 0; c < 3; ++c) {
+            if (!row[c].is_number()) {
+                return false;
+            }
+            m[3 * r + c] = row[c].get<double>();
+        }
+    }
+    out = m;
+    return true;
+}
+
+// `value` with `decimals` digits, never "-0.0" for a value that rounds to zero.
+std::string rounded(double value, int decimals) {
+    const double scale = std::pow(10.0, decimals);
+    return fixed(std::round(value * scale) / scale + 0.0, decimals);
+}
+
+std::string triple(const std::array<double, 3>& v, int decimals) {
+    return rounded(v[0], decimals) + " " + rounded(v[1], decimals) + " " + rounded(v[2], decimals);
+}
+
+}  // namespace
+
+core::Result<PoseReply> parsePose(std::string_view line) {
+    auto doc = expectClass(line, "POSE");
+    if (!doc) {
+        return doc.error();
+    }
+    PoseReply p;
+    const auto state = doc->find("state");
+    const bool ok =
+        state != doc->end() && state->is_string() && readInteger(*doc, "epoch", true, p.epoch) &&
+        readInteger(*doc, "frame_id", true, p.frame_id) &&
+        readOptionalNumber(*doc, "scale", p.scale) &&
+        readOptionalNumber(*doc, "scale_sigma", p.scale_sigma) &&
+        readNumbers(*doc, "position", p.position) && readNumbers(*doc, "velocity", p.velocity) &&
+        readMatrix3(*doc, "position_cov", p.position_cov) &&
+        readNumbers(*doc, "orientation", p.orientation) &&
+        readNumbers(*doc, "position_map", p.position_map) &&
+        readNumbers(*doc, "velocity_map", p.velocity_map);
+    if (!ok) {
+        return parseError("malformed POSE (a field has the wrong type or is missing): " +
+                          std::string(line.substr(0, 200)));
+    }
+    p.state = state->get<std::string>();
+    return p;
+}
+
+YawPitchRoll yawPitchRoll(const std::array<double, 4>& q) {
+    const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (!(n > 0)) {
+        return {};
+    }
+    const double w = q[0] / n;
+    const double x = q[1] / n;
+    const double y = q[2] / n;
+    const double z = q[3] / n;
+    // Columns of R_CtoG: the camera's right (x), down (y) and optical axis (z) in G.
+    const std::array<double, 3> right{1 - 2 * (y * y + z * z), 2 * (x * y + w * z),
+                                      2 * (x * z - w * y)};
+    const std::array<double, 3> down{2 * (x * y - w * z), 1 - 2 * (x * x + z * z),
+                                     2 * (y * z + w * x)};
+    const std::array<double, 3> fwd{2 * (x * z + w * y), 2 * (y * z - w * x),
+                                    1 - 2 * (x * x + y * y)};
+    constexpr double kDeg = 180.0 / M_PI;
+    YawPitchRoll r;
+    r.yaw_deg = std::atan2(fwd[1], fwd[0]) * kDeg;
+    r.pitch_deg = std::asin(std::clamp(fwd[2], -1.0, 1.0)) * kDeg;
+    // Roll of the body (x forward, y left = -right, z up = -down) about x.
+    r.roll_deg = std::atan2(-right[2], -down[2]) * kDeg;
+    return r;
+}
+
 // ---- formatting -----------------------------------------------------------
+
+std::string formatPose(const PoseReply& p) {
+    if (p.frame_id < 0 || !p.orientation) {
+        return "pose -  " + p.state + "  epoch " + std::to_string(p.epoch);
+    }
+    std::string out = "pose " + std::to_string(p.frame_id) + "  pos ";
+    if (p.position) {
+        out += triple(*p.position, 3) + " m";
+        if (p.position_cov) {
+            const auto& c = *p.position_cov;
+            const std::array<double, 3> sigma{std::sqrt(std::max(0.0, c[0])),
+                                              std::sqrt(std::max(0.0, c[4])),
+                                              std::sqrt(std::max(0.0, c[8]))};
+            out += "  1-sigma " + triple(sigma, 3) + " m";
+        }
+    } else {
+        out += "-";
+        if (p.position_map) {
+            out += " (map " + triple(*p.position_map, 3) + " units)";
+        }
+    }
+    const YawPitchRoll a = yawPitchRoll(*p.orientation);
+    out += "  ypr " + rounded(a.yaw_deg, 1) + " " + rounded(a.pitch_deg, 1) + " " +
+           rounded(a.roll_deg, 1) + " deg";
+    out += "  vel " + (p.velocity ? triple(*p.velocity, 3) + " m/s" : std::string("-"));
+    out += "  " + p.state + "  epoch " + std::to_string(p.epoch);
+    return out;
+}
 
 std::string formatScale(const ScaleReply& s) {
     std::string out = "scale ";
@@ -685,13 +827,15 @@ public:
             case Command::kGet:
                 return get();
             case Command::kWatch:
-                return watch();
+                return watch(*version);
             case Command::kStatus:
                 return status();
             case Command::kPosterior:
                 return posterior();
             case Command::kObjects:
                 return objects(*version);
+            case Command::kPose:
+                return pose(*version);
         }
         return kExSoftware;
     }
@@ -795,10 +939,7 @@ private:
     }
 
     int objects(const VersionReply& version) {
-        if (version.proto_minor < kObjectsProtoMinor) {
-            err_ << "scalectl: the daemon speaks protocol " << version.proto_major << "."
-                 << version.proto_minor << "; objects needs 1." << kObjectsProtoMinor << " (scaled "
-                 << version.release << " has no object table)\n";
+        if (!speaks(version, kObjectsProtoMinor, "objects", "object table")) {
             return kExProtocol;
         }
         auto line = request(R"({"cmd":"objects"})", "OBJECTS");
@@ -813,11 +954,45 @@ private:
         return 0;
     }
 
-    int watch() {
+    // false (and a message) when the daemon is older than protocol 1.`minor`.
+    bool speaks(const VersionReply& version, int minor, const char* what, const char* lacks) {
+        if (version.proto_minor >= minor) {
+            return true;
+        }
+        err_ << "scalectl: the daemon speaks protocol " << version.proto_major << "."
+             << version.proto_minor << "; " << what << " needs 1." << minor << " (scaled "
+             << version.release << " has no " << lacks << ")\n";
+        return false;
+    }
+
+    int pose(const VersionReply& version) {
+        if (!speaks(version, kPoseProtoMinor, "pose", "POSE")) {
+            return kExProtocol;
+        }
+        auto line = request(R"({"cmd":"pose"})", "POSE");
+        if (!line) {
+            return fail(line.error(), "before replying");
+        }
+        auto p = parsePose(*line);
+        if (!p) {
+            return fail(p.error());
+        }
+        print(options_.json ? *line : formatPose(*p));
+        return 0;
+    }
+
+    int watch(const VersionReply& version) {
         if (options_.count && *options_.count <= 0) {
             return 0;
         }
-        auto sent = client_.sendLine(R"({"cmd":"watch","enable":true})", replyDeadline());
+        if (options_.pose && !speaks(version, kPoseProtoMinor, "watch --pose", "POSE")) {
+            return kExProtocol;
+        }
+        // --pose: the POSE stream only; else the SCALE stream.
+        const char* streamed = options_.pose ? "POSE" : "SCALE";
+        auto sent = client_.sendLine(options_.pose ? R"({"cmd":"watch","enable":false,"pose":true})"
+                                                   : R"({"cmd":"watch","enable":true})",
+                                     replyDeadline());
         if (!sent) {
             return fail(sent.error());
         }
@@ -848,16 +1023,24 @@ private:
                 return fail(cls.error());
             }
             if (*cls == "ERROR") {
-                return fail(expectClass(*line, "SCALE").error());
+                return fail(expectClass(*line, streamed).error());
             }
             if (*cls == "WATCH") {
                 acknowledged = true;
-            } else if (*cls == "SCALE") {
-                auto scale = parseScale(*line);
-                if (!scale) {
-                    return fail(scale.error());
+            } else if (*cls == streamed) {
+                if (options_.pose) {
+                    auto p = parsePose(*line);
+                    if (!p) {
+                        return fail(p.error());
+                    }
+                    print(options_.json ? *line : formatPose(*p));
+                } else {
+                    auto scale = parseScale(*line);
+                    if (!scale) {
+                        return fail(scale.error());
+                    }
+                    print(options_.json ? *line : formatScale(*scale));
                 }
-                print(options_.json ? *line : formatScale(*scale));
                 ++printed;
                 if (options_.count && printed >= *options_.count) {
                     return 0;

@@ -8,9 +8,10 @@
 // Exit codes (sysexits): 0 ok; 64 usage; 69 the daemon cannot be reached, does
 // not answer within --timeout or closes the connection early; 75 `get
 // --require-converged` and the state is not converged; 76 a malformed reply, a
-// proto_major other than 1, an ERROR reply or (`objects`) a daemon whose
-// proto_minor is below 3.
+// proto_major other than 1, an ERROR reply or a daemon whose proto_minor is
+// below what the command needs (`objects` 3, `pose` and `watch --pose` 4).
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -75,6 +76,34 @@ struct PosteriorReply {
 };
 core::Result<PosteriorReply> parsePosterior(std::string_view line);
 
+// POSE (proto_minor 4): the camera pose in the gravity-aligned frame G
+// (docs/protocol.md). Metric members are absent while the epoch has no scale,
+// every pose member before the first pose.
+struct PoseReply {
+    std::int64_t epoch = 0;
+    std::int64_t frame_id = -1;
+    std::string state;
+    std::optional<double> scale;
+    std::optional<double> scale_sigma;
+    std::optional<std::array<double, 3>> position;      // m
+    std::optional<std::array<double, 3>> velocity;      // m/s
+    std::optional<std::array<double, 9>> position_cov;  // m^2, row-major
+    std::optional<std::array<double, 4>> orientation;   // [w, x, y, z], camera to G
+    std::optional<std::array<double, 3>> position_map;  // SLAM units
+    std::optional<std::array<double, 3>> velocity_map;  // SLAM units/s
+};
+core::Result<PoseReply> parsePose(std::string_view line);
+
+// The camera's heading from a POSE orientation, degrees: yaw of the optical
+// axis from G's x towards y (left), pitch of the optical axis above the
+// horizontal, roll about it (positive: the image's right side down).
+struct YawPitchRoll {
+    double yaw_deg = 0;
+    double pitch_deg = 0;
+    double roll_deg = 0;
+};
+YawPitchRoll yawPitchRoll(const std::array<double, 4>& wxyz);
+
 // ---- formatting -----------------------------------------------------------
 
 // One line, no newline:
@@ -86,6 +115,16 @@ std::string formatScale(const ScaleReply& scale);
 // The STATUS line as a readable multi-line summary (each line ends in '\n');
 // absent fields show as `-`.
 core::Result<std::string> formatStatus(std::string_view line);
+
+// One line, no newline:
+//   pose 512  pos 1.220 -0.391 0.303 m  1-sigma 0.042 0.021 0.017 m  ypr 30.0 -10.0 0.0 deg
+//     vel 0.195 0.049 0.000 m/s  converging  epoch 1
+// (one line), without a scale `pos - (map 0.053 0.001 -0.002 units)` and
+// `vel -`, before the first pose `pose -  initialising  epoch 0`.
+std::string formatPose(const PoseReply& pose);
+
+// The protocol minor version that added POSE.
+inline constexpr int kPoseProtoMinor = 4;
 
 // `d<TAB>log_p` rows, one per grid point, each ending in '\n'.
 std::string formatPosterior(const PosteriorReply& posterior);
@@ -162,7 +201,7 @@ private:
 
 // ---- the commands ---------------------------------------------------------
 
-enum class Command : std::uint8_t { kGet, kWatch, kStatus, kPosterior, kObjects };
+enum class Command : std::uint8_t { kGet, kWatch, kStatus, kPosterior, kObjects, kPose };
 
 struct Options {
     std::string socket_path = kDefaultSocket;
@@ -172,7 +211,8 @@ struct Options {
     std::optional<double> timeout_s;
     Command command = Command::kGet;
     bool require_converged = false;     // get
-    std::optional<std::int64_t> count;  // watch: stop after N SCALE lines
+    std::optional<std::int64_t> count;  // watch: stop after N SCALE (or POSE) lines
+    bool pose = false;                  // watch --pose: the POSE stream instead of SCALE
     int interrupt_fd = -1;              // readable: stop waiting (SIGINT/SIGTERM)
 };
 

@@ -67,6 +67,33 @@ constexpr const char* kObjects =
     R"("detections":1,"views":1,"views_used":0,"first_frame":450,"last_frame":450,)"
     R"("local_estimate":null,"height_m":null,"height_ci95_m":null,"new_member":1}]})";
 
+constexpr const char* kVersion14 =
+    R"({"class":"VERSION","release":"0.3.0","proto_major":1,"proto_minor":4})";
+// docs/protocol.md's first POSE: the camera 30 degrees left of G's x and 10
+// degrees down, no roll.
+constexpr const char* kPose =
+    R"({"class":"POSE","epoch":1,"frame_id":512,"t_ns":1700000016896666667,)"
+    R"("time":1700000016.8966667,"state":"converging","scale":0.9763412,"scale_sigma":0.03,)"
+    R"("position":[1.220427,-0.3905365,0.3026658],"velocity":[0.1952682,0.04881706,0],)"
+    R"("position_cov":[[0.001787547,-0.0004404676,0.00034875],)"
+    R"([-0.0004404676,0.0004299726,-0.0001116],[0.00034875,-0.0001116,0.0002771384]],)"
+    R"("orientation":[0.5566704,-0.6634139,0.3830222,-0.3213938],)"
+    R"("attitude_cov":[[7.6e-05,0,0],[0,7.6e-05,0],[0,0,1.2e-04]],)"
+    R"("position_map":[1.25,-0.4,0.31],"velocity_map":[0.2,0.05,0],)"
+    R"("position_map_cov":[[0.0004,1e-05,0],[1e-05,0.0003,0],[0,0,0.0002]],"new":1})";
+constexpr const char* kPoseNoScale =
+    R"({"class":"POSE","epoch":2,"frame_id":37,"t_ns":1233333333,"time":1.233333333,)"
+    R"("state":"tracking","scale":null,"scale_sigma":null,"position":null,"velocity":null,)"
+    R"("position_cov":null,"orientation":[0.5,-0.5,0.5,-0.5],)"
+    R"("attitude_cov":[[2.5e-05,0,0],[0,2.5e-05,0],[0,0,2.5e-05]],)"
+    R"("position_map":[0.0525,0.001,-0.002],"velocity_map":[0.04,0,0],)"
+    R"("position_map_cov":[[1e-06,0,0],[0,1e-06,0],[0,0,1e-06]]})";
+constexpr const char* kPoseNone =
+    R"({"class":"POSE","epoch":0,"frame_id":-1,"t_ns":0,"time":0,"state":"initialising",)"
+    R"("scale":null,"scale_sigma":null,"position":null,"velocity":null,"position_cov":null,)"
+    R"("orientation":null,"attitude_cov":null,"position_map":null,"velocity_map":null,)"
+    R"("position_map_cov":null})";
+
 // ---- parsing and formatting ----------------------------------------------
 
 TEST(ScalectlParse, ScaleLineWithEveryField) {
@@ -234,6 +261,67 @@ TEST(ScalectlFormat, ObjectsTable) {
               "  (0.412, -0.125, 2.500)          0.043\n"
               "   7  cup             tentative        0/1         -  -                     "
               "  -                                   -\n");
+}
+
+// POSE (proto_minor 4): one line; the metric part only with a scale.
+TEST(ScalectlFormat, PoseLine) {
+    auto p = ctl::parsePose(kPose);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    EXPECT_EQ(ctl::formatPose(*p),
+              "pose 512  pos 1.220 -0.391 0.303 m  1-sigma 0.042 0.021 0.017 m  "
+              "ypr 30.0 -10.0 0.0 deg  vel 0.195 0.049 0.000 m/s  converging  epoch 1");
+    auto none = ctl::parsePose(kPoseNoScale);
+    ASSERT_TRUE(none.ok()) << none.error().message;
+    EXPECT_EQ(ctl::formatPose(*none),
+              "pose 37  pos - (map 0.053 0.001 -0.002 units)  ypr 0.0 0.0 0.0 deg  vel -  "
+              "tracking  epoch 2");
+    auto before = ctl::parsePose(kPoseNone);
+    ASSERT_TRUE(before.ok()) << before.error().message;
+    EXPECT_EQ(ctl::formatPose(*before), "pose -  initialising  epoch 0");
+}
+
+// Yaw, pitch and roll of the camera from the quaternion (camera to G).
+TEST(ScalectlFormat, YawPitchRoll) {
+    // A level camera looking along x: R_CtoG columns (0,-1,0), (0,0,-1), (1,0,0).
+    const auto level = ctl::yawPitchRoll({0.5, -0.5, 0.5, -0.5});
+    EXPECT_NEAR(level.yaw_deg, 0, 1e-9);
+    EXPECT_NEAR(level.pitch_deg, 0, 1e-9);
+    EXPECT_NEAR(level.roll_deg, 0, 1e-9);
+    // Turned 90 degrees left about z: q = (cos 45, 0, 0, sin 45) * level.
+    const double c = std::sqrt(0.5);
+    const std::array<double, 4> turn{c, 0, 0, c};
+    const std::array<double, 4> lv{0.5, -0.5, 0.5, -0.5};
+    const std::array<double, 4> left{
+        turn[0] * lv[0] - turn[3] * lv[3], turn[0] * lv[1] - turn[3] * lv[2],
+        turn[0] * lv[2] + turn[3] * lv[1], turn[0] * lv[3] + turn[3] * lv[0]};
+    const auto l = ctl::yawPitchRoll(left);
+    EXPECT_NEAR(l.yaw_deg, 90, 1e-9);
+    EXPECT_NEAR(l.pitch_deg, 0, 1e-9);
+    EXPECT_NEAR(l.roll_deg, 0, 1e-9);
+    // Rolled right side down by 20 degrees about the optical axis (G's x):
+    // q = (cos 10, sin 10, 0, 0) * level.
+    const double h = 10.0 * M_PI / 180.0;
+    const std::array<double, 4> r{std::cos(h), std::sin(h), 0, 0};
+    const std::array<double, 4> rolled{r[0] * lv[0] - r[1] * lv[1], r[0] * lv[1] + r[1] * lv[0],
+                                       r[0] * lv[2] - r[1] * lv[3], r[0] * lv[3] + r[1] * lv[2]};
+    const auto rr = ctl::yawPitchRoll(rolled);
+    EXPECT_NEAR(rr.yaw_deg, 0, 1e-9);
+    EXPECT_NEAR(rr.pitch_deg, 0, 1e-9);
+    EXPECT_NEAR(rr.roll_deg, 20, 1e-9);
+}
+
+TEST(ScalectlFormat, MalformedPosesAreParseErrors) {
+    for (const char* line : {
+             R"({"class":"POSE","epoch":1,"frame_id":3,"state":"tracking","position":[1,2]})",
+             R"({"class":"POSE","epoch":1,"frame_id":3,"state":"tracking","position_cov":[[1]]})",
+             R"({"class":"POSE","epoch":1,"frame_id":3,"state":7})",
+             R"({"class":"POSE","epoch":1,"state":"tracking"})",
+             R"({"class":"SCALE","epoch":1})",
+         }) {
+        const auto p = ctl::parsePose(line);
+        ASSERT_FALSE(p.ok()) << line;
+        EXPECT_EQ(p.error().code, ErrorCode::kParse) << line;
+    }
 }
 
 TEST(ScalectlFormat, ObjectsOfThePaperModelAndEmptyTables) {
@@ -661,6 +749,87 @@ TEST(ScalectlClient, ObjectsNeedProtocolMinor3) {
     EXPECT_NE(r.err.find("protocol 1.0; objects needs 1.3"), std::string::npos) << r.err;
     EXPECT_TRUE(r.out.empty()) << r.out;
     EXPECT_TRUE(daemon.requests().empty());
+}
+
+TEST(ScalectlClient, PoseLineAndJson) {
+    const auto script = [](FakeDaemon& d, int fd) {
+        sendAll(fd, std::string(kVersion14) + "\n");
+        d.request(fd);
+        sendAll(fd, std::string(kPose) + "\n");
+        waitForClose(fd);
+    };
+    {
+        FakeDaemon daemon(script);
+        const auto r = runCtl(optionsFor(daemon, ctl::Command::kPose));
+        EXPECT_EQ(r.code, 0) << r.err;
+        EXPECT_EQ(r.out, ctl::formatPose(*ctl::parsePose(kPose)) + "\n");
+        EXPECT_EQ(daemon.requests(), std::vector<std::string>{R"({"cmd":"pose"})"});
+    }
+    {
+        FakeDaemon daemon(script);
+        auto o = optionsFor(daemon, ctl::Command::kPose);
+        o.json = true;
+        const auto r = runCtl(o);
+        EXPECT_EQ(r.code, 0) << r.err;
+        EXPECT_EQ(r.out, std::string(kPose) + "\n");
+    }
+}
+
+// A daemon older than protocol 1.4 has no POSE: `pose` and `watch --pose`
+// say so instead of asking (exit 76).
+TEST(ScalectlClient, PoseNeedsProtocolMinor4) {
+    for (const bool watch : {false, true}) {
+        FakeDaemon daemon([](FakeDaemon& /*d*/, int fd) {
+            sendAll(fd, std::string(kVersion13) + "\n");
+            waitForClose(fd);
+        });
+        auto o = optionsFor(daemon, watch ? ctl::Command::kWatch : ctl::Command::kPose);
+        o.pose = watch;
+        const auto r = runCtl(o);
+        EXPECT_EQ(r.code, 76);
+        EXPECT_NE(r.err.find(watch ? "protocol 1.3; watch --pose needs 1.4"
+                                   : "protocol 1.3; pose needs 1.4"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_TRUE(r.out.empty()) << r.out;
+        EXPECT_TRUE(daemon.requests().empty());
+    }
+}
+
+// watch --pose: asks for the POSE stream alone and prints POSE lines (a
+// SCALE among them is skipped), --count of them.
+TEST(ScalectlClient, WatchPoseStreamsPoseLines) {
+    const std::string stream = std::string(R"({"class":"WATCH","enable":false,"pose":true})") +
+                               "\n" + kPoseNoScale + "\n" + kScaleConverged + "\n" + kPose + "\n" +
+                               kPose + "\n";
+    const auto script = [&](FakeDaemon& d, int fd) {
+        sendAll(fd, std::string(kVersion14) + "\n");
+        d.request(fd);
+        sendAll(fd, stream);
+        waitForClose(fd);
+    };
+    {
+        FakeDaemon daemon(script);
+        auto o = optionsFor(daemon, ctl::Command::kWatch);
+        o.pose = true;
+        o.count = 2;
+        const auto r = runCtl(o);
+        EXPECT_EQ(r.code, 0) << r.err;
+        EXPECT_EQ(r.out, ctl::formatPose(*ctl::parsePose(kPoseNoScale)) + "\n" +
+                             ctl::formatPose(*ctl::parsePose(kPose)) + "\n");
+        EXPECT_EQ(daemon.requests(),
+                  std::vector<std::string>{R"({"cmd":"watch","enable":false,"pose":true})"});
+    }
+    {
+        FakeDaemon daemon(script);
+        auto o = optionsFor(daemon, ctl::Command::kWatch);
+        o.pose = true;
+        o.json = true;
+        o.count = 3;
+        const auto r = runCtl(o);
+        EXPECT_EQ(r.code, 0) << r.err;
+        EXPECT_EQ(r.out, std::string(kPoseNoScale) + "\n" + kPose + "\n" + kPose + "\n");
+    }
 }
 
 // The watch stream: WATCH acknowledgement, then SCALE lines.
