@@ -22,6 +22,11 @@
 // line per object the update saw) and, as the socket thread does, copies it
 // out of the hub and encodes an OBJECTS reply.
 //
+// Every tracked frame also publishes its pose as the tracking thread does
+// (makePoseReport from the filter, ReportHub::publishPose) and, as the socket
+// thread does for a pose watcher, copies it out of the hub, passes it through
+// the rate limiter and encodes the POSE line with the latest scale.
+//
 // The run happens once per model (SetUpTestSuite); the tests check its record:
 //   WorkWasReal             one healthy map, features matched and added,
 //                           estimator updates with observations that moved
@@ -49,8 +54,10 @@
 #include <scaled/daemon/log_service.h>
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pipeline_config.h>
+#include <scaled/daemon/pose.h>
 #include <scaled/daemon/protocol.h>
 #include <scaled/daemon/report.h>
+#include <scaled/daemon/socket_service.h>
 #include <scaled/detector/object_detector.h>
 #include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/priors_toml.h>
@@ -123,7 +130,7 @@ std::string report(std::span<const Stage> stages) {
 // What the run did and what it allocated.
 struct RunRecord {
     bool completed = false;  // every frame processed (no fatal failure on the way)
-    std::array<Stage, 8> stages{};
+    std::array<Stage, 9> stages{};
     std::string table;
     int counted_frames = 0;
     int frames_not_ok = 0;
@@ -144,6 +151,9 @@ struct RunRecord {
     int objects_used = 0;
     int object_lines = 0;
     std::size_t objects_reply_bytes = 0;
+    // POSE lines encoded (every counted frame) and those with a metric part.
+    int pose_lines = 0;
+    int metric_pose_lines = 0;
 };
 
 // The run; gtest assertions inside stop it early (completed stays false).
@@ -201,10 +211,16 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     reply.reserve(1 << 16);
     std::string log_line;
     log_line.reserve(8192);
+    // The socket thread's POSE line and the scale it combines it with.
+    std::string pose_line;
+    pose_line.reserve(2048);
+    daemon::ScaleReport scale_report;
+    scale_report.epoch = 1;
+    daemon::PoseRateLimiter pose_limiter(0);  // every pose, as with pose_rate_hz = 0
     const int every = pc.detection.every_frames;
     ASSERT_GT(every, 0);
 
-    std::array<Stage, 8>& stages = rec.stages;
+    std::array<Stage, 9>& stages = rec.stages;
     Stage& track = stages[0];
     Stage& capture = stages[1];
     Stage& convert = stages[2];
@@ -213,6 +229,8 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     Stage& detect_stage = stages[5];
     Stage& table_stage = stages[6];
     Stage& reply_stage = stages[7];
+    Stage& pose_stage = stages[8];
+    pose_stage.name = "pose: report, hub, POSE line";
     table_stage.name = "object table: collect, hub, OBJECT lines";
     reply_stage.name = "OBJECTS reply (socket thread)";
     track.name = "MonoTracker::processFrame";
@@ -283,6 +301,23 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
             frames_adding += stats.added > 0 ? 1 : 0;
         }
 
+        // Tracking thread: the pose into the hub; socket thread: the POSE line.
+        c0 = countsNow();
+        const core::slam::EkfSlam& filter = tracker->filter();
+        hub.publishPose(daemon::makePoseReport(filter.pose(), filter.velocityW(),
+                                               filter.poseCovariance(), filter.upW(), 1, frame.id,
+                                               frame.t_ns));
+        const daemon::PoseReport pose = hub.pose();
+        pose_line.clear();
+        if (pose_limiter.admit(pose.epoch, pose.t_ns)) {
+            daemon::appendPose(pose_line, pose, scale_report);
+        }
+        if (counting) {
+            pose_stage.add(c0, frame.id);
+            ++rec.pose_lines;
+            rec.metric_pose_lines += pose_line.find("\"position\":[") != std::string::npos ? 1 : 0;
+        }
+
         if (frames_in_map <= 1 || (frames_in_map - 1) % every != 0) {
             continue;
         }
@@ -321,6 +356,10 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
             log_p_out[j] = static_cast<double>(log_p[j]);
         }
         const core::ScaleSummary summary = estimator->summary();
+        scale_report.has_scale = summary.state != core::ScaleState::kNoData;
+        scale_report.scale = static_cast<double>(summary.map);
+        scale_report.ci68_lo = static_cast<double>(summary.ci68.lo);
+        scale_report.ci68_hi = static_cast<double>(summary.ci68.hi);
         if (counting) {
             update.add(c0, frame.id);
             ++updates;
@@ -381,13 +420,14 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
         "  scale: %d updates, %lld observations; MAP %.4f -> %.4f, observations %d -> %d, "
         "max |change| of log p %.3g\n"
         "  objects: up to %zu in the table, %d used at the end, %d OBJECT lines, replies up to "
-        "%zu bytes\n%s",
+        "%zu bytes\n  poses: %d POSE lines, %d with a metric part\n%s",
         core::toString(model), counted_frames, kWarmupFrames,
         test::mallocCountingEnabled() ? "yes" : "no (sanitizer)", matched, inliers, min_inliers,
         added, frames_adding, new_maps, updates, observations,
         static_cast<double>(before_summary.map), static_cast<double>(after_summary.map),
         before_summary.observations, after_summary.observations, log_p_change, rec.max_objects_seen,
-        rec.objects_used, rec.object_lines, rec.objects_reply_bytes, table.c_str());
+        rec.objects_used, rec.object_lines, rec.objects_reply_bytes, rec.pose_lines,
+        rec.metric_pose_lines, table.c_str());
 
     rec.completed = true;
 }
@@ -427,6 +467,9 @@ TEST_F(SteadyStateAllocation, WorkWasReal) {
     EXPECT_GT(r.after_summary.observations, r.before_summary.observations);
     EXPECT_NE(r.after_summary.map, r.before_summary.map);
     EXPECT_GT(r.log_p_change, 1e-3);
+    // A POSE line per counted frame, in metres once the scale had evidence.
+    EXPECT_EQ(r.pose_lines, kCountedFrames);
+    EXPECT_GT(r.metric_pose_lines, 0);
 }
 
 // The criterion: no operator new in the pipeline's own stages.
