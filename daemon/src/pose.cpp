@@ -11,9 +11,9 @@ namespace {
 constexpr double kMinHorizontal = 1e-6;
 
 void storeRowMajor(const Eigen::Matrix3d& m, std::array<double, 9>& out) {
-    for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c) {
-            out[static_cast<std::size_t>(3 * r + c)] = m(r, c);
+    for (Eigen::Index r = 0; r < 3; ++r) {
+        for (Eigen::Index c = 0; c < 3; ++c) {
+            out[static_cast<std::size_t>(r) * 3 + static_cast<std::size_t>(c)] = m(r, c);
         }
     }
 }
@@ -48,7 +48,7 @@ PoseReport makePoseReport(const core::CameraPose& pose_W, const core::Vec3& velo
                           std::int64_t t_ns) {
     const Eigen::Matrix3d R_WtoG = gravityAlignedFromMap(up_W.cast<double>());
     const Eigen::Matrix3d R_CtoG = R_WtoG * pose_W.R_CtoW.cast<double>();
-    const Eigen::Matrix<double, 6, 6> P = covariance.cast<double>();
+    const auto& P = covariance.cast<double>();  // a reference when Scalar is double
     PoseReport r;
     r.epoch = epoch;
     r.frame_id = frame_id;
