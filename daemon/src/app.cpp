@@ -120,8 +120,7 @@ Result<core::PriorTable> openPriors(const DaemonConfig& config) {
     // file configured anywhere else, or an installed one, always wins.
     std::error_code ec;
     const auto& path = config.pipeline.priors_path;
-    if (path == defaultDaemonConfig().pipeline.priors_path &&
-        !std::filesystem::exists(path, ec)) {
+    if (path == defaultDaemonConfig().pipeline.priors_path && !std::filesystem::exists(path, ec)) {
         printInfo(path.string() +
                   " not found: using the priors built into this binary (config/priors.toml of "
                   "its source tree)");
@@ -327,8 +326,8 @@ int Daemon::run() {
     if (!sock) {
         // The default directory is made by systemd (RuntimeDirectory=scaled);
         // say how to run without it rather than leave the user guessing.
-        const bool default_dir = config_.socket.path.parent_path() ==
-                                 defaultDaemonConfig().socket.path.parent_path();
+        const bool default_dir =
+            config_.socket.path.parent_path() == defaultDaemonConfig().socket.path.parent_path();
         printError("socket: " + sock.error().message +
                    (default_dir ? " (the service's unit creates it; to run by hand, "
                                   "--socket PATH in a directory you can write)"
