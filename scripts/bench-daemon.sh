@@ -13,7 +13,8 @@
 #   scripts/bench-daemon.sh [BUILD_DIR]      (default build/release)
 # Environment: SCALED_SHARED_DIR (default ../shared; redkitchen is skipped with
 # a message when the data or the model is absent), WATCHERS (16),
-# POLL_INTERVAL_MS (20), BENCH_OUT (JSON summaries, default BUILD_DIR/bench-daemon).
+# POLL_INTERVAL_MS (20), BENCH_OUT (JSON summaries, default BUILD_DIR/bench-daemon),
+# POSE=1 (the watchers also stream POSE lines, socket.pose_rate_hz = 30).
 # Prints the machine, each run's markdown table row and per-stage timing table
 # (STATUS.timing: predict, search, match, update, map, tracking, detect_*,
 # scale_*; docs/benchmarks.md "Per-stage timing"), and the JSON file names.
@@ -30,6 +31,10 @@ done
 shared=${SCALED_SHARED_DIR:-../shared}
 watchers=${WATCHERS:-16}
 interval=${POLL_INTERVAL_MS:-20}
+pose=()
+if [[ ${POSE:-0} == 1 ]]; then
+    pose=(--pose)
+fi
 out=${BENCH_OUT:-$build/bench-daemon}
 mkdir -p "$out"
 priors="$PWD/config/priors.toml"
@@ -43,10 +48,10 @@ fi
 run() {
     local name=$1
     shift
-    echo "# $name: $bench --scaled $scaled --watchers $watchers --poll-interval-ms $interval --label $name -- $*" >&2
+    echo "# $name: $bench --scaled $scaled --watchers $watchers --poll-interval-ms $interval ${pose[*]} --label $name -- $*" >&2
     local status=0
     "$bench" --scaled "$scaled" --watchers "$watchers" --poll-interval-ms "$interval" \
-        --label "$name" -- "$@" >"$out/$name.json" || status=$?
+        "${pose[@]}" --label "$name" -- "$@" >"$out/$name.json" || status=$?
     echo "# $name: $out/$name.json (exit $status)" >&2
     return $status
 }

@@ -14,7 +14,8 @@
 //
 //   daemon_bench [--scaled PATH] [--watchers N] [--poll-interval-ms MS]
 //                [--status-interval-ms MS] [--duration S] [--ready-timeout S]
-//                [--label TEXT] [--keep-dir] [--] scaled-args...
+//                [--label TEXT] [--keep-dir] [--pose] [--] scaled-args...
+// --pose: the watchers stream POSE lines too (socket.pose_rate_hz applies).
 //
 // The daemon gets `--socket DIR/s.sock --log-dir DIR/log
 // --set socket.max_clients=N+4` before the given arguments, and NOTIFY_SOCKET.
@@ -68,13 +69,14 @@ struct Options {
     double ready_timeout_s = 60;
     std::string label;
     bool keep_dir = false;
+    bool pose = false;  // watchers also stream POSE (watch with "pose":true)
     std::vector<std::string> scaled_args;
 };
 
 constexpr const char* kUsage =
     "usage: daemon_bench [--scaled PATH] [--watchers N] [--poll-interval-ms MS]\n"
     "                    [--status-interval-ms MS] [--duration S] [--ready-timeout S]\n"
-    "                    [--label TEXT] [--keep-dir] [--] scaled-args...\n"
+    "                    [--label TEXT] [--keep-dir] [--pose] [--] scaled-args...\n"
     "Runs scaled (default: the one built beside this program) and measures it: dropped\n"
     "frames, detector latency (STATUS), CPU and RSS (/proc), poll round trip with N\n"
     "watchers connected. JSON summary on stdout, a markdown table row on stderr.\n";
@@ -128,6 +130,10 @@ std::optional<int> parseArgs(int argc, char** argv, Options& o) {
         }
         if (a == "--keep-dir") {
             o.keep_dir = true;
+            continue;
+        }
+        if (a == "--pose") {
+            o.pose = true;
             continue;
         }
         if (a == "--scaled" || a == "--watchers" || a == "--poll-interval-ms" ||
@@ -251,6 +257,7 @@ double readLoadAverage() {
 struct WatcherCounts {
     std::uint64_t lines = 0;
     std::uint64_t scale_lines = 0;
+    std::uint64_t pose_lines = 0;
     std::uint64_t watch_acks = 0;
     std::uint64_t other_lines = 0;
     bool eof = false;
@@ -289,6 +296,8 @@ void readWatchers(std::vector<Client>& clients, std::vector<WatcherCounts>& coun
                 ++c.lines;
                 if (line->find(R"("class":"SCALE")") != std::string::npos) {
                     ++c.scale_lines;
+                } else if (line->find(R"("class":"POSE")") != std::string::npos) {
+                    ++c.pose_lines;
                 } else if (line->find(R"("class":"WATCH")") != std::string::npos) {
                     ++c.watch_acks;
                 } else {
@@ -536,7 +545,8 @@ int run(const Options& o) {
         }
         auto v = w.readJson(Millis(5000));
         if (!v || !v->is_object() || v->value("class", std::string()) != "VERSION" ||
-            !w.sendRaw("{\"cmd\":\"watch\",\"enable\":true}\n")) {
+            !w.sendRaw(o.pose ? "{\"cmd\":\"watch\",\"enable\":true,\"pose\":true}\n"
+                              : "{\"cmd\":\"watch\",\"enable\":true}\n")) {
             w.close();
             continue;
         }
@@ -700,6 +710,8 @@ int run(const Options& o) {
 
     std::uint64_t lines = 0;
     std::uint64_t scale_lines = 0;
+    std::uint64_t pose_lines = 0;
+    std::uint64_t min_pose = UINT64_MAX;
     std::uint64_t min_scale = UINT64_MAX;
     std::uint64_t max_scale = 0;
     int closed_early = 0;  // EOF well before the daemon exited: detached
@@ -710,6 +722,8 @@ int run(const Options& o) {
         }
         lines += c.lines;
         scale_lines += c.scale_lines;
+        pose_lines += c.pose_lines;
+        min_pose = std::min(min_pose, c.pose_lines);
         min_scale = std::min(min_scale, c.scale_lines);
         max_scale = std::max(max_scale, c.scale_lines);
         if (c.eof && c.eof_at + std::chrono::seconds(2) < end_at) {
@@ -718,6 +732,9 @@ int run(const Options& o) {
     }
     if (min_scale == UINT64_MAX) {
         min_scale = 0;
+    }
+    if (min_pose == UINT64_MAX) {
+        min_pose = 0;
     }
 
     const auto& st = polled.last_status;
@@ -729,6 +746,7 @@ int run(const Options& o) {
         {"scaled", o.scaled},
         {"scaled_args", o.scaled_args},
         {"watchers", o.watchers},
+        {"pose_watchers", o.pose},
         {"poll_interval_ms", o.poll_interval_ms},
         {"loadavg_1m_at_start", load_at_start},
         {"ended_by", ended_by},
@@ -771,6 +789,8 @@ int run(const Options& o) {
           {"scale", scale_lines},
           {"scale_per_watcher_min", min_scale},
           {"scale_per_watcher_max", max_scale},
+          {"pose", pose_lines},
+          {"pose_per_watcher_min", min_pose},
           {"closed_early", closed_early}}},
         {"clients_detached", at(st, {"clients", "detached"})},
         {"final",
