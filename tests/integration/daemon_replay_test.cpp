@@ -2,16 +2,23 @@
 // with YOLOX-Nano, watched over its socket until the replay ends and the
 // daemon exits (at_end = exit). Skips when ../shared (data or model) is absent.
 
+#include <cmath>
 #include <csignal>
+#include <cstdio>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 
 #include <gtest/gtest.h>
 
+#include <scaled/daemon/pipeline_config.h>
+#include <scaled/drivers/frame_source.h>
+
 #include "daemon_harness.h"
 #include "shared_data.h"
+#include "slam_run.h"
 #include "temp_dir.h"
 
 namespace scaled::test {
@@ -34,14 +41,18 @@ TEST(DaemonReplay, RedkitchenHoldsTheTruthAndExitsCleanly) {
     DaemonOptions opt;
     opt.args = {
         "--source", "replay:" + dataset.string(), "--pacing", "fast",
-        "--set",    "source.at_end=exit",         "--set",    "detector.model=" + model.string()};
+        "--set",    "source.at_end=exit",         "--set",    "detector.model=" + model.string(),
+        "--set",    "socket.pose_rate_hz=0"};
     opt.ready_timeout = Millis(60'000);
     ASSERT_TRUE(daemon.start(opt));
 
     auto c = daemon.client();
     ASSERT_TRUE(c.has_value()) << "no VERSION greeting";
-    ASSERT_TRUE(c->send(Json{{"cmd", "watch"}, {"enable", true}}));
+    ASSERT_TRUE(c->send(Json{{"cmd", "watch"}, {"enable", true}, {"pose", true}}));
     constexpr double kTruth = 0.992;
+    // |position_map| of every POSE received, by frame (a slow reader gets the
+    // latest only: not necessarily every frame).
+    std::map<std::int64_t, double> pose_norm;
     std::optional<Json> first_evidence;
     std::optional<Json> last;
     std::optional<Json> status;
@@ -58,6 +69,14 @@ TEST(DaemonReplay, RedkitchenHoldsTheTruthAndExitsCleanly) {
         ASSERT_TRUE(j->is_object()) << c->lastLine();
         if ((*j)["class"] == "STATUS") {
             status = j;
+            continue;
+        }
+        if ((*j)["class"] == "POSE") {
+            if ((*j)["epoch"] == 1) {
+                const auto& p = (*j)["position_map"];
+                pose_norm[(*j)["frame_id"].get<std::int64_t>()] =
+                    std::hypot(p[0].get<double>(), p[1].get<double>(), p[2].get<double>());
+            }
             continue;
         }
         if ((*j)["class"] != "SCALE") {
@@ -112,6 +131,37 @@ TEST(DaemonReplay, RedkitchenHoldsTheTruthAndExitsCleanly) {
               (*first_evidence)["observations"].get<std::int64_t>())
         << last->dump();
     EXPECT_FALSE(fs::exists(fs::symlink_status(daemon.paths().socket)));
+
+    // The pose served is the tools' trajectory: slam-run's tracker (what
+    // scale-eval runs) over the same frames with the daemon's tracker
+    // configuration gives the same camera positions (compared by their
+    // distance from the map's origin, which the gravity-aligned frame keeps).
+    ASSERT_GT(pose_norm.size(), 100u) << "too few POSE lines";
+    auto source = drivers::openDataset(dataset);
+    ASSERT_TRUE(source.ok()) << source.error().message;
+    auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
+    ASSERT_TRUE(camera.ok());
+    tools::SlamRunOptions ro;
+    ro.tracker = daemon::defaultPipelineConfig().tracker;
+    const auto run = tools::runSlam(**source, *camera, ro);
+    ASSERT_TRUE(run.ok()) << run.error().message;
+    ASSERT_EQ(run->reinitialisations, 0);
+    int compared = 0;
+    double worst = 0;
+    for (const auto& [frame, norm] : pose_norm) {
+        if (frame < 0 || static_cast<std::size_t>(frame) >= run->poses.size()) {
+            continue;
+        }
+        const double tool =
+            static_cast<double>(run->poses[static_cast<std::size_t>(frame)].p_CinW.norm());
+        worst = std::max(worst, std::abs(norm - tool) / (1e-3 + tool));
+        ++compared;
+    }
+    std::printf("POSE vs slam-run: %d frames compared, worst relative difference %.3g\n", compared,
+                worst);
+    EXPECT_GT(compared, 100);
+    EXPECT_LT(worst, 1e-5) << "the daemon's poses differ from slam-run's on " << compared
+                           << " frames";
 }
 
 }  // namespace
