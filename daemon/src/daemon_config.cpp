@@ -160,6 +160,7 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         boolean("log", "enabled", &l.enabled),
         path("log", "dir", &l.dir),
         integer("log", "frame_every", &l.frame_every, 0, 1000000),
+        real("log", "pose_rate_hz", &l.pose_rate_hz, 0, 1000),
         integer("log", "max_file_bytes", &l.max_file_bytes, 4096, std::int64_t{1} << 40),
         integer("log", "max_total_bytes", &l.max_total_bytes, 4096, std::int64_t{1} << 40),
         integer("log", "fsync_interval_ms", &l.fsync_interval_ms, 0, 3600000),

@@ -2,7 +2,9 @@
 
 // PipelineEvents written to the field log: the pipeline's callbacks turned
 // into LogService events. Box and observation lists are converted into
-// buffers reserved here (the detection thread is their only caller).
+// buffers reserved here (the detection thread is their only caller); poses
+// are thinned here to log.pose_rate_hz (the tracking thread is onPose's only
+// caller).
 
 #include <algorithm>
 #include <array>
@@ -18,7 +20,7 @@ namespace scaled::daemon {
 
 class LogEvents final : public PipelineEvents {
 public:
-    explicit LogEvents(LogService& log) : log_(log) {}
+    explicit LogEvents(LogService& log) : log_(log), pose_limiter_(log.poseRateHz()) {}
 
     void start(std::string_view release, std::string_view source, const std::string& config) {
         StartEvent e;
@@ -106,6 +108,19 @@ public:
         }
     }
 
+    // At most log.pose_rate_hz lines per second of frame time; none when 0.
+    void onPose(const Pose& p) override {
+        if (p.pose == nullptr || !(log_.poseRateHz() > 0) ||
+            !pose_limiter_.admit(p.pose->epoch, p.pose->t_ns)) {
+            return;
+        }
+        PoseEvent e;
+        e.pose = p.pose;
+        e.metric = p.metric;
+        e.state = p.state;
+        log_.poseEvent(e);
+    }
+
     void onState(DaemonState from, DaemonState to, std::uint64_t epoch, std::int64_t frame_id,
                  const char* reason) override {
         StateEvent e;
@@ -126,6 +141,7 @@ public:
 
 private:
     LogService& log_;
+    PoseRateLimiter pose_limiter_;  // onPose: the tracking thread only
     std::array<LogBox, 256> boxes_{};
     std::array<LogObservation, kMaxLoggedObservations> obs_{};
 };

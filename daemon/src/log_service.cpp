@@ -199,6 +199,17 @@ void formatEvent(const ObjectEvent& event, std::string& out) {
     out += '}';
 }
 
+void formatEvent(const PoseEvent& event, std::string& out) {
+    // As the socket's POSE: 0.1 mm at 1 km; the scale with the log's digits.
+    constexpr int kPoseDigits = 7;
+    begin(out, "POSE", event.mono_ns);
+    if (event.pose != nullptr) {
+        frameFields(out, event.pose->frame_id, event.pose->t_ns, event.pose->epoch);
+        appendPoseMembers(out, *event.pose, event.metric, event.state, kPoseDigits, kLogDigits);
+    }
+    out += '}';
+}
+
 void formatEvent(const StateEvent& event, std::string& out) {
     begin(out, "STATE", event.mono_ns);
     key(out, "from");
@@ -463,6 +474,10 @@ bool LogService::scaleEvent(const ScaleEvent& event) {
     return append(lineBuffer());
 }
 bool LogService::objectEvent(const ObjectEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::poseEvent(const PoseEvent& event) {
     formatEvent(event, lineBuffer());
     return append(lineBuffer());
 }

@@ -523,9 +523,22 @@ void Pipeline::trackingLoop() {
         if (ok) {
             // POSE: fixed-size arithmetic and a copy into the hub, no allocation.
             const core::slam::EkfSlam& filter = tracker.filter();
-            hub_.publishPose(makePoseReport(filter.pose(), filter.velocityW(),
-                                            filter.poseCovariance(), filter.upW(), epoch, frame.id,
-                                            frame.t_ns));
+            const PoseReport pose =
+                makePoseReport(filter.pose(), filter.velocityW(), filter.poseCovariance(),
+                               filter.upW(), epoch, frame.id, frame.t_ns);
+            hub_.publishPose(pose);
+            if (events_ != nullptr) {
+                PipelineEvents::Pose e;
+                e.pose = &pose;
+                {
+                    // The scale as published (publishLocked keeps report_ and
+                    // the hub's in step under this lock).
+                    const std::lock_guard lock(report_mutex_);
+                    e.metric = metricPose(pose, report_);
+                    e.state = report_.state;
+                }
+                events_->onPose(e);
+            }
         }
 
         // Hand a frame to the detector: every Nth frame of a map, or by period.

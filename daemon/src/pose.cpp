@@ -99,4 +99,33 @@ MetricPose metricPose(const PoseReport& pose, const ScaleReport& scale) {
     return m;
 }
 
+// --- PoseRateLimiter ------------------------------------------------------------
+
+PoseRateLimiter::PoseRateLimiter(double rate_hz)
+    : period_ns_(rate_hz > 0 && std::isfinite(rate_hz)
+                     ? static_cast<std::int64_t>(std::llround(1e9 / rate_hz))
+                     : 0) {}
+
+bool PoseRateLimiter::admit(std::uint64_t epoch, std::int64_t t_ns) {
+    const bool restart = !started_ || epoch != epoch_ || t_ns < last_t_ns_;
+    last_t_ns_ = t_ns;
+    if (restart) {
+        started_ = true;
+        epoch_ = epoch;
+        origin_ns_ = t_ns;
+        last_slot_ = 0;
+        return true;
+    }
+    if (period_ns_ <= 0) {
+        return true;
+    }
+    // t_ns >= origin here: the division rounds down.
+    const std::int64_t slot = (t_ns - origin_ns_ + period_ns_ / 2) / period_ns_;
+    if (slot <= last_slot_) {
+        return false;
+    }
+    last_slot_ = slot;
+    return true;
+}
+
 }  // namespace scaled::daemon

@@ -356,6 +356,33 @@ void appendObjects(std::string& out, const ObjectsSnapshot& s) {
     out += "]}\n";
 }
 
+void appendPoseMembers(std::string& out, const PoseReport& pose, const MetricPose& m,
+                       DaemonState state, int digits, int scale_digits) {
+    const bool has_pose = pose.frame_id >= 0;
+    key(out, "state");
+    appendJsonString(out, toString(state));
+    key(out, "scale");
+    appendJsonNumberOr(out, m.has_scale, m.scale, scale_digits);
+    key(out, "scale_sigma");
+    appendJsonNumberOr(out, m.has_scale, m.scale_sigma, digits);
+    key(out, "position");
+    appendVector(out, m.has_scale, m.position_m, digits);
+    key(out, "velocity");
+    appendVector(out, m.has_scale, m.velocity_mps, digits);
+    key(out, "position_cov");
+    appendMatrix(out, m.has_scale, m.position_cov_m2, digits);
+    key(out, "orientation");
+    appendVector(out, has_pose, pose.orientation_wxyz, digits);
+    key(out, "attitude_cov");
+    appendMatrix(out, has_pose, pose.attitude_cov_rad2, digits);
+    key(out, "position_map");
+    appendVector(out, has_pose, pose.position_map, digits);
+    key(out, "velocity_map");
+    appendVector(out, has_pose, pose.velocity_map, digits);
+    key(out, "position_map_cov");
+    appendMatrix(out, has_pose, pose.position_cov_map, digits);
+}
+
 void appendPose(std::string& out, const PoseReport& pose, const ScaleReport& scale) {
     // 7 significant digits: 0.1 mm at 1 km, far below what the map knows.
     constexpr int kDigits = 7;
@@ -369,28 +396,7 @@ void appendPose(std::string& out, const PoseReport& pose, const ScaleReport& sca
     appendJsonInt(out, has_pose ? pose.t_ns : 0);
     key(out, "time");
     appendJsonNumber(out, has_pose ? static_cast<double>(pose.t_ns) * 1e-9 : 0.0);
-    key(out, "state");
-    appendJsonString(out, toString(scale.state));
-    key(out, "scale");
-    appendJsonNumberOr(out, m.has_scale, m.scale);
-    key(out, "scale_sigma");
-    appendJsonNumberOr(out, m.has_scale, m.scale_sigma, kDigits);
-    key(out, "position");
-    appendVector(out, m.has_scale, m.position_m, kDigits);
-    key(out, "velocity");
-    appendVector(out, m.has_scale, m.velocity_mps, kDigits);
-    key(out, "position_cov");
-    appendMatrix(out, m.has_scale, m.position_cov_m2, kDigits);
-    key(out, "orientation");
-    appendVector(out, has_pose, pose.orientation_wxyz, kDigits);
-    key(out, "attitude_cov");
-    appendMatrix(out, has_pose, pose.attitude_cov_rad2, kDigits);
-    key(out, "position_map");
-    appendVector(out, has_pose, pose.position_map, kDigits);
-    key(out, "velocity_map");
-    appendVector(out, has_pose, pose.velocity_map, kDigits);
-    key(out, "position_map_cov");
-    appendMatrix(out, has_pose, pose.position_cov_map, kDigits);
+    appendPoseMembers(out, pose, m, scale.state, kDigits, 0);
     out += "}\n";
 }
 

@@ -25,7 +25,9 @@
 // Every tracked frame also publishes its pose as the tracking thread does
 // (makePoseReport from the filter, ReportHub::publishPose) and, as the socket
 // thread does for a pose watcher, copies it out of the hub, passes it through
-// the rate limiter and encodes the POSE line with the latest scale.
+// the rate limiter and encodes the POSE line with the latest scale; and, as
+// the field log does (LogEvents::onPose), thins them to log.pose_rate_hz and
+// formats the POSE log line.
 //
 // The run happens once per model (SetUpTestSuite); the tests check its record:
 //   WorkWasReal             one healthy map, features matched and added,
@@ -154,6 +156,9 @@ struct RunRecord {
     // POSE lines encoded (every counted frame) and those with a metric part.
     int pose_lines = 0;
     int metric_pose_lines = 0;
+    // The field log's POSE lines (log.pose_rate_hz, the default) and those with a metric part.
+    int pose_log_lines = 0;
+    int metric_pose_log_lines = 0;
 };
 
 // The run; gtest assertions inside stop it early (completed stays false).
@@ -217,6 +222,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     daemon::ScaleReport scale_report;
     scale_report.epoch = 1;
     daemon::PoseRateLimiter pose_limiter(0);  // every pose, as with pose_rate_hz = 0
+    daemon::PoseRateLimiter log_pose_limiter(daemon::LogConfig{}.pose_rate_hz);
     const int every = pc.detection.every_frames;
     ASSERT_GT(every, 0);
 
@@ -230,7 +236,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     Stage& table_stage = stages[6];
     Stage& reply_stage = stages[7];
     Stage& pose_stage = stages[8];
-    pose_stage.name = "pose: report, hub, POSE line";
+    pose_stage.name = "pose: report, hub, POSE line, POSE log line";
     table_stage.name = "object table: collect, hub, OBJECT lines";
     reply_stage.name = "OBJECTS reply (socket thread)";
     track.name = "MonoTracker::processFrame";
@@ -312,10 +318,24 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
         if (pose_limiter.admit(pose.epoch, pose.t_ns)) {
             daemon::appendPose(pose_line, pose, scale_report);
         }
+        // Tracking thread: the field log's POSE line (LogEvents::onPose).
+        bool log_pose = false;
+        if (log_pose_limiter.admit(pose.epoch, pose.t_ns)) {
+            daemon::formatEvent(daemon::PoseEvent{.pose = &pose,
+                                                  .metric = daemon::metricPose(pose, scale_report),
+                                                  .state = scale_report.state},
+                                log_line);
+            log_pose = true;
+        }
         if (counting) {
             pose_stage.add(c0, frame.id);
             ++rec.pose_lines;
             rec.metric_pose_lines += pose_line.find("\"position\":[") != std::string::npos ? 1 : 0;
+            if (log_pose) {
+                ++rec.pose_log_lines;
+                rec.metric_pose_log_lines +=
+                    log_line.find("\"position\":[") != std::string::npos ? 1 : 0;
+            }
         }
 
         if (frames_in_map <= 1 || (frames_in_map - 1) % every != 0) {
@@ -420,14 +440,15 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
         "  scale: %d updates, %lld observations; MAP %.4f -> %.4f, observations %d -> %d, "
         "max |change| of log p %.3g\n"
         "  objects: up to %zu in the table, %d used at the end, %d OBJECT lines, replies up to "
-        "%zu bytes\n  poses: %d POSE lines, %d with a metric part\n%s",
+        "%zu bytes\n  poses: %d POSE lines, %d with a metric part; %d POSE log lines, %d "
+        "metric\n%s",
         core::toString(model), counted_frames, kWarmupFrames,
         test::mallocCountingEnabled() ? "yes" : "no (sanitizer)", matched, inliers, min_inliers,
         added, frames_adding, new_maps, updates, observations,
         static_cast<double>(before_summary.map), static_cast<double>(after_summary.map),
         before_summary.observations, after_summary.observations, log_p_change, rec.max_objects_seen,
         rec.objects_used, rec.object_lines, rec.objects_reply_bytes, rec.pose_lines,
-        rec.metric_pose_lines, table.c_str());
+        rec.metric_pose_lines, rec.pose_log_lines, rec.metric_pose_log_lines, table.c_str());
 
     rec.completed = true;
 }
@@ -470,6 +491,10 @@ TEST_F(SteadyStateAllocation, WorkWasReal) {
     // A POSE line per counted frame, in metres once the scale had evidence.
     EXPECT_EQ(r.pose_lines, kCountedFrames);
     EXPECT_GT(r.metric_pose_lines, 0);
+    // The field log's at 10 per second of the sim's 30 fps: one in three frames.
+    EXPECT_GE(r.pose_log_lines, kCountedFrames / 3 - 1);
+    EXPECT_LE(r.pose_log_lines, kCountedFrames / 3 + 2);
+    EXPECT_GT(r.metric_pose_log_lines, 0);
 }
 
 // The criterion: no operator new in the pipeline's own stages.

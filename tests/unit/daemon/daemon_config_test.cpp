@@ -43,6 +43,7 @@ TEST(DaemonConfig, Defaults) {
     EXPECT_EQ(c.socket.path, std::filesystem::path("/run/scaled/scaled.sock"));
     EXPECT_EQ(c.socket.mode, 0660U);
     EXPECT_DOUBLE_EQ(c.socket.pose_rate_hz, 30.0);
+    EXPECT_DOUBLE_EQ(c.log.pose_rate_hz, 10.0);
     EXPECT_EQ(c.log.dir, std::filesystem::path("/var/log/scaled"));
     EXPECT_EQ(c.pipeline.detector.model_path,
               std::filesystem::path("/usr/share/scaled/models/yolox_nano.onnx"));
@@ -120,6 +121,7 @@ TEST(DaemonConfig, KeysAreThePipelinesAndTheDaemons) {
                           "log.enabled",
                           "log.dir",
                           "log.frame_every",
+                          "log.pose_rate_hz",
                           "log.max_file_bytes",
                           "log.max_total_bytes",
                           "log.fsync_interval_ms",
@@ -170,6 +172,7 @@ pose_rate_hz = 12.5
 [log]
 enabled = false
 dir = ""
+pose_rate_hz = 0
 max_file_bytes = 4096
 max_total_bytes = 4096
 [pipeline]
@@ -193,6 +196,7 @@ period_s = 0.5
     EXPECT_DOUBLE_EQ(c.socket.pose_rate_hz, 12.5);
     EXPECT_FALSE(c.log.enabled);
     EXPECT_TRUE(c.log.dir.empty());
+    EXPECT_DOUBLE_EQ(c.log.pose_rate_hz, 0.0);
     EXPECT_EQ(c.log.max_total_bytes, 4096U);
     EXPECT_EQ(c.queues.capture_queue_frames, 2);
     EXPECT_DOUBLE_EQ(c.pipeline.detection.period_s, 0.5);
@@ -281,6 +285,10 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
          "2: socket.pose_rate_hz: must be a number in [0, 1000] (got -1)"},
         {"[socket]\npose_rate_hz = \"fast\"\n",
          "2: socket.pose_rate_hz: must be a number in [0, 1000] (got \"fast\")"},
+        {"[log]\npose_rate_hz = 1001\n",
+         "2: log.pose_rate_hz: must be a number in [0, 1000] (got 1001)"},
+        {"[log]\npose_rate_hz = nan\n",
+         "2: log.pose_rate_hz: must be a number in [0, 1000] (got nan)"},
         {"[source]\nspeed = 0\n", "2: source.speed: must be a number in (0, 1000] (got 0)"},
         {"[pipeline]\nstatus_interval_ms = 10\n",
          "2: pipeline.status_interval_ms: must be an integer in [100, 60000] (got 10)"},

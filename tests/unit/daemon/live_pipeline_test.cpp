@@ -112,6 +112,7 @@ public:
     void onDetection(const detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
                      double /*latency_ms*/) override {}
     void onScale(const Scale& /*scale*/) override {}
+    void onPose(const Pose& /*pose*/) override {}
     void onState(DaemonState /*from*/, DaemonState to, std::uint64_t /*epoch*/,
                  std::int64_t /*frame_id*/, const char* reason) override {
         const std::lock_guard lock(mutex_);

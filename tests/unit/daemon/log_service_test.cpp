@@ -18,6 +18,8 @@
 #include <gtest/gtest.h>
 
 #include <scaled/daemon/log_service.h>
+#include <scaled/daemon/pose.h>
+#include <scaled/daemon/protocol.h>
 #include <scaled/drivers/field_log.h>
 
 #include "log_events.h"
@@ -459,6 +461,135 @@ TEST(LogService, ScaleUpdatesLogTheObjectsTheyViewed) {
     EXPECT_EQ(lines[2]["id"], 7);
     EXPECT_EQ(lines[3]["class"], "SCALE");
     EXPECT_EQ(lines[3]["frame_id"], 460);
+}
+
+PoseReport poseAt(std::uint64_t epoch, std::int64_t frame_id, std::int64_t t_ns) {
+    PoseReport p;
+    p.epoch = epoch;
+    p.frame_id = frame_id;
+    p.t_ns = t_ns;
+    p.position_map = {1.25, -0.4, 0.3125};
+    p.velocity_map = {0.2, 0.05, 0};
+    p.orientation_wxyz = {0.5, -0.5, 0.5, -0.5};
+    p.position_cov_map = {4e-4, 1e-5, 0, 1e-5, 3e-4, 0, 0, 0, 2e-4};
+    p.attitude_cov_rad2 = {2.5e-5, 0, 0, 0, 2.5e-5, 0, 0, 0, 1.2e-4};
+    return p;
+}
+
+// A POSE line holds the members of the socket's POSE (but "time"), the
+// metric ones at the scale given and null before the epoch has one.
+TEST(LogService, PoseLinesHaveTheMembersOfTheSocketsPose) {
+    const PoseReport pose = poseAt(2, 512, 17'066'666'667);
+    ScaleReport scale;
+    scale.epoch = 2;
+    scale.has_scale = true;
+    scale.scale = 0.976341234;
+    scale.ci68_lo = 0.95;
+    scale.ci68_hi = 1.01;
+    scale.state = DaemonState::kConverging;
+    std::string out;
+    formatEvent(
+        PoseEvent{
+            .pose = &pose, .metric = metricPose(pose, scale), .state = scale.state, .mono_ns = 99},
+        out);
+    EXPECT_EQ(out.find('\n'), std::string::npos);
+    json j = parse(out);
+    EXPECT_EQ(j["class"], "POSE");
+    EXPECT_EQ(j["mono_ns"], 99);
+    EXPECT_EQ(j["frame_id"], 512);
+    EXPECT_EQ(j["t_ns"], 17'066'666'667);
+    EXPECT_EQ(j["epoch"], 2);
+    EXPECT_EQ(j["state"], "converging");
+    EXPECT_DOUBLE_EQ(j["scale"].get<double>(), 0.976341234);  // 9 digits
+    EXPECT_DOUBLE_EQ(j["scale_sigma"].get<double>(), 0.03);
+    ASSERT_TRUE(j["position"].is_array());
+    for (std::size_t k = 0; k < 3; ++k) {
+        EXPECT_NEAR(j["position"][k].get<double>(), 0.976341234 * pose.position_map.at(k), 1e-6)
+            << k;
+        EXPECT_EQ(j["position_map"][k].get<double>(), pose.position_map.at(k)) << k;
+    }
+    EXPECT_EQ(j["orientation"], json::parse("[0.5,-0.5,0.5,-0.5]"));
+    // The socket's POSE of the same pose and scale: the same members.
+    std::string socket;
+    appendPose(socket, pose, scale);
+    json expected = parse(socket);
+    expected.erase("time");
+    expected["class"] = "POSE";
+    json got = j;
+    got.erase("mono_ns");
+    got["scale"] = expected["scale"];  // the log writes 9 digits, the socket all 17
+    EXPECT_EQ(got, expected);
+
+    // Before the epoch's first scale (a scale of the previous epoch): no metric part.
+    scale.epoch = 1;
+    scale.state = DaemonState::kTracking;
+    formatEvent(PoseEvent{.pose = &pose, .metric = metricPose(pose, scale), .state = scale.state},
+                out);
+    j = parse(out);
+    EXPECT_EQ(j["state"], "tracking");
+    for (const char* k : {"scale", "scale_sigma", "position", "velocity", "position_cov"}) {
+        EXPECT_TRUE(j[k].is_null()) << k;
+    }
+    for (const char* k :
+         {"orientation", "attitude_cov", "position_map", "velocity_map", "position_map_cov"}) {
+        EXPECT_TRUE(j[k].is_array()) << k;
+    }
+}
+
+// LogEvents thins the poses of every tracked frame to log.pose_rate_hz per
+// second of frame time (the socket's PoseRateLimiter), starts again with a
+// new epoch, and writes none with pose_rate_hz = 0.
+TEST(LogService, PoseLinesAreThinnedToTheRateOfFrameTime) {
+    const auto run = [](double rate_hz, std::vector<json>& poses) {
+        TempDir dir("log");
+        ReportHub hub(16);
+        LogConfig config = configIn(dir.path());
+        config.pose_rate_hz = rate_hz;
+        config.queue_bytes = 1u << 20;  // room for 250 lines without a drain
+        auto log = make(config, hub);
+        ASSERT_TRUE(log);
+        LogEvents events(*log);
+        // 2 s of frames at 100 Hz in epoch 1, then 0.5 s in epoch 2.
+        for (int i = 0; i < 250; ++i) {
+            const std::uint64_t epoch = i < 200 ? 1 : 2;
+            const PoseReport pose = poseAt(epoch, i, std::int64_t{i} * 10'000'000);
+            PipelineEvents::Pose e;
+            e.pose = &pose;
+            e.state = DaemonState::kTracking;
+            events.onPose(e);
+        }
+        ASSERT_TRUE(log->flush());
+        for (const auto& l : readAll(dir.path()).lines) {
+            const json j = parse(l.text);
+            EXPECT_EQ(j["class"], "POSE");
+            poses.push_back(j);
+        }
+    };
+    std::vector<json> poses;
+    run(10, poses);
+    // Slots of 100 ms centred on the epoch's first pose: 0, 50, 150, ...,
+    // 1950 ms (21 lines), then 2000, 2050, ..., 2450 ms (6).
+    ASSERT_EQ(poses.size(), 27U);
+    std::vector<std::int64_t> t_ms;
+    for (const json& j : poses) {
+        t_ms.push_back(j["t_ns"].get<std::int64_t>() / 1'000'000);
+    }
+    EXPECT_EQ(t_ms[0], 0);
+    EXPECT_EQ(t_ms[1], 50);
+    EXPECT_EQ(t_ms[2], 150);
+    EXPECT_EQ(t_ms[20], 1950);
+    EXPECT_EQ(t_ms[21], 2000);
+    EXPECT_EQ(poses[21]["epoch"], 2);
+    EXPECT_EQ(t_ms[22], 2050);
+    EXPECT_EQ(t_ms[26], 2450);
+    EXPECT_TRUE(poses[0]["position"].is_null());  // no metric part without a scale
+
+    std::vector<json> none;
+    run(0, none);
+    EXPECT_TRUE(none.empty());
+    std::vector<json> all;
+    run(1000, all);  // faster than the frames: every pose
+    EXPECT_EQ(all.size(), 250U);
 }
 
 TEST(LogService, TextIsEscapedIntoValidJson) {

@@ -52,7 +52,20 @@ public:
         const std::lock_guard lock(mutex_);
         errors_.push_back(std::string(where) + ": " + message);
     }
+    void onPose(const Pose& p) override {
+        const std::lock_guard lock(mutex_);
+        poses_.push_back({*p.pose, p.metric, p.state});
+    }
 
+    struct PoseCall {
+        PoseReport pose;
+        MetricPose metric;
+        DaemonState state;
+    };
+    std::vector<PoseCall> poses() const {
+        const std::lock_guard lock(mutex_);
+        return poses_;
+    }
     struct StateChange {
         DaemonState from;
         DaemonState to;
@@ -83,6 +96,7 @@ private:
     std::vector<StateChange> states_;
     std::vector<std::string> errors_;
     std::vector<std::vector<ObjectReport>> objects_;
+    std::vector<PoseCall> poses_;
 };
 
 // A detector that runs the sim detector only when the test lets it: it
@@ -223,6 +237,32 @@ TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
     EXPECT_EQ(states[0].epoch, 1U);
     EXPECT_EQ(states[1].to, DaemonState::kConverging);
     EXPECT_TRUE(rec.errors().empty());
+
+    // onPose (the field log's POSE lines): every tracked frame once, in
+    // order, metric only at a scale the pipeline published for an earlier
+    // frame of the same epoch.
+    const auto poses = rec.poses();
+    ASSERT_EQ(poses.size(), 450U);
+    int metric = 0;
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        const auto& call = poses[i];
+        EXPECT_EQ(call.pose.frame_id, static_cast<std::int64_t>(i));
+        EXPECT_EQ(call.pose.epoch, 1U);
+        if (!call.metric.has_scale) {
+            continue;
+        }
+        ++metric;
+        const auto it = std::find_if(scales.begin(), scales.end(), [&](const ScaleReport& r) {
+            return r.has_scale && r.scale == call.metric.scale;
+        });
+        ASSERT_NE(it, scales.end()) << "frame " << call.pose.frame_id;
+        EXPECT_LT(it->frame_id, call.pose.frame_id);
+        EXPECT_NE(call.state, DaemonState::kTracking) << "a scale while the state says none";
+        EXPECT_DOUBLE_EQ(call.metric.position_m[0], call.metric.scale * call.pose.position_map[0]);
+    }
+    EXPECT_GT(metric, 10);
+    EXPECT_FALSE(poses.front().metric.has_scale);
+    EXPECT_TRUE(poses.back().metric.has_scale);
 }
 
 // POSE on the sim: the poses the tracking thread publishes, in metres at the

@@ -93,8 +93,10 @@ struct SocketConfig {
 struct LogConfig {
     bool enabled = true;
     std::filesystem::path dir = "/var/log/scaled";
-    int frame_every = 30;                     // per-frame summary every N tracked frames (0: none)
-    std::uint64_t max_file_bytes = 8u << 20;  // rotate after this size
+    int frame_every = 30;  // per-frame summary every N tracked frames (0: none)
+    // POSE lines per second of frame time (PoseRateLimiter; 0: none).
+    double pose_rate_hz = 10;
+    std::uint64_t max_file_bytes = 8u << 20;    // rotate after this size
     std::uint64_t max_total_bytes = 64u << 20;  // delete the oldest files above this total
     int fsync_interval_ms = 1000;               // flush + fsync at most this often
     std::size_t queue_bytes = 1u << 20;         // in-memory queue; full: lines dropped and counted

@@ -31,6 +31,7 @@
 
 #include <scaled/core/result.h>
 #include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
 
 namespace scaled::drivers {
@@ -148,6 +149,19 @@ struct ObjectEvent {
     std::int64_t mono_ns = 0;
 };
 
+// POSE {frame_id, t_ns, epoch, state, scale|null, scale_sigma|null,
+// position|null, velocity|null, position_cov|null, orientation,
+// attitude_cov, position_map, velocity_map, position_map_cov}: the members
+// of the socket's POSE (protocol.h appendPoseMembers; no "time") of a
+// tracked frame, numbers with 7 significant digits, the scale with 9.
+// LogEvents writes them at most log.pose_rate_hz per second of frame time.
+struct PoseEvent {
+    const PoseReport* pose = nullptr;                // required
+    MetricPose metric;                               // metricPose(*pose, the latest scale report)
+    DaemonState state = DaemonState::kInitialising;  // that report's
+    std::int64_t mono_ns = 0;
+};
+
 // STATE {from, to, epoch, frame_id, reason}
 struct StateEvent {
     DaemonState from = DaemonState::kInitialising;
@@ -174,6 +188,7 @@ void formatEvent(const FrameEvent& event, std::string& out);
 void formatEvent(const DetectionEvent& event, std::string& out);
 void formatEvent(const ScaleEvent& event, std::string& out);
 void formatEvent(const ObjectEvent& event, std::string& out);
+void formatEvent(const PoseEvent& event, std::string& out);
 void formatEvent(const StateEvent& event, std::string& out);
 void formatEvent(const ErrorEvent& event, std::string& out);
 
@@ -220,6 +235,7 @@ public:
     [[nodiscard]] LogStatus status() const;
     [[nodiscard]] bool enabled() const { return config_.enabled; }
     [[nodiscard]] int frameEvery() const { return config_.frame_every; }
+    [[nodiscard]] double poseRateHz() const { return config_.pose_rate_hz; }
 
     // Format into a per-thread buffer and append(); the result of append().
     bool startEvent(const StartEvent& event);
@@ -228,6 +244,7 @@ public:
     bool detectionEvent(const DetectionEvent& event);
     bool scaleEvent(const ScaleEvent& event);
     bool objectEvent(const ObjectEvent& event);
+    bool poseEvent(const PoseEvent& event);
     bool stateEvent(const StateEvent& event);
     bool errorEvent(const ErrorEvent& event);
 

@@ -43,6 +43,7 @@
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/slam/slam_snapshot.h>
 #include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
 #include <scaled/detector/object_detector.h>
 #include <scaled/drivers/camera.h>
@@ -92,9 +93,19 @@ public:
         // frame_id received a view in this update.
         std::span<const ObjectReport> objects;
     };
+    // The pose of a tracked frame (the one published to the hub) with its
+    // metric part at the scale the daemon serves at that moment.
+    struct Pose {
+        const PoseReport* pose = nullptr;
+        MetricPose metric;  // metricPose(*pose, the latest scale report)
+        DaemonState state = DaemonState::kInitialising;  // that report's
+    };
 
     // Every LogConfig::frame_every tracked frames.
     virtual void onFrame(const Frame& frame) = 0;
+    // Every tracked frame, on the tracking thread (the receiver thins them:
+    // LogEvents to LogConfig::pose_rate_hz). Must not block or allocate.
+    virtual void onPose(const Pose& pose) = 0;
     virtual void onDetection(const detector::DetectionResult& result, std::uint64_t epoch,
                              double latency_ms) = 0;
     virtual void onScale(const Scale& scale) = 0;

@@ -54,4 +54,28 @@ struct MetricPose {
 // there is none for the pose's epoch).
 MetricPose metricPose(const PoseReport& pose, const ScaleReport& scale);
 
+// Thins a stream of poses (the socket's POSE lines, socket.pose_rate_hz; the
+// field log's, log.pose_rate_hz) to `rate_hz` per second of frame time (the frames'
+// t_ns, not the wall clock). Frame time is cut into slots of one period
+// centred on the instants origin + k / rate_hz, the origin being the first
+// pose's t_ns; the first pose of each slot is admitted, the others in it are
+// not. So frames at the rate itself all pass while their timing error
+// (against the first pose's) stays below half a period, and over any T seconds of frames at most
+// rate_hz * T + 2 poses are admitted. The first pose, the first of a new epoch and one whose t_ns
+// went back (a replay restarted) are admitted and set a new origin.
+// rate_hz <= 0 admits every pose.
+class PoseRateLimiter {
+public:
+    explicit PoseRateLimiter(double rate_hz);
+    bool admit(std::uint64_t epoch, std::int64_t t_ns);
+
+private:
+    std::int64_t period_ns_ = 0;
+    bool started_ = false;
+    std::uint64_t epoch_ = 0;
+    std::int64_t origin_ns_ = 0;
+    std::int64_t last_t_ns_ = 0;
+    std::int64_t last_slot_ = 0;
+};
+
 }  // namespace scaled::daemon

@@ -14,6 +14,7 @@
 #include <string_view>
 
 #include <scaled/daemon/json_write.h>
+#include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
 
 namespace scaled::daemon {
@@ -54,6 +55,14 @@ void appendObjectMembers(std::string& out, const ObjectReport& object, std::stri
 // null; `state` is the scale report's. Numbers with 7 significant digits.
 // Before the first pose (frame_id -1) every pose member is null.
 void appendPose(std::string& out, const PoseReport& pose, const ScaleReport& scale);
+// The members of a POSE from "state" to "position_map_cov", each after a
+// comma, without braces: the socket's POSE (appendPose) and the field log's
+// POSE lines. `metric` is metricPose(pose, the scale report), `state` that
+// report's. Numbers with `digits` significant digits, the scale with
+// `scale_digits` (0: the shortest that reads back exactly). Pose members are
+// null when pose.frame_id < 0, metric ones without metric.has_scale.
+void appendPoseMembers(std::string& out, const PoseReport& pose, const MetricPose& metric,
+                       DaemonState state, int digits, int scale_digits);
 // {"class":"WATCH","enable":true,"pose":false}
 void appendWatch(std::string& out, bool enable, bool pose);
 void appendAck(std::string& out, std::string_view cmd);
