@@ -571,6 +571,7 @@ TEST(LogService, PoseLinesAreThinnedToTheRateOfFrameTime) {
     // 1950 ms (21 lines), then 2000, 2050, ..., 2450 ms (6).
     ASSERT_EQ(poses.size(), 27U);
     std::vector<std::int64_t> t_ms;
+    t_ms.reserve(poses.size());
     for (const json& j : poses) {
         t_ms.push_back(j["t_ns"].get<std::int64_t>() / 1'000'000);
     }
