@@ -10,8 +10,10 @@ likelihoods.csv and (if present) summary.json from OUT_DIR and writes
 fig_a_likelihoods.png, fig_b_posterior.png, fig_c_estimates.png and
 fig_d_rel_error.png into OUT_DIR (and fig_e_objects.png, each object's own
 estimate over time, when objects.csv is there; fig_f_map_scale.png, the
-map's ground-truth scale so far and over the sliding window), printing one
-line per written file.
+map's ground-truth scale so far and over the sliding window;
+fig_g_trajectory.png, the metric camera path from above and its height over
+time, when poses.csv is there: field-log's POSE lines), printing one line per
+written file.
 With --no-curves (field-log output: no posterior curves are logged)
 posterior.csv and likelihoods.csv are not read and only figures (c) and (d)
 are drawn.
@@ -55,6 +57,8 @@ OBS_COLS = ("update,frame,observation,class,score,D,sigma_D,local_estimate,"
             "weight").split(",")
 # objects.csv (model object; optional): the columns figure (e) needs.
 OBJ_COLS = "frame,id,class,state,local_estimate".split(",")
+# poses.csv (field-log; optional): the columns figure (g) needs.
+POSES_COLS = "t_s,epoch,x_m,y_m,z_m,run".split(",")
 TEXT_COLS = {"state", "class"}
 PAPER_REL_ERROR_PCT = 2.0
 
@@ -400,6 +404,51 @@ def fig_map_scale(ax, frames, summary):
     ax.legend(loc="lower right", fontsize=8)
 
 
+def fig_trajectory(out_path, poses, suffix):
+    """(g) The metric camera path in each map's gravity-aligned frame G
+    (x forward at the start, y left, z up; metres at the scale served when
+    the pose was logged): from above (x-y) and its height z over time. Each
+    (run, epoch) is its own frame G: drawn apart, never joined."""
+    fig, (top, side) = plt.subplots(1, 2, figsize=(12, 5), dpi=120,
+                                    gridspec_kw={"width_ratios": [1, 1.4]})
+    ok = np.isfinite(poses["x_m"]) & np.isfinite(poses["y_m"])
+    pairs = list(zip(np.nan_to_num(poses["run"], nan=0).astype(int),
+                     np.nan_to_num(poses["epoch"], nan=-1).astype(int)))
+    groups = list(dict.fromkeys(p for p, m in zip(pairs, ok) if m))
+    several_runs = len({r for r, _ in groups}) > 1
+    cmap = plt.get_cmap("tab10")
+    for i, (r, e) in enumerate(groups):
+        sel = ok & np.array([p == (r, e) for p in pairs], dtype=bool)
+        label = f"run {r} epoch {e}" if several_runs else f"epoch {e}"
+        c = cmap(i % 10)
+        x, y = poses["x_m"][sel], poses["y_m"][sel]
+        top.plot(x, y, "-", color=c, lw=1.2, label=label)
+        top.plot(x[:1], y[:1], "o", color=c, ms=5)
+        top.plot(x[-1:], y[-1:], "s", color=c, ms=5)
+        side.plot(poses["t_s"][sel], poses["z_m"][sel], "-", color=c, lw=1.2,
+                  label=label, marker="o" if sel.sum() == 1 else None, ms=4)
+    top.set_xlabel("x (m, forward at the start)")
+    top.set_ylabel("y (m, left)")
+    top.set_aspect("equal", adjustable="datalim")
+    side.set_xlabel("time (s, source clock)")
+    side.set_ylabel("height z (m, up)")
+    if not groups:
+        note(top, "no metric pose")
+        note(side, "no metric pose")
+    else:
+        top.legend(loc="best", fontsize=8, title="o start, \u25a0 end",
+                   title_fontsize=8)
+        side.legend(loc="best", fontsize=8)
+    for ax in (top, side):
+        ax.grid(True, which="major", alpha=0.3)
+    top.set_title("(g) Metric trajectory, from above" + suffix, fontsize=10)
+    side.set_title("(g) Height over time", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out_path, dpi=120)
+    plt.close(fig)
+    print(out_path)
+
+
 def run(out_dir, extra_title, curves=True):
     warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows etc.
     if not os.path.isdir(out_dir):
@@ -448,6 +497,9 @@ def run(out_dir, extra_title, curves=True):
         fig.savefig(path(name), dpi=120)
         plt.close(fig)
         print(path(name))
+    if os.path.isfile(path("poses.csv")):
+        fig_trajectory(path("fig_g_trajectory.png"),
+                       read_table(path("poses.csv"), POSES_COLS), suffix)
     return 0
 
 

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # field-log end to end: usage errors, a small hand-written log with a corrupt
 # line and a partial last line (a crash), the CSV files in scale-eval's shape,
-# objects.csv from OBJECT lines and, with matplotlib, the figures.
+# objects.csv from OBJECT lines, poses.csv and the metric trajectories (TUM)
+# from POSE lines (a malformed one named) and, with matplotlib, the figures.
 #   tests/cli/field_log_cli.sh PATH/TO/field-log
 set -euo pipefail
 fl=$1
@@ -40,6 +41,10 @@ cat > "$f1" <<'EOF'
 {"class":"OBJECT","mono_ns":1400000200,"frame_id":5,"t_ns":166666666,"epoch":0,"id":2,"object_class":"dining table, \"big\"","state":"tentative","anchor":null,"anchor_rel_sigma":null,"detections":1,"views":1,"views_used":0,"first_frame":5,"last_frame":5,"local_estimate":null,"height_m":null,"height_ci95_m":null}
 this line is not JSON
 {"class":"FRAME","mono_ns":1500000000,"frame_id":30,"t_ns":1000000000,"epoch":0,"health":"ok","features":35,"tracked":22,"ms":3.1,"dropped":0}
+{"class":"POSE","mono_ns":1500000100,"frame_id":3,"t_ns":100000000,"epoch":0,"state":"tracking","scale":null,"scale_sigma":null,"position":null,"velocity":null,"position_cov":null,"orientation":[1,0,0,0],"position_map":[0.1,0,0],"attitude_cov":[[1e-05,0,0],[0,1e-05,0],[0,0,1e-05]],"velocity_map":[0,0,0],"position_map_cov":[[1e-06,0,0],[0,1e-06,0],[0,0,1e-06]]}
+{"class":"POSE","mono_ns":1500000200,"frame_id":6,"t_ns":200000000,"epoch":0,"state":"converging","scale":1.2,"scale_sigma":0.1,"position":[0.24,0.12,-0.06],"velocity":[0,0,0],"position_cov":[[0.0004,0,0],[0,0.0009,0],[0,0,0.0016]],"orientation":[0.5,-0.5,0.5,-0.5],"position_map":[0.2,0.1,-0.05],"attitude_cov":[[1e-05,0,0],[0,1e-05,0],[0,0,1e-05]],"velocity_map":[0,0,0],"position_map_cov":[[1e-06,0,0],[0,1e-06,0],[0,0,1e-06]]}
+{"class":"POSE","mono_ns":1500000300,"frame_id":9,"t_ns":300000000,"epoch":0,"state":"converging","scale":1.2,"scale_sigma":0.1,"position":[0.36,0.12,-0.06],"velocity":[0,0,0],"position_cov":[[0.0004,0,0],[0,0.0009,0],[0,0,0.0016]],"orientation":[1,0,0,0],"position_map":[0.3,0.1,-0.05],"attitude_cov":[[1e-05,0,0],[0,1e-05,0],[0,0,1e-05]],"velocity_map":[0,0,0],"position_map_cov":[[1e-06,0,0],[0,1e-06,0],[0,0,1e-06]]}
+{"class":"POSE","mono_ns":1500000400,"frame_id":12,"t_ns":400000000,"epoch":0,"state":"converging","scale":1.2,"position":[0.36,0.12],"orientation":[1,0,0,0],"position_map":[0.3,0.1,-0.05]}
 {"class":"STOP","mono_ns":1600000000,"reason":"SIGTERM"}
 EOF
 cat > "$f2" <<'EOF'
@@ -49,6 +54,7 @@ cat > "$f2" <<'EOF'
 {"class":"OBJECT","mono_ns":5200000100,"frame_id":45,"t_ns":1500000000,"epoch":0,"id":1,"object_class":"chair","state":"anchored","anchor":[1,2,3],"anchor_rel_sigma":0.3,"detections":2,"views":2,"views_used":0,"first_frame":30,"last_frame":45,"local_estimate":null,"height_m":null,"height_ci95_m":null}
 {"class":"OBJECT","mono_ns":5200000200,"frame_id":46,"t_ns":1533333333,"epoch":0,"id":2,"object_class":"cup","state":"tentative","anchor":null,"anchor_rel_sigma":null,"detections":1,"views":1,"views_used":0,"first_frame":46,"last_frame":46,"local_estimate":null,"height_m":null,"height_ci95_m":null}
 {"class":"ERROR","mono_ns":5300000000,"where":"detector","message":"slow"}
+{"class":"POSE","mono_ns":5300000100,"frame_id":50,"t_ns":1666666667,"epoch":0,"state":"converged","scale":1.21,"scale_sigma":0.03,"position":[1,2,0.5],"velocity":[0,0,0],"position_cov":[[0.0004,0,0],[0,0.0009,0],[0,0,0.0016]],"orientation":[1,0,0,0],"position_map":[0.8264463,1.652893,0.4132231],"attitude_cov":[[1e-05,0,0],[0,1e-05,0],[0,0,1e-05]],"velocity_map":[0,0,0],"position_map_cov":[[1e-06,0,0],[0,1e-06,0],[0,0,1e-06]]}
 {"class":"FRAME","mono_ns":5400000000,"frame_id":60,"t_ns":2000000000,"epoch":0,"health":"lost","features":35,"tracked":0,"ms":3.1,"dropped":1}
 EOF
 printf '{"class":"SCALE","mono_ns":55000' >> "$f2"
@@ -56,7 +62,9 @@ printf '{"class":"SCALE","mono_ns":55000' >> "$f2"
 "$fl" "$tmp/log" --json --out "$tmp/out" --no-plots > "$tmp/s.json" 2> "$tmp/s.err" \
     || fail "field-log failed: $(cat "$tmp/s.err")"
 grep -q "$f1:8: not a JSON object" "$tmp/s.err" || fail "corrupt line not reported: $(cat "$tmp/s.err")"
-grep -q "$f2:8: last line has no newline" "$tmp/s.err" || fail "partial line not reported"
+grep -q "$f2:9: last line has no newline" "$tmp/s.err" || fail "partial line not reported"
+grep -q "$f1:13: POSE position is neither null nor \[x,y,z\] (skipped)" "$tmp/s.err" \
+    || fail "malformed POSE line not reported: $(cat "$tmp/s.err")"
 py=/usr/bin/python3
 [[ -x $py ]] || py=python3
 "$py" - "$tmp/s.json" "$tmp/out" <<'PY' || fail "summary or CSV check failed"
@@ -65,13 +73,18 @@ lines = open(sys.argv[1]).read().splitlines()
 assert len(lines) == 1, "stdout must be one JSON line"
 j = json.loads(lines[0])
 assert j == json.load(open(os.path.join(sys.argv[2], "summary.json"))), "summary.json differs"
-assert j["files"] == 2 and j["lines"] == 16, j
+assert j["files"] == 2 and j["lines"] == 21, j
 assert j["corrupt_lines"] == 1 and j["partial_lines"] == 1, j
 assert j["runs"] == 2 and j["stops"] == 1 and j["last_stop_reason"] == "SIGTERM", j
 assert j["epochs"] == 2 and j["updates"] == 3 and j["frames_logged"] == 3, j
 assert j["errors"] == 1 and j["last_error"] == "detector: slow", j
 assert j["classes"]["SCALE"] == 3 and j["boxes"] == 1, j
 assert j["classes"]["OBJECT"] == 4 and j["objects_logged"] == 4, j
+assert j["classes"]["POSE"] == 5 and j["poses_logged"] == 4 and j["metric_poses_logged"] == 3, j
+assert j["bad_fields"] == 1, j
+assert j["trajectory_metric"] == "trajectory_metric_run1_epoch0.tum", j
+assert [(t["file"], t["poses"]) for t in j["trajectories"]] == [
+    ("trajectory_metric_run1_epoch0.tum", 2), ("trajectory_metric_run2_epoch0.tum", 1)], j
 assert abs(j["time_span_s"] - 0.6 - 0.4) < 1e-9, j["time_span_s"]
 ls = j["last_scale"]
 assert ls["scale"] == 1.21 and ls["ci95"] == [1.15, 1.27] and ls["state"] == "converged", ls
@@ -102,6 +115,25 @@ assert ob[0]["anchor_rel_sigma"] == "0.04" and ob[0]["t_s"] == "0.166666666", ob
 assert ob[1]["class"] == 'dining table, "big"' and ob[1]["state"] == "tentative", ob[1]
 assert ob[1]["anchor_x"] == "" and ob[1]["height_m"] == "" and ob[1]["local_estimate"] == "", ob[1]
 assert ob[2]["state"] == "anchored" and ob[2]["anchor_z"] == "3" and ob[2]["epoch"] == "0", ob[2]
+p = rows("poses.csv")
+assert [(x["frame"], x["epoch"], x["run"]) for x in p] == [
+    ("3", "0", "1"), ("6", "0", "1"), ("9", "0", "1"), ("50", "0", "2")], p
+assert p[0]["x_m"] == "" and p[0]["sigma_x_m"] == "" and p[0]["scale"] == "", p[0]
+assert p[0]["x_map"] == "0.1" and p[0]["state"] == "tracking", p[0]
+assert (p[1]["t_s"], p[1]["x_m"], p[1]["y_m"], p[1]["z_m"]) == ("0.2", "0.24", "0.12", "-0.06"), p[1]
+assert (p[1]["sigma_x_m"], p[1]["sigma_y_m"], p[1]["sigma_z_m"]) == ("0.02", "0.03", "0.04"), p[1]
+assert p[1]["scale"] == "1.2" and p[3]["scale"] == "1.21", p
+def tum(name):
+    with open(os.path.join(sys.argv[2], name)) as f:
+        return [l.split() for l in f if not l.startswith("#")]
+t1 = tum("trajectory_metric_run1_epoch0.tum")
+assert t1 == [["0.200000", "0.240000000", "0.120000000", "-0.060000000",
+               "-0.500000000", "0.500000000", "-0.500000000", "0.500000000"],
+              ["0.300000", "0.360000000", "0.120000000", "-0.060000000",
+               "0.000000000", "0.000000000", "0.000000000", "1.000000000"]], t1
+assert tum("trajectory_metric.tum") == t1
+assert tum("trajectory_metric_run2_epoch0.tum")[0][:4] == [
+    "1.666667", "1.000000000", "2.000000000", "0.500000000"]
 for c in ("frame", "t_s", "tracked", "epoch", "features_measured", "scale_est", "ci95_lo",
           "ci95_hi", "state", "scale_true", "rel_error", "baseline_single_rel_error"):
     assert c in fr[0], c
@@ -109,13 +141,14 @@ PY
 
 # Text summary on stdout without --json.
 "$fl" "$f1" 2>/dev/null | grep -q "last scale 1.2 m/unit" || fail "text summary"
-"$fl" "$f1" 2>/dev/null | grep -q "2 scale updates, 2 object lines, 0 errors" || fail "text: objects"
+"$fl" "$f1" 2>/dev/null | grep -q "2 scale updates, 2 object lines, 3 pose lines (2 metric), 0 errors" \
+    || fail "text: objects and poses"
 
 # The figures (figures (c) and (d): a field log has no posterior curves).
 if "$py" -c 'import matplotlib, numpy' 2>/dev/null; then
     SCALED_PYTHON=$py "$fl" "$tmp/log" --out "$tmp/fig" > /dev/null 2> "$tmp/fig.err" \
         || fail "field-log with figures failed: $(cat "$tmp/fig.err")"
-    for f in fig_c_estimates.png fig_d_rel_error.png; do
+    for f in fig_c_estimates.png fig_d_rel_error.png fig_g_trajectory.png; do
         [[ -s "$tmp/fig/$f" ]] || fail "$f not written"
     done
 else

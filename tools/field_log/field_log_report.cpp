@@ -5,12 +5,17 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <utility>
+
+#include <Eigen/Geometry>
+
+#include <scaled/drivers/trajectory_io.h>
 
 #include "files.h"
 #include "json.h"
@@ -40,6 +45,9 @@ const char* const kObjectsHeader =
     "update,frame,t_s,epoch,id,class,state,detections,views,views_used,first_frame,last_frame,"
     "local_estimate,height_m,height_ci95_lo_m,height_ci95_hi_m,anchor_x,anchor_y,anchor_z,"
     "anchor_rel_sigma,run";
+const char* const kPosesHeader =
+    "t_s,frame,epoch,x_m,y_m,z_m,sigma_x_m,sigma_y_m,sigma_z_m,scale,state,x_map,y_map,z_map,run";
+const char* const kMainTrajectory = "trajectory_metric.tum";
 
 std::optional<double> number(const json& j, const char* key) {
     const auto it = j.find(key);
@@ -72,6 +80,54 @@ bool interval(const json& j, const char* key, double& lo, double& hi) {
     lo = (*it)[0].get<double>();
     hi = (*it)[1].get<double>();
     return true;
+}
+
+// An array member of N numbers: absent (missing or null), ok, or malformed.
+enum class Member : std::uint8_t { kAbsent, kOk, kMalformed };
+
+// A JSON value that is null (absent), an array of N numbers, or something else.
+template <std::size_t N>
+Member numbersOf(const json& v, std::array<double, N>& out) {
+    if (v.is_null()) {
+        return Member::kAbsent;
+    }
+    if (!v.is_array() || v.size() != N) {
+        return Member::kMalformed;
+    }
+    for (std::size_t k = 0; k < N; ++k) {
+        if (!v[k].is_number()) {
+            return Member::kMalformed;
+        }
+        out.at(k) = v[k].get<double>();
+    }
+    return Member::kOk;
+}
+
+template <std::size_t N>
+Member numbers(const json& j, const char* key, std::array<double, N>& out) {
+    const auto it = j.find(key);
+    return it == j.end() ? Member::kAbsent : numbersOf(*it, out);
+}
+
+// A 3x3 matrix member (rows), row-major into `out`.
+Member matrix3(const json& j, const char* key, std::array<double, 9>& out) {
+    const auto it = j.find(key);
+    if (it == j.end() || it->is_null()) {
+        return Member::kAbsent;
+    }
+    if (!it->is_array() || it->size() != 3) {
+        return Member::kMalformed;
+    }
+    for (std::size_t r = 0; r < 3; ++r) {
+        std::array<double, 3> row{};
+        if (numbersOf((*it)[r], row) != Member::kOk) {
+            return Member::kMalformed;
+        }
+        for (std::size_t c = 0; c < 3; ++c) {
+            out.at(3 * r + c) = row.at(c);
+        }
+    }
+    return Member::kOk;
 }
 
 std::string field(std::optional<double> v, int digits = 7) {
@@ -164,12 +220,27 @@ public:
             scale(j, where);
         } else if (cls == "OBJECT") {
             object(j, where);
+        } else if (cls == "POSE") {
+            pose(j, where);
         }
     }
 
     void finish() {
         endRun();
         a_.epochs = epochs_.size();
+        auto& ts = a_.trajectories;
+        const bool several_runs = std::any_of(
+            ts.begin(), ts.end(), [&](const auto& t) { return t.run != ts.front().run; });
+        for (auto& t : ts) {
+            t.file = "trajectory_metric_" +
+                     (several_runs ? "run" + std::to_string(t.run) + "_" : std::string()) +
+                     "epoch" + std::to_string(t.epoch) + ".tum";
+        }
+        for (std::size_t i = 0; i < ts.size(); ++i) {
+            if (!a_.main_trajectory || ts[i].poses.size() >= ts[*a_.main_trajectory].poses.size()) {
+                a_.main_trajectory = i;
+            }
+        }
     }
 
     [[nodiscard]] double spanSeconds() const { return span_ns_ * 1e-9; }
@@ -332,6 +403,92 @@ private:
             std::to_string(run_));
     }
 
+    // POSE: one row of poses.csv and, with a metric position, a pose of its
+    // (run, epoch)'s trajectory. A line without the members every POSE has
+    // (frame_id, epoch, t_ns, orientation, position_map) or with a member
+    // of the wrong shape is skipped and named.
+    void pose(const json& j, const std::string& where) {
+        const auto frame_id = integer(j, "frame_id");
+        const auto ep = integer(j, "epoch");
+        const auto t_ns = integer(j, "t_ns");
+        std::array<double, 4> q{};
+        std::array<double, 3> map{};
+        std::array<double, 3> pos{};
+        std::array<double, 9> cov{};
+        std::string bad;
+        Member position = Member::kAbsent;
+        Member covariance = Member::kAbsent;
+        if (!frame_id || !ep || !t_ns) {
+            bad = "without frame_id, epoch or t_ns";
+        } else if (numbers(j, "orientation", q) != Member::kOk) {
+            bad = "orientation is not [w,x,y,z]";
+        } else if (numbers(j, "position_map", map) != Member::kOk) {
+            bad = "position_map is not [x,y,z]";
+        } else if (position = numbers(j, "position", pos); position == Member::kMalformed) {
+            bad = "position is neither null nor [x,y,z]";
+        } else if (covariance = matrix3(j, "position_cov", cov); covariance == Member::kMalformed) {
+            bad = "position_cov is neither null nor a 3x3 matrix";
+        }
+        const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        if (bad.empty() && !(std::abs(qn - 1) <= 1e-3)) {
+            bad = "orientation is not a unit quaternion (norm " + jsonNumber(qn, 6) + ")";
+        }
+        if (!bad.empty()) {
+            ++a_.bad_fields;
+            problem(where + ": POSE " + bad + " (skipped)");
+            return;
+        }
+        epoch(ep);
+        const bool metric = position == Member::kOk;
+        const auto opt = [](bool has, double v) {
+            return has && std::isfinite(v) ? std::optional<double>(v) : std::nullopt;
+        };
+        const bool sig = metric && covariance == Member::kOk;
+        std::string row =
+            tSeconds(t_ns) + "," + std::to_string(*frame_id) + "," + std::to_string(*ep);
+        for (std::size_t k = 0; k < 3; ++k) {
+            row += "," + field(opt(metric, pos.at(k)));
+        }
+        for (std::size_t k = 0; k < 3; ++k) {
+            const double var = cov.at(4 * k);
+            row += "," + field(opt(sig && var >= 0, std::sqrt(std::max(var, 0.0))), 5);
+        }
+        row += "," + field(number(j, "scale"), 9) + "," + csvText(text(j, "state"));
+        for (std::size_t k = 0; k < 3; ++k) {
+            row += "," + field(map.at(k));
+        }
+        row += "," + std::to_string(run_);
+        a_.pose_rows.push_back(std::move(row));
+        if (!metric) {
+            return;
+        }
+        ++a_.metric_poses;
+        const auto key = std::make_pair(run_, *ep);
+        auto found = trajectory_index_.find(key);
+        if (found == trajectory_index_.end()) {
+            FieldLogAnalysis::Trajectory t;
+            t.run = run_;
+            t.epoch = *ep;
+            a_.trajectories.push_back(std::move(t));
+            found = trajectory_index_.emplace(key, a_.trajectories.size() - 1).first;
+        }
+        auto& t = a_.trajectories[found->second];
+        if (!t.t_ns.empty() && *t_ns < t.t_ns.back() + 1000) {
+            problem(where + ": POSE t_ns " + std::to_string(*t_ns) +
+                    " is not after the previous pose of run " + std::to_string(run_) + " epoch " +
+                    std::to_string(*ep) + " (left out of its trajectory)");
+            return;
+        }
+        core::CameraPose cp;
+        cp.R_CtoW = Eigen::Quaterniond(q[0], q[1], q[2], q[3])
+                        .normalized()
+                        .toRotationMatrix()
+                        .cast<core::Scalar>();
+        cp.p_CinW = Eigen::Vector3d(pos[0], pos[1], pos[2]).cast<core::Scalar>();
+        t.t_ns.push_back(*t_ns);
+        t.poses.push_back(cp);
+    }
+
     struct LastUpdate {
         std::size_t index = 0;  // row of updates.csv
         std::int64_t frame_id = -1;
@@ -344,6 +501,7 @@ private:
     std::optional<LastUpdate> last_update_;
     std::size_t run_ = 0;
     std::set<std::pair<std::size_t, std::int64_t>> epochs_;
+    std::map<std::pair<std::size_t, std::int64_t>, std::size_t> trajectory_index_;
     std::optional<std::int64_t> run_first_mono_;
     std::optional<std::int64_t> run_last_mono_;
     double span_ns_ = 0;
@@ -410,6 +568,24 @@ std::string toJson(const FieldLogAnalysis& a) {
     s += ",\"updates\":" + std::to_string(a.update_rows.size());
     s += ",\"observations_logged\":" + std::to_string(a.observation_rows.size());
     s += ",\"objects_logged\":" + std::to_string(a.object_rows.size());
+    s += ",\"poses_logged\":" + std::to_string(a.pose_rows.size());
+    s += ",\"metric_poses_logged\":" + std::to_string(a.metric_poses);
+    s += ",\"trajectories\":[";
+    for (std::size_t i = 0; i < a.trajectories.size(); ++i) {
+        const auto& t = a.trajectories[i];
+        double path_m = 0;
+        for (std::size_t k = 1; k < t.poses.size(); ++k) {
+            path_m += static_cast<double>((t.poses[k].p_CinW - t.poses[k - 1].p_CinW).norm());
+        }
+        s += (i == 0 ? "{\"file\":" : ",{\"file\":") + jsonString(t.file) +
+             ",\"run\":" + std::to_string(t.run) + ",\"epoch\":" + std::to_string(t.epoch) +
+             ",\"poses\":" + std::to_string(t.poses.size()) +
+             ",\"path_m\":" + jsonNumber(path_m, 6) + "}";
+    }
+    s += "]";
+    s += ",\"trajectory_metric\":" + (a.main_trajectory
+                                          ? jsonString(a.trajectories[*a.main_trajectory].file)
+                                          : std::string("null"));
     s += ",\"first_mono_ns\":" + (a.first_mono_ns ? std::to_string(*a.first_mono_ns) : "null");
     s += ",\"last_mono_ns\":" + (a.last_mono_ns ? std::to_string(*a.last_mono_ns) : "null");
     s += ",\"time_span_s\":" + jsonNumber(a.time_span_s, 6);
@@ -448,6 +624,9 @@ std::string toText(const FieldLogAnalysis& a) {
          " detector runs, " + std::to_string(a.update_rows.size()) + " scale updates, " +
          (a.object_rows.empty() ? std::string()
                                 : std::to_string(a.object_rows.size()) + " object lines, ") +
+         (a.pose_rows.empty() ? std::string()
+                              : std::to_string(a.pose_rows.size()) + " pose lines (" +
+                                    std::to_string(a.metric_poses) + " metric), ") +
          std::to_string(a.errors) + " errors, " + jsonNumber(a.time_span_s, 6) + " s\n";
     if (a.last_scale && a.last_scale->scale) {
         const auto& l = *a.last_scale;
@@ -503,6 +682,20 @@ Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& 
     }
     if (auto ok = write("objects.csv", kObjectsHeader, a.object_rows); !ok) {
         return ok;
+    }
+    if (auto ok = write("poses.csv", kPosesHeader, a.pose_rows); !ok) {
+        return ok;
+    }
+    for (const auto& t : a.trajectories) {
+        if (auto ok = drivers::writeTumTrajectory(dir / t.file, t.t_ns, t.poses); !ok) {
+            return ok;
+        }
+    }
+    if (a.main_trajectory) {
+        const auto& t = a.trajectories[*a.main_trajectory];
+        if (auto ok = drivers::writeTumTrajectory(dir / kMainTrajectory, t.t_ns, t.poses); !ok) {
+            return ok;
+        }
     }
     return write("summary.json", nullptr, {toJson(a)});
 }

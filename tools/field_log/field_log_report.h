@@ -3,7 +3,8 @@
 // field-log's work: a field log read back (drivers/field_log.h) turned into
 // scale-eval's CSV shapes (frames.csv, updates.csv, observations.csv, the
 // ground-truth columns left empty), objects.csv (the object model's OBJECT
-// lines) and a summary (docs/field-log.md).
+// lines), poses.csv and the metric trajectories in TUM format (POSE lines)
+// and a summary (docs/field-log.md).
 
 #include <cstddef>
 #include <cstdint>
@@ -13,6 +14,7 @@
 #include <vector>
 
 #include <scaled/core/result.h>
+#include <scaled/core/scale/vertical_extent.h>
 #include <scaled/drivers/field_log.h>
 
 namespace scaled::tools {
@@ -60,6 +62,26 @@ struct FieldLogAnalysis {
     std::vector<std::string> update_rows;
     std::vector<std::string> observation_rows;
     std::vector<std::string> object_rows;  // OBJECT lines (estimator.model = "object")
+    std::vector<std::string> pose_rows;    // POSE lines (poses.csv)
+    std::size_t metric_poses = 0;          // POSE lines with a metric position
+
+    // The metric poses of one map: a (run, epoch) with at least one POSE line
+    // with a position, in the epoch's gravity-aligned frame G (metres,
+    // camera to G), in log order. A pose whose t_ns is not at least 1 us
+    // after the previous one of its trajectory is left out (and named in
+    // problems). `file`: trajectory_metric_epoch<N>.tum, or
+    // trajectory_metric_run<R>_epoch<N>.tum when the log holds several runs.
+    struct Trajectory {
+        std::size_t run = 0;
+        std::int64_t epoch = 0;
+        std::string file;
+        std::vector<std::int64_t> t_ns;
+        std::vector<core::CameraPose> poses;
+    };
+    std::vector<Trajectory> trajectories;
+    // The index in `trajectories` written again as trajectory_metric.tum:
+    // the one with the most poses (the later one of equals); none without.
+    std::optional<std::size_t> main_trajectory;
 };
 
 FieldLogAnalysis analyseFieldLog(const drivers::FieldLogContents& contents, const std::string& log);
@@ -70,8 +92,9 @@ std::string toJson(const FieldLogAnalysis& a);
 // A few lines for a terminal.
 std::string toText(const FieldLogAnalysis& a);
 
-// frames.csv, updates.csv, observations.csv, objects.csv and summary.json into `out_dir`
-// (created if needed). Errors name the file.
+// frames.csv, updates.csv, observations.csv, objects.csv, poses.csv, the
+// trajectories' TUM files (and trajectory_metric.tum) and summary.json into
+// `out_dir` (created if needed). Errors name the file.
 core::Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir);
 
 }  // namespace scaled::tools

@@ -1,5 +1,6 @@
 // field-log: a field log (the daemon's JSON lines, docs/field-log.md) into
-// scale-eval's CSV files, a summary and the figures.
+// scale-eval's CSV files, poses.csv and the metric trajectories (TUM), a
+// summary and the figures.
 //
 //   field-log LOG_DIR_OR_FILE [--out DIR] [--json] [--no-plots] [--title TEXT]
 //
@@ -31,8 +32,11 @@ void usage(std::FILE* to) {
         "corrupt lines are skipped and counted) and prints a summary.\n"
         "  --out DIR       write frames.csv, updates.csv, observations.csv (scale-eval's\n"
         "                  columns; ground-truth columns empty), objects.csv (the OBJECT\n"
-        "                  lines of the object model), summary.json and\n"
-        "                  fig_c_estimates.png, fig_d_rel_error.png (tools/scale_eval_plot.py)\n"
+        "                  lines of the object model), poses.csv (the POSE lines),\n"
+        "                  trajectory_metric_epoch<N>.tum (the metric poses of each map, TUM;\n"
+        "                  _run<R>_epoch<N> with several runs) and trajectory_metric.tum (the\n"
+        "                  longest), summary.json and fig_c_estimates.png, fig_d_rel_error.png,\n"
+        "                  fig_g_trajectory.png (tools/scale_eval_plot.py)\n"
         "  --json          print the summary as one JSON object\n"
         "  --no-plots      with --out: write the CSV files only\n"
         "  --title TEXT    appended to the figure titles\n"
