@@ -160,6 +160,23 @@ Calibration calibration(std::span<const UpdateRow> updates, double settle_s) {
     return c;
 }
 
+namespace {
+
+// The summary of paired displacement errors (absolute, metres; relative).
+DistanceErrors summariseDistances(const std::vector<double>& abs_m,
+                                  const std::vector<double>& rel) {
+    DistanceErrors d;
+    d.pairs = static_cast<int>(rel.size());
+    if (!rel.empty()) {
+        d.median_abs_m = median(abs_m);
+        d.median_rel = median(rel);
+        d.p90_rel = quantile(rel, 0.9);
+    }
+    return d;
+}
+
+}  // namespace
+
 MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m) {
     MetricTrajectory m;
     const auto served = [](const FrameRow& f) {
@@ -204,7 +221,6 @@ MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_dis
     // Displacements between a served frame and the first served frame of the
     // same epoch at least dt later, against the truth's.
     const auto distances = [&](double dt_s) {
-        DistanceErrors d;
         std::vector<double> abs_m;
         std::vector<double> rel;
         std::size_t j = 0;
@@ -228,13 +244,7 @@ MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_dis
             abs_m.push_back(std::abs(est_dist - gt_dist));
             rel.push_back(std::abs(est_dist / gt_dist - 1));
         }
-        d.pairs = static_cast<int>(rel.size());
-        if (!rel.empty()) {
-            d.median_abs_m = median(abs_m);
-            d.median_rel = median(rel);
-            d.p90_rel = quantile(rel, 0.9);
-        }
-        return d;
+        return summariseDistances(abs_m, rel);
     };
     m.distance_1s = distances(1.0);
     m.distance_5s = distances(5.0);
@@ -350,7 +360,6 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
 
     // Per epoch: the trajectory, its frame rows, and the baselines.
     Track track;
-    std::vector<std::size_t> track_rows;  // frame_rows index of each track entry
     std::optional<double> epoch_baseline_constant;
     std::optional<double> epoch_baseline_single;
     double epoch_t0_s = 0;
@@ -422,7 +431,6 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             row.p_map = slam.pose().p_CinW;
             row.p_gt = frame.T_CtoW_gt->p_CinW;
             track.t_s.push_back(row.t_s);
-            track_rows.push_back(r.frame_rows.size());
             row.scale_true = truthScale(track.est, track.gt, options.min_truth_path_m);
             if (options.truth_geometry) {
                 row.scale_true = 1.0;  // the estimator sees metric poses
@@ -593,7 +601,6 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             need_gravity = true;
             ++r.epochs;
             track = Track{};
-            track_rows.clear();
             epoch_baseline_constant.reset();
             epoch_baseline_single.reset();
             frames_in_map = 0;
@@ -625,36 +632,24 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
         // after convergence, with the estimate current at the later one.
         std::vector<double> abs_m;
         std::vector<double> rel;
-        std::vector<std::optional<std::pair<Vec3, Vec3>>> pos(r.frame_rows.size());
-        // Re-walk the rows: positions were kept per epoch only, so rebuild
-        // from the final epoch's track (convergence implies the final epoch).
-        for (std::size_t k = 0; k < track_rows.size(); ++k) {
-            pos[track_rows[k]] = std::pair{track.est[k], track.gt[k]};
-        }
         const auto delta = static_cast<std::size_t>(options.distance_delta_frames);
         for (std::size_t j = delta; j < r.frame_rows.size(); ++j) {
             const auto& a = r.frame_rows[j - delta];
             const auto& b = r.frame_rows[j];
-            if (!pos[j] || !pos[j - delta] || a.frame < from_frame || a.epoch != epoch ||
+            if (!a.has_position || !b.has_position || a.frame < from_frame || a.epoch != epoch ||
                 b.epoch != epoch || b.scale.state == core::ScaleState::kNoData) {
                 continue;
             }
-            const double gt_dist = (pos[j]->second - pos[j - delta]->second).norm();
+            const double gt_dist = (b.p_gt - a.p_gt).norm();
             if (gt_dist < options.min_distance_m) {
                 continue;
             }
             const double est_dist =
-                static_cast<double>(b.scale.map) *
-                static_cast<double>((pos[j]->first - pos[j - delta]->first).norm());
+                static_cast<double>(b.scale.map) * static_cast<double>((b.p_map - a.p_map).norm());
             abs_m.push_back(std::abs(est_dist - gt_dist));
             rel.push_back(std::abs(est_dist / gt_dist - 1));
         }
-        r.distance.pairs = static_cast<int>(rel.size());
-        if (!rel.empty()) {
-            r.distance.median_abs_m = median(abs_m);
-            r.distance.median_rel = median(rel);
-            r.distance.p90_rel = quantile(rel, 0.9);
-        }
+        r.distance = summariseDistances(abs_m, rel);
         std::vector<double> drel;
         std::vector<double> dabs;
         for (std::size_t k = 0; k < depth_rel.size(); ++k) {
