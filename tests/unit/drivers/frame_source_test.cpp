@@ -28,6 +28,7 @@
 #include <scaled/core/types.h>
 #include <scaled/drivers/dataset_kitti.h>
 #include <scaled/drivers/dataset_tum.h>
+#include <scaled/drivers/frame_selection.h>
 #include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/trajectory_io.h>
 
@@ -388,6 +389,55 @@ TEST(DatasetTum, ReadsASmallDataset) {
     EXPECT_EQ(f.t_ns, 66667000);
     // Third pose: q = (0.5, 0.5, 0.5, 0.5), a 120 degree turn about (1,1,1).
     EXPECT_LT(rotationError(f.T_CtoW_gt->R_CtoW, rotationFromTum(0.5, 0.5, 0.5, 0.5)), 1e-6);
+}
+
+TEST(FrameSelection, StrideReadsEveryNthFrameAndBlankedFramesAreBlack) {
+    TempDir tmp("tum-select");
+    makeTumDataset(tmp.path());
+    auto src = openDataset(tmp.path());
+    ASSERT_TRUE(src) << src.error().message;
+    FrameSelection sel;
+    sel.stride = 2;
+    sel.blank.push_back({2, 3});
+    Frame f;
+    std::vector<std::int64_t> ids;
+    for (std::size_t i = 0; i < (*src)->info().frame_count; i += sel.stride) {
+        auto r = readSelected(**src, sel, i, f);
+        ASSERT_TRUE(r) << r.error().message;
+        ASSERT_TRUE(*r);
+        ids.push_back(f.id);
+        ASSERT_FALSE(f.gray.empty());
+        const bool black = cv::countNonZero(f.gray) == 0;
+        EXPECT_EQ(black, f.id == 2) << "frame " << f.id;
+        EXPECT_TRUE(f.T_CtoW_gt.has_value()) << "a blanked frame keeps its time and ground truth";
+    }
+    EXPECT_EQ(ids, (std::vector<std::int64_t>{0, 2}));
+    EXPECT_EQ(f.color.size(), tinyImage(0).size());
+    EXPECT_EQ(cv::norm(f.color, cv::NORM_INF), 0.0);
+    // Past the end: false, as next() says.
+    auto end = readSelected(**src, sel, 3, f);
+    ASSERT_TRUE(end);
+    EXPECT_FALSE(*end);
+}
+
+TEST(FrameSelection, BlankRangesParseAndBadOnesAreNamed) {
+    auto r = parseBlankRange("300:320");
+    ASSERT_TRUE(r) << r.error().message;
+    EXPECT_EQ(r->first, 300U);
+    EXPECT_EQ(r->end, 320U);
+    FrameSelection sel;
+    sel.blank.push_back(*r);
+    EXPECT_FALSE(sel.blanked(299));
+    EXPECT_TRUE(sel.blanked(300));
+    EXPECT_TRUE(sel.blanked(319));
+    EXPECT_FALSE(sel.blanked(320));
+    EXPECT_FALSE(sel.blanked(-1));
+    for (const char* bad : {"", ":", "5", "5:", ":5", "5:5", "6:5", "a:9", "1:2x", "-1:3"}) {
+        const auto e = parseBlankRange(bad);
+        ASSERT_FALSE(e) << bad;
+        EXPECT_NE(e.error().message.find(std::string("'") + bad + "'"), std::string::npos)
+            << e.error().message;
+    }
 }
 
 TEST(DatasetTum, AssociatesGroundTruthAndDepthByNearestTimestamp) {
