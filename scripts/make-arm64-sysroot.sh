@@ -55,7 +55,7 @@ packages=(
   libgpiod-dev libcamera-dev
   # image front end, detector, dataset readers
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
-  libopencv-features2d-dev libopencv-videoio-dev libopencv-dnn-dev
+  libopencv-features2d-dev libopencv-calib3d-dev libopencv-videoio-dev libopencv-dnn-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
 )

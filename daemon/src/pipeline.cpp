@@ -494,7 +494,8 @@ void Pipeline::trackingLoop() {
             frames_in_map = 0;
             setSlamState(DaemonState::kTracking, frame.id, frame.t_ns, "new map", true);
         } else if (ok) {
-            setSlamState(DaemonState::kTracking, frame.id, frame.t_ns, "tracking", false);
+            setSlamState(DaemonState::kTracking, frame.id, frame.t_ns,
+                         stats.relocalised ? "relocalised" : "tracking", false);
         }
         if (ok) {
             ++frames_in_map;
@@ -592,7 +593,11 @@ void Pipeline::trackingLoop() {
             events_->onFrame(e);
         }
 
-        if (!ok) {
+        if (stats.health == core::slam::SlamHealth::kRelocalising) {
+            // Lost, the map kept: the tracker looks for the camera in it for
+            // up to tracker.relocalise_s; the epoch and the scale stay.
+            setSlamState(DaemonState::kLost, frame.id, frame.t_ns, "relocalising", false);
+        } else if (!ok) {
             // Lost or diverged: the next frame starts a new map with a new,
             // unrelated scale; the epoch moves when it does.
             setSlamState(DaemonState::kLost, frame.id, frame.t_ns,

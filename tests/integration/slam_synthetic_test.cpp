@@ -38,15 +38,27 @@ core::PinholeRadialCamera syntheticCamera() {
 struct SyntheticRun {
     std::vector<Vec3> est;
     std::vector<Vec3> gt;
-    std::vector<double> nees;  // per frame (0 for the first)
+    std::vector<double> nees;   // per frame (0 for the first)
+    std::vector<bool> tracked;  // health ok on the frame
     int lost_frames = 0;
+    int new_maps = 0;
+    int relocalisations = 0;
     double mean_measured = 0;
+};
+
+// Frames of the rendered sequence: its rate, and a range rendered black (a
+// covered lens) that the tracker must come back from.
+struct SyntheticFrames {
+    double fps = synth::kDefaultFps;
+    int blank_first = -1;
+    int blank_end = -1;
 };
 
 // Renders and tracks n frames. known_depth: the first map's features get their
 // true depth (scale fixed, metric) with a 2% prior.
 SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
-                          const vision::TrackerConfig& base = {}, Scalar tracker_focal_scale = 1) {
+                          const vision::TrackerConfig& base = {}, Scalar tracker_focal_scale = 1,
+                          const SyntheticFrames& frames = {}) {
     SyntheticRun out;
     const auto cam = syntheticCamera();
     // The camera the tracker believes in (the renderer always uses cam).
@@ -62,7 +74,7 @@ SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
     synth::Renderer renderer(*scene, ro);
     auto traj = synth::Trajectory::create();
     EXPECT_TRUE(traj.ok());
-    const auto seq = traj->makeSequence(n_frames);
+    const auto seq = traj->makeSequence(n_frames, frames.fps);
 
     vision::TrackerConfig config = base;
     config.slam.seed = seed;
@@ -88,9 +100,18 @@ SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
     double measured = 0;
     for (std::size_t k = 0; k < seq.size(); ++k) {
         renderer.render(cam, seq[k].pose_CtoW, gray, &depth, k);
+        const auto ki = static_cast<int>(k);
+        if (ki >= frames.blank_first && ki < frames.blank_end) {
+            gray.setTo(0);
+        }
         const auto stats = tracker->processFrame(seq[k].t_ns, gray);
-        if (stats.health != core::slam::SlamHealth::kOk) {
-            ++out.lost_frames;
+        const bool ok = stats.health == core::slam::SlamHealth::kOk;
+        out.tracked.push_back(ok);
+        out.lost_frames += ok ? 0 : 1;
+        out.new_maps += stats.new_map ? 1 : 0;
+        out.relocalisations += stats.relocalised ? 1 : 0;
+        if (!ok && stats.health != core::slam::SlamHealth::kRelocalising) {
+            tracker->reset();  // what every caller does: a new map next frame
         }
         measured += stats.inliers + stats.rescued;
         // Ground truth in the first camera's frame.
@@ -121,6 +142,64 @@ TEST(SlamSynthetic, TrajectoryErrorBelowOnePercentOfThePath) {
                 r.mean_measured);
     EXPECT_GT(len, 2.0);
     EXPECT_LT(a->ate_rmse, Scalar(0.01) * len);
+}
+
+// Issue 21: a covered lens for 12 frames (0.4 s of this room's brisk path)
+// in the middle of the run. The filter is lost after
+// tracker.slam.lost_after_frames bad frames; the tracker keeps the map and
+// finds the camera in it again (the features' descriptors against the
+// frame's corners, RANSAC PnP) when the image comes back: no new map, and
+// one trajectory in one frame and scale before and after. (After 15 frames
+// here the view has turned too far for the descriptors; redkitchen's 20-frame
+// outage is in slam_redkitchen_test.cpp.)
+TEST(SlamSynthetic, RelocalisesAfterACoveredLensAndKeepsTheMap) {
+    SyntheticFrames frames;
+    frames.blank_first = 150;
+    frames.blank_end = 162;
+    const auto r = runSynthetic(300, 1, false, {}, 1, frames);
+    EXPECT_EQ(r.new_maps, 1) << "the first map only";
+    EXPECT_EQ(r.relocalisations, 1);
+    std::vector<Vec3> est;
+    std::vector<Vec3> gt;
+    int tracked_after = 0;
+    for (std::size_t k = 0; k < r.est.size(); ++k) {
+        if (r.tracked[k] &&
+            (static_cast<int>(k) < frames.blank_first || static_cast<int>(k) >= frames.blank_end)) {
+            est.push_back(r.est[k]);
+            gt.push_back(r.gt[k]);
+            tracked_after += static_cast<int>(k) >= frames.blank_end ? 1 : 0;
+        }
+    }
+    EXPECT_GE(tracked_after, 120) << "back within a few frames of the light";
+    const auto a = core::alignTrajectories(est, gt);
+    ASSERT_TRUE(a.ok()) << a.error().message;
+    const Scalar len = core::pathLength(gt);
+    std::printf("covered lens: %d frames not tracked, ATE %.2f%% of the path over both parts\n",
+                r.lost_frames, double(100 * a->ate_rmse / len));
+    EXPECT_LT(a->ate_rmse, Scalar(0.02) * len);
+}
+
+// Issue 21: the same room at 10 Hz (three times the motion per frame). The
+// gate ellipses outgrow the full-resolution search budget; the coarse-to-fine
+// search finds the features at a pyramid level and refines them, and every
+// frame is tracked in one map. Without the pyramid the same run loses the map.
+TEST(SlamSynthetic, TracksATenHertzSequenceWithTheCoarseToFineSearch) {
+    SyntheticFrames frames;
+    frames.fps = 10;
+    const auto r = runSynthetic(150, 1, false, {}, 1, frames);
+    EXPECT_EQ(r.lost_frames, 0);
+    EXPECT_EQ(r.new_maps, 1);
+    const auto a = core::alignTrajectories(r.est, r.gt);
+    ASSERT_TRUE(a.ok()) << a.error().message;
+    const Scalar len = core::pathLength(r.gt);
+    std::printf("10 Hz: ATE %.2f%% of the path\n", double(100 * a->ate_rmse / len));
+    EXPECT_LT(a->ate_rmse, Scalar(0.03) * len);
+
+    vision::TrackerConfig no_pyramid;
+    no_pyramid.pyramid_levels = 0;
+    no_pyramid.relocalise_s = 0;
+    const auto flat = runSynthetic(150, 1, false, no_pyramid, 1, frames);
+    EXPECT_GT(flat.new_maps, 1) << "without the pyramid the map is lost";
 }
 
 // Issue 19: the map's scale holds on the rendered room when the camera model

@@ -36,6 +36,7 @@ void usage(std::FILE* out) {
     std::fputs(
         "usage: scale-eval --dataset DIR [--format tum|kitti|folder|video] [--config FILE]\n"
         "                  [--set section.key=value]... [--frames A:B] [--out DIR] [--json]\n"
+        "                  [--stride N] [--blank A:B]...\n"
         "                  [--intrinsics fx,fy,cx,cy] [--window N] [--delta N] [--no-plots]\n"
         "                  [--truth-geometry]\n"
         "Runs EKF MonoSLAM, the object detector (synchronously, every detection.every_frames\n"
@@ -46,6 +47,8 @@ void usage(std::FILE* out) {
         "  --set K=V       override one key after the file, e.g. --set estimator.robust=true,\n"
         "                  --set detection.every_frames=5, --set estimator.priors=FILE\n"
         "  --frames A:B    frames A (inclusive) to B (exclusive); either may be omitted\n"
+        "  --stride N      every Nth frame of the range (a 30 Hz sequence at 10 Hz: 3)\n"
+        "  --blank A:B     frames A to B-1 delivered black (loss and recovery); repeatable\n"
         "  --out DIR       write frames.csv, updates.csv, observations.csv, posterior.csv,\n"
         "                  likelihoods.csv, summary.json, config.toml and the figures\n"
         "                  fig_{a,b,c,d}_*.png (tools/scale_eval_plot.py, python3-matplotlib)\n"
@@ -134,6 +137,14 @@ int main(int argc, char** argv) {
             }
         } else if (a == "--frames") {
             ok = parseFrameRange(v, opt.first_frame, opt.end_frame);
+        } else if (a == "--stride") {
+            ok = parseNumber(v, opt.selection.stride) && opt.selection.stride >= 1;
+        } else if (a == "--blank") {
+            auto r = scaled::drivers::parseBlankRange(v);
+            ok = r.ok();
+            if (ok) {
+                opt.selection.blank.push_back(*r);
+            }
         } else if (a == "--intrinsics") {
             scaled::core::CameraIntrinsics k;
             ok = parseIntrinsics(v, k);

@@ -134,6 +134,7 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
     s += ",\"tracking_lost_frames\":" + std::to_string(r.tracking_lost_frames);
     s += ",\"unreadable_frames\":" + std::to_string(r.unreadable_frames);
     s += ",\"epochs\":" + std::to_string(r.epochs);
+    s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
     s += ",\"detect_every_frames\":" + std::to_string(cfg.detection.every_frames);
     s += ",\"updates\":" + std::to_string(r.updates.size());
     s += ",\"observations\":" + std::to_string(r.observations.size());

@@ -375,8 +375,9 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
     double estimator_ms = 0;
 
     drivers::Frame frame;
-    for (std::size_t i = options.first_frame; i < end; ++i) {
-        auto got = source.next(frame);
+    const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
+    for (std::size_t i = options.first_frame; i < end; i += stride) {
+        auto got = drivers::readSelected(source, options.selection, i, frame);
         if (!got) {
             // A frame that cannot be read is skipped (the reader moved past it);
             // the tracker sees a longer frame gap.
@@ -593,7 +594,10 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
         row.baseline_single = epoch_baseline_single;
         r.frame_rows.push_back(row);
 
-        if (!ok) {
+        if (stats.relocalised) {
+            ++r.relocalisations;  // back in the same map: same epoch, same evidence
+        }
+        if (!ok && stats.health != core::slam::SlamHealth::kRelocalising) {
             // Lost or diverged: the next frame starts a new map with a new,
             // unrelated scale. The evidence about the old one is void.
             tracker->reset();

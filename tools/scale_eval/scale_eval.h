@@ -19,6 +19,7 @@
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/daemon/pipeline_config.h>
 #include <scaled/detector/object_detector.h>
+#include <scaled/drivers/frame_selection.h>
 #include <scaled/drivers/frame_source.h>
 
 namespace scaled::tools {
@@ -27,6 +28,7 @@ struct EvalOptions {
     daemon::PipelineConfig config;
     std::size_t first_frame = 0;
     std::optional<std::size_t> end_frame;  // exclusive
+    drivers::FrameSelection selection;     // --stride, --blank
     // Ground-truth scale over a sliding window of this many tracked frames.
     int window_frames = 150;
     // The constant-scale baseline is fitted on this much ground truth at the
@@ -162,6 +164,7 @@ struct EvalResult {
     std::size_t tracked_frames = 0;
     std::size_t tracking_lost_frames = 0;
     int epochs = 1;
+    int relocalisations = 0;  // losses the tracker recovered from in the same map (epoch)
     std::size_t unreadable_frames = 0;
     bool has_ground_truth = false;
     std::string gravity_source;

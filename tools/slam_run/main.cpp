@@ -40,6 +40,7 @@ using scaled::core::Scalar;
 void usage(std::FILE* out) {
     std::fputs(
         "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
+        "                [--stride N] [--blank A:B]...\n"
         "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
         "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
         "                [--seed N] [--set KEY=VALUE]... [--window N]\n"
@@ -49,6 +50,8 @@ void usage(std::FILE* out) {
         "camera) and prints a summary.\n"
         "  --camera FILE  intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt format);\n"
         "                 overrides the dataset's\n"
+        "  --stride N     every Nth frame of the range (a 30 Hz sequence at 10 Hz: 3)\n"
+        "  --blank A:B    frames A to B-1 delivered black (loss and recovery); repeatable\n"
         "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
         "                 container has none (default 30)\n"
         "  --window N     tracked frames of the sliding-window Sim(3) scale whose range\n"
@@ -117,6 +120,30 @@ bool setParameter(std::string_view kv, scaled::vision::TrackerConfig& c) {
         c.match.min_ncc = v;
     } else if (key == "max_search_pixels") {
         c.match.max_search_pixels = i;
+    } else if (key == "relocalise_s") {
+        c.relocalise_s = v;
+    } else if (key == "relocalise_min_inliers") {
+        c.relocalise_min_inliers = i;
+    } else if (key == "relocalise_reproj_px") {
+        c.relocalise_reproj_px = v;
+    } else if (key == "relocalise_corners") {
+        c.relocalise_corners = i;
+    } else if (key == "relocalise_max_brief_distance") {
+        c.relocalise_max_brief_distance = i;
+    } else if (key == "relocalise_search_px") {
+        c.relocalise_search_px = v;
+    } else if (key == "relocalise_max_rel_sigma") {
+        c.relocalise_max_rel_sigma = v;
+    } else if (key == "feature_border_px") {
+        c.feature_border_px = i;
+    } else if (key == "pyramid_levels") {
+        c.pyramid_levels = i;
+    } else if (key == "coarse_min_fraction") {
+        c.coarse_min_fraction = v;
+    } else if (key == "coarse_max_search_pixels") {
+        c.coarse_max_search_pixels = i;
+    } else if (key == "coarse_min_ncc") {
+        c.coarse_min_ncc = v;
     } else if (key == "patch_size") {
         c.patch_size = i;
     } else if (key == "patch_source_size") {
@@ -200,6 +227,14 @@ int main(int argc, char** argv) {
             }
         } else if (a == "--frames") {
             ok = scaled::tools::parseFrameRange(*v, ropt.first_frame, ropt.end_frame);
+        } else if (a == "--stride") {
+            ok = parseNumber(*v, ropt.selection.stride) && ropt.selection.stride >= 1;
+        } else if (a == "--blank") {
+            auto r = scaled::drivers::parseBlankRange(*v);
+            ok = r.ok();
+            if (ok) {
+                ropt.selection.blank.push_back(*r);
+            }
         } else if (a == "--intrinsics") {
             scaled::core::CameraIntrinsics k;
             ok = parseIntrinsics(*v, k);
@@ -294,10 +329,11 @@ int main(int argc, char** argv) {
         ropt.progress = [](std::size_t done, std::size_t, const scaled::vision::TrackStats& s) {
             std::fprintf(stderr,
                          "frame %zu %s map %d visible %d searched %d matched %d inliers %d "
-                         "rescued %d added %d ncc_evals %d\n",
+                         "rescued %d added %d ncc_evals %d coarse %d/%d reloc %d/%d\n",
                          done - 1, scaled::core::slam::toString(s.health), s.features, s.visible,
                          s.predicted, s.matched, s.inliers, s.rescued, s.added,
-                         s.search_evaluations);
+                         s.search_evaluations, s.coarse_matches, s.coarse_searches,
+                         s.relocalise_inliers, s.relocalise_candidates);
         };
     } else if (tty) {
         ropt.progress = [](std::size_t done, std::size_t total,
@@ -346,8 +382,8 @@ int main(int argc, char** argv) {
         std::printf("%s\n", scaled::tools::toJson(*result, dataset.string()).c_str());
     } else {
         const auto& r = *result;
-        std::printf("frames %zu, tracked %zu, re-initialisations %d\n", r.frames, r.tracked_frames,
-                    r.reinitialisations);
+        std::printf("frames %zu, tracked %zu, re-initialisations %d, relocalisations %d\n",
+                    r.frames, r.tracked_frames, r.reinitialisations, r.relocalisations);
         std::printf("features measured per frame %.1f (map %.1f), %.2f ms per frame (max %.2f)\n",
                     r.mean_features_measured, r.mean_features_in_map, r.ms_per_frame,
                     r.ms_per_frame_max);

@@ -83,8 +83,9 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
     double measured_sum = 0;
     double map_sum = 0;
     bool need_gravity = true;
-    for (std::size_t i = options.first_frame; i < end; ++i) {
-        auto got = source.next(frame);
+    const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
+    for (std::size_t i = options.first_frame; i < end; i += stride) {
+        auto got = drivers::readSelected(source, options.selection, i, frame);
         if (!got) {
             return got.error();
         }
@@ -130,6 +131,12 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
             if (frame.T_CtoW_gt) {
                 seg.gt_R.push_back(frame.T_CtoW_gt->R_CtoW);
             }
+            if (stats.relocalised) {
+                ++result.relocalisations;
+            }
+        } else if (stats.health == core::slam::SlamHealth::kRelocalising) {
+            // Lost, the map kept: the tracker looks for the camera in it.
+            ++result.relocalising_frames;
         } else {
             // Lost or diverged: the next frame starts a new map (new scale).
             ++result.reinitialisations;
@@ -218,6 +225,8 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"frames\":" + std::to_string(r.frames);
     s += ",\"tracked_frames\":" + std::to_string(r.tracked_frames);
     s += ",\"reinitialisations\":" + std::to_string(r.reinitialisations);
+    s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
+    s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
     s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
     s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);
     s += ",\"ms_per_frame\":" + num(r.ms_per_frame);

@@ -14,6 +14,7 @@
 
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/result.h>
+#include <scaled/drivers/frame_selection.h>
 #include <scaled/drivers/frame_source.h>
 #include <scaled/vision/mono_tracker.h>
 
@@ -23,6 +24,7 @@ struct SlamRunOptions {
     vision::TrackerConfig tracker;
     std::size_t first_frame = 0;
     std::optional<std::size_t> end_frame;  // exclusive
+    drivers::FrameSelection selection;     // --stride, --blank
     int window_frames = 150;               // the sliding-window scale's window (tracked frames)
     // Called after every frame (progress display); may be empty.
     std::function<void(std::size_t done, std::size_t total, const vision::TrackStats&)> progress;
@@ -32,6 +34,8 @@ struct SlamRunResult {
     std::size_t frames = 0;
     std::size_t tracked_frames = 0;  // frames tracked (healthy, not starting a replacement map)
     int reinitialisations = 0;
+    int relocalisations = 0;            // losses the tracker recovered from in the same map
+    int relocalising_frames = 0;        // frames spent looking for the camera in a lost map
     double mean_features_measured = 0;  // accepted matches per tracked frame
     double mean_features_in_map = 0;
     double ms_per_frame = 0;  // tracker only (image decoding excluded)

@@ -111,6 +111,8 @@ const char* toString(SlamHealth health) {
             return "lost";
         case SlamHealth::kBadTimestamp:
             return "bad timestamp";
+        case SlamHealth::kRelocalising:
+            return "relocalising";
     }
     return "unknown";
 }
@@ -499,6 +501,14 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
     }
     const int accepted = report.low_innovation_inliers + report.rescued;
     report.bad_frame = accepted < config_.min_inliers && !features_.empty();
+    if (report.bad_frame && report.matched == 0) {
+        // A frame where nothing at all matched says more about the frame (a
+        // covered lens, a dark scene, total blur) than about the features: it
+        // does not count against them, so an outage does not empty the map.
+        for (const FeaturePrediction& p : predictions_) {
+            --features_[static_cast<size_t>(p.slot)].attempts;
+        }
+    }
     bad_frames_ = report.bad_frame ? bad_frames_ + 1 : 0;
     return report;
 }
@@ -694,6 +704,34 @@ int EkfSlam::makeRoom(int n) {
         ++removed;
     }
     return removed;
+}
+
+bool EkfSlam::relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p,
+                         Scalar sigma_theta) {
+    if (health_ == SlamHealth::kUninitialised || !T_CtoW.p_CinW.allFinite() ||
+        !T_CtoW.R_CtoW.allFinite() || !std::isfinite(sigma_p) || !std::isfinite(sigma_theta)) {
+        return false;
+    }
+    const Vec4 q = quatNormalized(quatFromRotation(T_CtoW.R_CtoW));
+    x_.segment<3>(kPos) = T_CtoW.p_CinW;
+    x_.segment<4>(kQuat) = q;
+    x_.segment<3>(kVel).setZero();
+    x_.segment<3>(kAngVel).setZero();
+    // The camera forgets its correlations with the map.
+    P_.block(0, 0, kCameraDim, n_).setZero();
+    P_.block(0, 0, n_, kCameraDim).setZero();
+    P_.block<3, 3>(kPos, kPos) = Mat3::Identity() * (sigma_p * sigma_p);
+    // q_true = q (x) [1, delta / 2]: d q / d delta = L(q) [0; I] / 2.
+    const Eigen::Matrix<Scalar, 4, 3> J = Scalar(0.5) * quatLeftMatrix(q).rightCols<3>();
+    P_.block<4, 4>(kQuat, kQuat) = (sigma_theta * sigma_theta) * J * J.transpose();
+    P_.block<3, 3>(kVel, kVel) = Mat3::Identity() * (config_.init_sigma_v * config_.init_sigma_v);
+    P_.block<3, 3>(kAngVel, kAngVel) =
+        Mat3::Identity() * (config_.init_sigma_w * config_.init_sigma_w);
+    t_ns_ = t_ns;
+    ++frame_;
+    bad_frames_ = 0;
+    health_ = SlamHealth::kOk;
+    return true;
 }
 
 CameraPose EkfSlam::pose() const {

@@ -1,6 +1,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 
 #include <Eigen/LU>
@@ -51,11 +53,53 @@ core::Result<bool> validate(const TrackerConfig& c) {
         c.patch_source_size % 2 == 0) {
         return bad("patch_source_size", c.patch_source_size, "odd, in [2 patch_size + 1, 101]");
     }
+    if (c.feature_border_px < 0 || c.feature_border_px > 200) {
+        return bad("feature_border_px", c.feature_border_px, "in [0, 200]");
+    }
     if (c.free_radius_px < 1 || c.free_radius_px > 200) {
         return bad("free_radius_px", c.free_radius_px, "in [1, 200]");
     }
     if (c.max_new_per_frame < 1 || c.max_new_per_frame > c.slam.max_features) {
         return bad("max_new_per_frame", c.max_new_per_frame, "in [1, slam.max_features]");
+    }
+    if (!(c.relocalise_s >= 0 && c.relocalise_s <= 3600)) {
+        return core::makeError(
+            core::ErrorCode::kInvalidArgument,
+            "tracker.relocalise_s = " + std::to_string(c.relocalise_s) + ": must be in [0, 3600]");
+    }
+    if (c.relocalise_min_inliers < 4 || c.relocalise_min_inliers > 1000) {
+        return bad("relocalise_min_inliers", c.relocalise_min_inliers, "in [4, 1000]");
+    }
+    if (!(c.relocalise_reproj_px > 0 && c.relocalise_reproj_px <= 100)) {
+        return core::makeError(
+            core::ErrorCode::kInvalidArgument,
+            "tracker.relocalise_reproj_px = " + std::to_string(c.relocalise_reproj_px) +
+                ": must be in (0, 100]");
+    }
+    if (c.relocalise_max_brief_distance < 0 || c.relocalise_max_brief_distance > 256) {
+        return bad("relocalise_max_brief_distance", c.relocalise_max_brief_distance, "in [0, 256]");
+    }
+    if (c.brief_refresh_frames < 1 || c.brief_refresh_frames > 100000) {
+        return bad("brief_refresh_frames", c.brief_refresh_frames, "in [1, 100000]");
+    }
+    if (c.relocalise_corners < 1 || c.relocalise_corners > 10000) {
+        return bad("relocalise_corners", c.relocalise_corners, "in [1, 10000]");
+    }
+    if (c.coarse_max_search_pixels < 1 || c.coarse_max_search_pixels > 1000000) {
+        return bad("coarse_max_search_pixels", c.coarse_max_search_pixels, "in [1, 1000000]");
+    }
+    if (!(c.coarse_min_fraction >= 0 && c.coarse_min_fraction <= 1)) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "tracker.coarse_min_fraction = " +
+                                   std::to_string(c.coarse_min_fraction) + ": must be in [0, 1]");
+    }
+    if (c.pyramid_levels < 0 || c.pyramid_levels > 3) {
+        return bad("pyramid_levels", c.pyramid_levels, "in [0, 3]");
+    }
+    if (!(c.coarse_min_ncc > -1 && c.coarse_min_ncc < 1)) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "tracker.coarse_min_ncc = " + std::to_string(c.coarse_min_ncc) +
+                                   ": must be in (-1, 1)");
     }
     if (!(c.match.min_ncc > -1 && c.match.min_ncc < 1)) {
         return core::makeError(
@@ -84,7 +128,8 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, const TrackerConfig& config)
     appearance_.reserve(static_cast<size_t>(config.slam.max_features));
     matches_.reserve(static_cast<size_t>(config.slam.max_measured));
     occupied_.reserve(static_cast<size_t>(config.slam.max_features));
-    corners_.reserve(static_cast<size_t>(config.max_new_per_frame) * 4);
+    corners_.reserve(
+        static_cast<size_t>(std::max(config.max_new_per_frame * 4, config.relocalise_corners)));
     // Steady-state tracking allocates nothing: every patch buffer a feature
     // can need is made here, and the matcher's scratch sized for the largest
     // search the configuration allows.
@@ -96,11 +141,19 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, const TrackerConfig& config)
         p.templ.create(config.patch_size, config.patch_size, CV_32FC1);
         spare_patches_.push_back(std::move(p));
     }
-    matcher_.reserve(config.patch_size, std::max(config.match.max_search_pixels, 3));
+    matcher_.reserve(config.patch_size, std::max({config.match.max_search_pixels,
+                                                  config.coarse_max_search_pixels, 3}));
+    reloc_candidates_.reserve(static_cast<size_t>(config.slam.max_features));
+    corner_briefs_.reserve(static_cast<size_t>(config.relocalise_corners));
+    corner_has_brief_.reserve(static_cast<size_t>(config.relocalise_corners));
+    reloc_points_W_.reserve(static_cast<size_t>(config.slam.max_features));
+    reloc_points_n_.reserve(static_cast<size_t>(config.slam.max_features));
+    depth_scratch_.reserve(static_cast<size_t>(config.slam.max_features));
 }
 
 void MonoTracker::reset() {
     has_map_ = false;
+    relocalising_ = false;
     clearAppearances();
 }
 
@@ -135,7 +188,8 @@ void MonoTracker::dropDeletedAppearances() {
 }
 
 bool MonoTracker::predictedWarp(const slam::FeatureInfo& f, const FeatureAppearance& a,
-                                const Vec2& h_px, core::Mat2& A) const {
+                                const Vec2& h_px, const core::CameraPose& cur,
+                                core::Mat2& A) const {
     // The patch is taken to lie on the plane through the feature facing the
     // camera that first saw it; map pixel offsets in the current image through
     // that plane into the first image.
@@ -151,7 +205,6 @@ bool MonoTracker::predictedWarp(const slam::FeatureInfo& f, const FeatureAppeara
         p = slam::inverseDepthToXyz(y);
     }
     const Vec3 n = (p - a.pose_at_init.p_CinW).normalized();
-    const core::CameraPose cur = slam_.pose();
     const auto& cam = slam_.camera();
     auto toInit = [&](const Vec2& u) -> std::optional<Vec2> {
         const auto ray_C = cam.unproject(u);
@@ -208,6 +261,11 @@ int MonoTracker::addFeatures(const cv::Mat& gray, int wanted, bool new_map) {
         if (spare_patches_.empty()) {
             spare_patches_.emplace_back();  // not expected: one per feature was made at create()
         }
+        const auto border = static_cast<Scalar>(config_.feature_border_px);
+        if (c.x() < border || c.y() < border || c.x() > Scalar(gray.cols - 1) - border ||
+            c.y() > Scalar(gray.rows - 1) - border) {
+            continue;  // born at the border, it would leave the view at once
+        }
         Patch& patch = spare_patches_.back();
         if (!extractPatchInto(gray, c, config_.patch_size, config_.patch_source_size, patch)) {
             continue;
@@ -228,10 +286,296 @@ int MonoTracker::addFeatures(const cv::Mat& gray, int wanted, bool new_map) {
         spare_patches_.pop_back();
         a.pose_at_init = slam_.pose();
         a.px_at_init = c;
+        a.has_brief = computeBrief(gray, c, a.brief);
+        a.brief_frame = slam_.frameIndex();
         appearance_.push_back(std::move(a));
         ++added;
     }
     return added;
+}
+
+int MonoTracker::searchLevel(const core::Mat2& S) const {
+    // The gate ellipse's area, pi * gate * sqrt(det S), against the budget;
+    // each level divides it by 4.
+    const double det = static_cast<double>(S.determinant());
+    if (!(det > 0) || !std::isfinite(det)) {
+        return 0;  // the matcher rejects it with its own checks
+    }
+    const double area = 3.14159265358979 * config_.match.chi2_gate * std::sqrt(det);
+    const double extent =
+        2 * std::sqrt(config_.match.chi2_gate * static_cast<double>(std::max(S(0, 0), S(1, 1))));
+    const double budget = config_.match.max_search_pixels;
+    if (area <= budget && extent + 1 <= budget) {
+        return 0;
+    }
+    const double coarse_budget = config_.coarse_max_search_pixels;
+    for (int level = 1; level <= config_.pyramid_levels; ++level) {
+        const double shrink = std::ldexp(1.0, level);
+        if (area / (shrink * shrink) <= coarse_budget && extent / shrink + 1 <= coarse_budget) {
+            return level;
+        }
+    }
+    return -1;
+}
+
+const cv::Mat& MonoTracker::pyramidLevel(const cv::Mat& gray, int level) {
+    while (pyramid_built_ < level) {
+        const cv::Mat& from =
+            pyramid_built_ == 0 ? gray : pyramid_[static_cast<size_t>(pyramid_built_ - 1)];
+        // pyrDown into the same buffer every frame: no allocation once sized.
+        cv::pyrDown(from, pyramid_[static_cast<size_t>(pyramid_built_)]);
+        ++pyramid_built_;
+    }
+    return pyramid_[static_cast<size_t>(level - 1)];
+}
+
+std::optional<Match> MonoTracker::matchCoarseToFine(const cv::Mat& gray, int level,
+                                                    FeatureAppearance& a, const core::Mat2& A_full,
+                                                    const Vec2& h_px, const core::Mat2& S,
+                                                    TrackStats& stats) {
+    ++stats.coarse_searches;
+    const double shrink = std::ldexp(1.0, level);
+    const auto s = static_cast<Scalar>(shrink);
+    // One template pixel at this level spans `shrink` full-resolution pixels.
+    warpTemplate(a.patch, A_full * s);
+    MatchConfig coarse = config_.match;
+    coarse.min_ncc = config_.coarse_min_ncc;
+    coarse.max_search_pixels = config_.coarse_max_search_pixels;
+    coarse.subpixel = false;
+    // pyrDown's pixel i is centred on full-resolution pixel 2i.
+    const auto hit =
+        matcher_.match(pyramidLevel(gray, level), a.patch, h_px / s, S / (s * s), coarse);
+    warpTemplate(a.patch, A_full);
+    if (!hit) {
+        return std::nullopt;
+    }
+    stats.search_evaluations += hit->evaluated;
+    // Refine inside a small circle around the coarse hit (about 2 coarse
+    // pixels), then keep it only if it lies in the original gate.
+    const Vec2 c = hit->px * s;
+    const core::Mat2 S_fine = core::Mat2::Identity() * (s * s * Scalar(0.5));
+    auto fine = matcher_.match(gray, a.patch, c, S_fine, config_.match);
+    if (!fine) {
+        return std::nullopt;
+    }
+    const Vec2 nu = fine->px - h_px;
+    if (!(static_cast<double>(nu.dot(S.inverse() * nu)) <= config_.match.chi2_gate)) {
+        return std::nullopt;
+    }
+    ++stats.coarse_matches;
+    return fine;
+}
+
+bool MonoTracker::knownMapPoint(int slot, slam::MapPoint& mp) const {
+    // Only features whose position is known: a fresh inverse-depth feature's
+    // point is a guess along its ray.
+    if (!slam_.mapPoint(slot, mp)) {
+        return false;
+    }
+    const Scalar dist = (mp.p_FinW - last_good_pose_.p_CinW).norm();
+    return std::sqrt(std::max(mp.P_FinW.trace(), Scalar(0))) <
+           static_cast<Scalar>(config_.relocalise_max_rel_sigma) * dist;
+}
+
+void MonoTracker::addRelocPoint(const Vec3& p_FinW, const Vec2& px) {
+    const auto ray = slam_.camera().unproject(px);
+    if (!ray || !((*ray)(2) > 0)) {
+        return;
+    }
+    reloc_points_W_.emplace_back(static_cast<float>(p_FinW.x()), static_cast<float>(p_FinW.y()),
+                                 static_cast<float>(p_FinW.z()));
+    reloc_points_n_.emplace_back(static_cast<float>((*ray)(0) / (*ray)(2)),
+                                 static_cast<float>((*ray)(1) / (*ray)(2)));
+}
+
+void MonoTracker::guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats) {
+    // Each known feature searched around where the last well-tracked pose
+    // puts it (an outage is usually short and the camera near where it was),
+    // coarse-to-fine inside relocalise_search_px, with its template warped
+    // for that pose.
+    const auto features = slam_.features();
+    const Scalar r = static_cast<Scalar>(config_.relocalise_search_px);
+    const core::Mat2 S =
+        core::Mat2::Identity() * (r * r / static_cast<Scalar>(config_.match.chi2_gate));
+    const int level = searchLevel(S);
+    const auto& cam = slam_.camera();
+    slam::MapPoint mp;
+    for (int slot = 0; slot < static_cast<int>(features.size()) && level >= 0; ++slot) {
+        FeatureAppearance* a = appearanceOf(features[static_cast<size_t>(slot)].id);
+        if (a == nullptr || !knownMapPoint(slot, mp)) {
+            continue;
+        }
+        const Vec3 p_C = last_good_pose_.R_CtoW.transpose() * (mp.p_FinW - last_good_pose_.p_CinW);
+        const auto h = p_C.z() > 0 ? cam.project(p_C) : std::nullopt;
+        if (!h || h->x() < 0 || h->y() < 0 || h->x() > Scalar(cam.width() - 1) ||
+            h->y() > Scalar(cam.height() - 1)) {
+            continue;
+        }
+        core::Mat2 A = core::Mat2::Identity();
+        if (config_.warp_patches &&
+            !predictedWarp(features[static_cast<size_t>(slot)], *a, *h, last_good_pose_, A)) {
+            A = core::Mat2::Identity();
+        }
+        std::optional<Match> m;
+        if (level == 0) {
+            warpTemplate(a->patch, A);
+            m = matcher_.match(gray, a->patch, *h, S, config_.match);
+        } else {
+            m = matchCoarseToFine(gray, level, *a, A, *h, S, stats);
+        }
+        if (m) {
+            addRelocPoint(mp.p_FinW, m->px);
+        }
+    }
+}
+
+void MonoTracker::globalRelocCandidates(const cv::Mat& gray) {
+    // The frame's corners and their descriptors against every known
+    // feature's descriptor: a feature is a candidate when its nearest corner
+    // is within relocalise_max_brief_distance bits, clearly nearer than the
+    // second (ratio 0.8) and claimed by no other feature.
+    CornerConfig cc = config_.corners;
+    cc.max_corners = config_.relocalise_corners;
+    cc.min_distance_px = std::max(3, config_.patch_size / 2);
+    cc.border_px = std::max(cc.border_px, kBriefRadiusPx + 1);
+    detectCorners(gray, cv::Mat(), cc, corners_);
+    corner_briefs_.resize(corners_.size());
+    corner_has_brief_.resize(corners_.size());
+    for (std::size_t i = 0; i < corners_.size(); ++i) {
+        corner_has_brief_[i] = computeBrief(gray, corners_[i], corner_briefs_[i]) ? 1 : 0;
+    }
+    reloc_candidates_.clear();
+    const auto features = slam_.features();
+    slam::MapPoint mp;
+    for (int slot = 0; slot < static_cast<int>(features.size()); ++slot) {
+        const FeatureAppearance* a = appearanceOf(features[static_cast<size_t>(slot)].id);
+        if (a == nullptr || !a->has_brief || !knownMapPoint(slot, mp)) {
+            continue;
+        }
+        RelocCandidate best;
+        int best_d = 257;
+        int second_d = 257;
+        for (int ci = 0; ci < static_cast<int>(corners_.size()); ++ci) {
+            if (corner_has_brief_[static_cast<size_t>(ci)] == 0) {
+                continue;
+            }
+            const int d = briefDistance(a->brief, corner_briefs_[static_cast<size_t>(ci)]);
+            if (d < best_d) {
+                second_d = best_d;
+                best_d = d;
+                best = {slot, ci, 1.0 - d / 256.0, corners_[static_cast<size_t>(ci)]};
+            } else if (d < second_d) {
+                second_d = d;
+            }
+        }
+        if (best_d <= config_.relocalise_max_brief_distance && 5 * best_d < 4 * second_d) {
+            reloc_candidates_.push_back(best);
+        }
+    }
+    for (const RelocCandidate& c : reloc_candidates_) {
+        const bool shared =
+            std::count_if(reloc_candidates_.begin(), reloc_candidates_.end(),
+                          [&](const RelocCandidate& o) { return o.corner == c.corner; }) > 1;
+        if (!shared && slam_.mapPoint(c.slot, mp)) {
+            addRelocPoint(mp.p_FinW, c.px);
+        }
+    }
+}
+
+void MonoTracker::refreshDescriptors(const cv::Mat& gray,
+                                     std::span<const slam::FeaturePrediction> preds) {
+    const auto features = slam_.features();
+    const std::int64_t frame = slam_.frameIndex();
+    for (const slam::FeatureMatch& m : matches_) {
+        const auto& pr = preds[static_cast<size_t>(m.prediction)];
+        if (!features[static_cast<size_t>(pr.slot)].measured) {
+            continue;  // rejected by the update
+        }
+        FeatureAppearance* a = appearanceOf(pr.id);
+        if (a == nullptr ||
+            (a->has_brief && frame - a->brief_frame < config_.brief_refresh_frames)) {
+            continue;
+        }
+        if (computeBrief(gray, m.z_px, a->brief)) {
+            a->has_brief = true;
+            a->brief_frame = frame;
+        }
+    }
+}
+
+std::optional<core::CameraPose> MonoTracker::solveRelocPose(TrackStats& stats) {
+    stats.relocalise_candidates = static_cast<int>(reloc_points_W_.size());
+    if (stats.relocalise_candidates < config_.relocalise_min_inliers) {
+        return std::nullopt;
+    }
+    // RANSAC PnP in normalised coordinates (OpenCV's seeded RANSAC:
+    // deterministic); the threshold in pixels over the focal length.
+    cv::Mat rvec;
+    cv::Mat tvec;
+    const auto& k = slam_.camera().intrinsics();
+    const auto threshold =
+        static_cast<float>(config_.relocalise_reproj_px / static_cast<double>(k.fx));
+    bool solved = false;
+    reloc_inliers_.clear();
+    try {
+        solved = cv::solvePnPRansac(reloc_points_W_, reloc_points_n_, cv::Mat::eye(3, 3, CV_64F),
+                                    cv::Mat(), rvec, tvec, false, 1000, threshold, 0.99,
+                                    reloc_inliers_, cv::SOLVEPNP_AP3P);
+    } catch (const cv::Exception&) {
+        solved = false;  // degenerate points: no pose this frame
+    }
+    stats.relocalise_inliers = static_cast<int>(reloc_inliers_.size());
+    if (!solved || stats.relocalise_inliers < config_.relocalise_min_inliers) {
+        return std::nullopt;
+    }
+    cv::Mat R_WtoC_cv;
+    cv::Rodrigues(rvec, R_WtoC_cv);
+    core::Mat3 R_WtoC;
+    Vec3 t_WinC;
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) {
+            R_WtoC(r, c) = static_cast<Scalar>(R_WtoC_cv.at<double>(r, c));
+        }
+        t_WinC(r) = static_cast<Scalar>(tvec.at<double>(r));
+    }
+    core::CameraPose T_CtoW;
+    T_CtoW.R_CtoW = R_WtoC.transpose();
+    T_CtoW.p_CinW = -(T_CtoW.R_CtoW * t_WinC);
+    if (!T_CtoW.R_CtoW.allFinite() || !T_CtoW.p_CinW.allFinite()) {
+        return std::nullopt;
+    }
+    return T_CtoW;
+}
+
+bool MonoTracker::tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
+    reloc_points_W_.clear();
+    reloc_points_n_.clear();
+    globalRelocCandidates(gray);
+    auto pose = solveRelocPose(stats);
+    if (!pose) {
+        reloc_points_W_.clear();
+        reloc_points_n_.clear();
+        guidedRelocCandidates(gray, stats);
+        pose = solveRelocPose(stats);
+    }
+    if (!pose) {
+        return false;
+    }
+    // Uncertainty of the PnP pose: a few pixels at the inliers' median depth.
+    depth_scratch_.clear();
+    const core::Mat3 R_WtoC = pose->R_CtoW.transpose();
+    for (const int i : reloc_inliers_) {
+        const auto& P = reloc_points_W_[static_cast<size_t>(i)];
+        const Vec3 p_W(static_cast<Scalar>(P.x), static_cast<Scalar>(P.y),
+                       static_cast<Scalar>(P.z));
+        depth_scratch_.push_back((R_WtoC * (p_W - pose->p_CinW)).z());
+    }
+    const auto mid = depth_scratch_.begin() + static_cast<long>(depth_scratch_.size() / 2);
+    std::nth_element(depth_scratch_.begin(), mid, depth_scratch_.end());
+    const Scalar depth = std::max(*mid, Scalar(1e-3));
+    const auto px_angle =
+        static_cast<Scalar>(config_.relocalise_reproj_px) / slam_.camera().intrinsics().fx;
+    return slam_.relocalise(t_ns, *pose, 3 * px_angle * depth, 3 * px_angle);
 }
 
 TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
@@ -244,6 +588,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
     StageLap lap;
     if (!has_map_) {
         slam_.initialise(t_ns, gravity_down_C_);
+        last_good_pose_ = slam_.pose();
         clearAppearances();
         has_map_ = true;
         stats.new_map = true;
@@ -254,30 +599,66 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
         stats.map_us = lap.next();
         return stats;
     }
-    const slam::SlamHealth predicted = slam_.predict(t_ns);
-    stats.predict_us = lap.next();
-    if (predicted != slam::SlamHealth::kOk) {
-        stats.health = predicted;
-        return stats;
+    pyramid_built_ = 0;
+    if (relocalising_) {
+        stats.health = slam::SlamHealth::kRelocalising;
+        stats.features = static_cast<int>(slam_.features().size());
+        if (static_cast<double>(t_ns - lost_t_ns_) * 1e-9 > config_.relocalise_s) {
+            relocalising_ = false;  // given up: the caller starts a new map
+            stats.health = slam::SlamHealth::kLost;
+            return stats;
+        }
+        const bool back = tryRelocalise(t_ns, gray, stats);
+        stats.relocalise_us = lap.next();
+        if (!back) {
+            return stats;
+        }
+        relocalising_ = false;
+        stats.relocalised = true;
+    } else {
+        const slam::SlamHealth predicted = slam_.predict(t_ns);
+        stats.predict_us = lap.next();
+        if (predicted != slam::SlamHealth::kOk) {
+            stats.health = predicted;
+            return stats;
+        }
     }
     const auto preds = slam_.predictMeasurements();
     matches_.clear();
+    // The pyramid is for a camera whose motion is uncertain (a long frame
+    // gap, fast motion): then most ellipses outgrow the budget together. A
+    // few large ones on a normal frame are searched as before (not at all):
+    // a coarse match there is more often wrong than useful.
+    int over_budget = 0;
+    for (const auto& pr : preds) {
+        over_budget += searchLevel(pr.S) != 0 ? 1 : 0;
+    }
+    const bool coarse_frame =
+        !preds.empty() && static_cast<double>(over_budget) >=
+                              config_.coarse_min_fraction * static_cast<double>(preds.size());
     for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
         const auto& pr = preds[static_cast<size_t>(i)];
         FeatureAppearance* a = appearanceOf(pr.id);
         if (a == nullptr) {
             continue;
         }
+        const int level = searchLevel(pr.S);
+        if (level < 0 || (level > 0 && !coarse_frame)) {
+            continue;  // too uncertain to search
+        }
+        core::Mat2 A = core::Mat2::Identity();
         if (config_.warp_patches) {
-            core::Mat2 A;
             const auto& f = slam_.features()[static_cast<size_t>(pr.slot)];
-            if (!predictedWarp(f, *a, pr.h_px, A)) {
+            if (!predictedWarp(f, *a, pr.h_px, slam_.pose(), A)) {
                 continue;
             }
-            warpTemplate(a->patch, A);
+            if (level == 0) {
+                warpTemplate(a->patch, A);
+            }
         }
         stats.search_us += lap.next();
-        const auto m = matcher_.match(gray, a->patch, pr.h_px, pr.S, config_.match);
+        const auto m = level == 0 ? matcher_.match(gray, a->patch, pr.h_px, pr.S, config_.match)
+                                  : matchCoarseToFine(gray, level, *a, A, pr.h_px, pr.S, stats);
         stats.match_us += lap.next();
         if (m) {
             stats.search_evaluations += m->evaluated;
@@ -286,6 +667,10 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
     }
     stats.search_us += lap.next();
     const auto report = slam_.update(matches_);
+    if (!report.bad_frame) {
+        last_good_pose_ = slam_.pose();  // where relocalisation's guided search looks
+        refreshDescriptors(gray, preds);
+    }
     stats.update_us = lap.next();
     stats.predicted = report.predicted;
     stats.matched = report.matched;
@@ -294,6 +679,13 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
     stats.nis_sum = report.nis_sum;
     stats.nis_count = report.nis_count;
     stats.health = slam_.manageMap();
+    if (stats.health == slam::SlamHealth::kLost && config_.relocalise_s > 0 &&
+        !slam_.features().empty()) {
+        // Keep the map and look for the camera in it from the next frame on.
+        relocalising_ = true;
+        lost_t_ns_ = t_ns;
+        stats.health = slam::SlamHealth::kRelocalising;
+    }
     dropDeletedAppearances();
     stats.visible = slam_.visibleCount();
     if (stats.health == slam::SlamHealth::kOk && stats.visible < config_.slam.min_visible) {

@@ -37,18 +37,24 @@ bool extractPatchInto(const cv::Mat& gray, const Vec2& px, int size, int source_
     const double y0f = std::floor(top);
     const double ax = left - x0f;
     const double ay = top - y0f;
-    // A zero weight needs no neighbour, so integer positions may touch the border.
-    const double last_x = x0f + (source_size - 1) + (ax > 0 ? 1 : 0);
-    const double last_y = y0f + (source_size - 1) + (ay > 0 ? 1 : 0);
-    if (x0f < 0 || y0f < 0 || last_x > gray.cols - 1 || last_y > gray.rows - 1) {
+    // The template square must lie in the image; the rest of the source may
+    // leave it and takes the nearest border pixel there (it feeds warped and
+    // coarse-level templates only). A zero weight needs no neighbour, so
+    // integer positions may touch the border.
+    const int off = half - size / 2;
+    const double t_last_x = x0f + off + (size - 1) + (ax > 0 ? 1 : 0);
+    const double t_last_y = y0f + off + (size - 1) + (ay > 0 ? 1 : 0);
+    if (x0f + off < 0 || y0f + off < 0 || t_last_x > gray.cols - 1 || t_last_y > gray.rows - 1) {
         return false;
     }
     const int x0 = static_cast<int>(x0f);
     const int y0 = static_cast<int>(y0f);
-    const int dx = ax > 0 ? 1 : 0;
-    const int dy = ay > 0 ? 1 : 0;
     const auto wx = static_cast<float>(ax);
     const auto wy = static_cast<float>(ay);
+    const int last_col = gray.cols - 1;
+    const int last_row = gray.rows - 1;
+    const bool inside =
+        x0 >= 0 && y0 >= 0 && x0 + source_size <= last_col && y0 + source_size <= last_row;
 
     patch.size = size;
     // A template that views the source (a shallow copy) must not alias the
@@ -58,18 +64,25 @@ bool extractPatchInto(const cv::Mat& gray, const Vec2& px, int size, int source_
     }
     patch.source.create(source_size, source_size, CV_32FC1);
     for (int i = 0; i < source_size; ++i) {
-        const uchar* r0 = gray.ptr<uchar>(y0 + i) + x0;
-        const uchar* r1 = gray.ptr<uchar>(y0 + i + dy) + x0;
+        const int ya = std::clamp(y0 + i, 0, last_row);
+        const int yb = std::clamp(y0 + i + 1, 0, last_row);
+        const uchar* r0 = gray.ptr<uchar>(ya);
+        const uchar* r1 = gray.ptr<uchar>(yb);
         auto* dst = patch.source.ptr<float>(i);
         for (int j = 0; j < source_size; ++j) {
+            int xa = x0 + j;
+            int xb = xa + 1;
+            if (!inside) {
+                xa = std::clamp(xa, 0, last_col);
+                xb = std::clamp(xb, 0, last_col);
+            }
             const float top_v =
-                (1.0F - wx) * static_cast<float>(r0[j]) + wx * static_cast<float>(r0[j + dx]);
+                (1.0F - wx) * static_cast<float>(r0[xa]) + wx * static_cast<float>(r0[xb]);
             const float bottom_v =
-                (1.0F - wx) * static_cast<float>(r1[j]) + wx * static_cast<float>(r1[j + dx]);
+                (1.0F - wx) * static_cast<float>(r1[xa]) + wx * static_cast<float>(r1[xb]);
             dst[j] = (1.0F - wy) * top_v + wy * bottom_v;
         }
     }
-    const int off = half - size / 2;
     patch.source(cv::Rect(off, off, size, size)).copyTo(patch.templ);
     return true;
 }

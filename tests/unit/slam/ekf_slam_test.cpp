@@ -334,5 +334,93 @@ TEST(EkfSlam, DeletesFeaturesThatAreNeverFoundAndCapsTheMap) {
     EXPECT_LE((P - P.transpose()).cwiseAbs().maxCoeff(), 1e-12);
 }
 
+TEST(EkfSlam, RelocalisationPutsTheCameraBackIntoTheMapItLost) {
+    // A metric map (features at their true depth) tracked for 30 frames, a
+    // covered lens until the filter is lost, then the camera put back at its
+    // true pose (what the tracker's PnP would find) 15 frames later.
+    PointSimOptions opt;
+    opt.known_depth_rel_sigma = Scalar(0.05);
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    for (int k = 0; k < 30; ++k) {
+        sim.step(*slam, k);
+    }
+    ASSERT_EQ(slam->health(), SlamHealth::kOk);
+    std::vector<std::pair<std::uint64_t, int>> attempts;
+    for (const auto& f : slam->features()) {
+        attempts.emplace_back(f.id, f.attempts);
+    }
+    const int lost_after = slam->config().lost_after_frames;
+    ASSERT_GE(lost_after, slam->config().delete_min_attempts) << "the outage must be long enough";
+    for (int k = 30; k < 30 + lost_after; ++k) {
+        ASSERT_EQ(slam->predict(sim.timeNs(k)), SlamHealth::kOk);
+        slam->predictMeasurements();
+        EXPECT_TRUE(slam->update({}).bad_frame);
+        slam->manageMap();
+    }
+    ASSERT_EQ(slam->health(), SlamHealth::kLost);
+    // Frames with nothing matched do not count against the features: the
+    // whole map is still there, its search counts unchanged.
+    ASSERT_EQ(slam->features().size(), attempts.size());
+    for (std::size_t i = 0; i < attempts.size(); ++i) {
+        EXPECT_EQ(slam->features()[i].id, attempts[i].first);
+        EXPECT_EQ(slam->features()[i].attempts, attempts[i].second);
+    }
+
+    const int k_back = 30 + lost_after + 5;
+    const core::CameraPose truth = sim.truthInC0(Scalar(k_back) / opt.fps);
+    const Scalar sigma_p = Scalar(0.02);
+    const Scalar sigma_theta = Scalar(0.01);
+    ASSERT_TRUE(slam->relocalise(sim.timeNs(k_back), truth, sigma_p, sigma_theta));
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+    EXPECT_EQ(slam->timestampNs(), sim.timeNs(k_back));
+    EXPECT_LT((slam->pose().p_CinW - truth.p_CinW).norm(), 1e-5);
+    EXPECT_LT(rotationError(slam->pose().R_CtoW, truth.R_CtoW).norm(), 1e-5);
+    EXPECT_EQ(slam->velocityW(), Vec3::Zero());
+    const Mat6x6 Pp = slam->poseCovariance();
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(Pp(i, i), sigma_p * sigma_p, 1e-9);
+        EXPECT_NEAR(Pp(3 + i, 3 + i), sigma_theta * sigma_theta, 1e-7);
+    }
+    const auto P = slam->covariance();
+    EXPECT_EQ(P.topRightCorner(kCameraDim, P.cols() - kCameraDim).cwiseAbs().maxCoeff(), 0)
+        << "the camera forgets its correlation with the map";
+    EXPECT_EQ(slam->predict(sim.timeNs(k_back)), SlamHealth::kBadTimestamp)
+        << "the clock moved to the relocalised frame";
+
+    // Tracking resumes in the same map: the same features are found again
+    // and the camera follows the truth.
+    for (int k = k_back + 1; k < k_back + 90; ++k) {
+        sim.step(*slam, k);
+    }
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+    const core::CameraPose end = sim.truthInC0(Scalar(k_back + 89) / opt.fps);
+    EXPECT_LT((slam->pose().p_CinW - end.p_CinW).norm(), 0.05);
+    std::uint64_t last_id_before = 0;
+    for (const auto& [id, n] : attempts) {
+        last_id_before = std::max(last_id_before, id);
+    }
+    int kept = 0;
+    for (const auto& f : slam->features()) {
+        kept += f.id <= last_id_before && f.matches > 0 ? 1 : 0;
+    }
+    EXPECT_GT(kept, 10) << "features from before the loss are measured again";
+}
+
+TEST(EkfSlam, RelocaliseRefusesBadInput) {
+    const auto cam = test::makeCamera(0, 0, 500);
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
+    ASSERT_TRUE(slam.ok());
+    core::CameraPose T;
+    EXPECT_FALSE(slam->relocalise(1, T, 1, 1)) << "no map yet";
+    slam->initialise(0, Vec3(0, 1, 0));
+    T.p_CinW = Vec3(std::numeric_limits<Scalar>::quiet_NaN(), 0, 0);
+    EXPECT_FALSE(slam->relocalise(1, T, 1, 1));
+    EXPECT_TRUE(slam->state().allFinite());
+}
+
 }  // namespace
 }  // namespace scaled::core::slam

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
@@ -53,17 +54,36 @@ TEST(Patch, SubPixelIsBilinear) {
     EXPECT_NEAR(p->templ.at<float>(3, 3), 0.2 * top + 0.8 * bottom, 1e-3);
 }
 
-TEST(Patch, RejectsSourceLeavingImage) {
+TEST(Patch, TemplateMustLieInTheImageTheSourceMayLeaveIt) {
+    // Default sizes: template 11 (half 5), source 41 (half 20).
     const cv::Mat img = test::smoothTexture(cv::Size(100, 80), 2.0, 9);
     EXPECT_TRUE(extractPatch(img, Vec2(20, 20)));
-    EXPECT_TRUE(extractPatch(img, Vec2(79, 59)));  // source touches the last column/row
+    EXPECT_TRUE(extractPatch(img, Vec2(79, 59)));
     EXPECT_TRUE(extractPatch(img, Vec2(Scalar(78.5), Scalar(58.5))));
-    EXPECT_FALSE(extractPatch(img, Vec2(Scalar(19.5), 30)));
-    EXPECT_FALSE(extractPatch(img, Vec2(30, Scalar(19.9))));
-    EXPECT_FALSE(extractPatch(img, Vec2(Scalar(79.2), 30)));
-    EXPECT_FALSE(extractPatch(img, Vec2(30, Scalar(59.5))));
+    // The template square touches the border: accepted; the source beyond it
+    // takes the nearest border pixel.
+    EXPECT_TRUE(extractPatch(img, Vec2(5, 5)));
+    EXPECT_TRUE(extractPatch(img, Vec2(94, 74)));
+    EXPECT_FALSE(extractPatch(img, Vec2(Scalar(4.5), 30)));
+    EXPECT_FALSE(extractPatch(img, Vec2(30, Scalar(4.9))));
+    EXPECT_FALSE(extractPatch(img, Vec2(Scalar(94.2), 30)));
+    EXPECT_FALSE(extractPatch(img, Vec2(30, Scalar(74.5))));
     EXPECT_FALSE(extractPatch(img, Vec2(-500, 1e9)));
     EXPECT_FALSE(extractPatch(img, Vec2(std::numeric_limits<Scalar>::quiet_NaN(), 30)));
+
+    // Inside, the source is the image; outside, the replicated border.
+    const auto p = extractPatch(img, Vec2(5, 40));
+    ASSERT_TRUE(p);
+    for (int j = 0; j < 41; ++j) {
+        const int x = std::clamp(5 - 20 + j, 0, img.cols - 1);
+        EXPECT_FLOAT_EQ(p->source.at<float>(20, j), static_cast<float>(img.at<uchar>(40, x)))
+            << "column " << j;
+    }
+    for (int i = 0; i < 11; ++i) {
+        for (int j = 0; j < 11; ++j) {
+            EXPECT_FLOAT_EQ(p->templ.at<float>(i, j), static_cast<float>(img.at<uchar>(35 + i, j)));
+        }
+    }
 }
 
 TEST(Patch, RejectsBadInputs) {

@@ -78,6 +78,9 @@ enum class SlamHealth : std::uint8_t {
     kNotPositiveDefinite,  // covariance lost positive definiteness
     kLost,                 // too few accepted matches for lost_after_frames frames
     kBadTimestamp,         // non-increasing or too large frame interval
+    // Not the filter's own: the tracker lost the camera and keeps the map
+    // while it tries to find the camera in it again (relocalisation).
+    kRelocalising,
 };
 const char* toString(SlamHealth health);
 
@@ -170,6 +173,16 @@ public:
     std::uint64_t addFeature(const Vec2& px, Scalar rho, Scalar sigma_rho);
     // Makes room for n new features by deleting those out of view the longest.
     int makeRoom(int n);
+
+    // Puts the camera back into a map it lost (relocalisation): the camera at
+    // T_CtoW with independent position and attitude uncertainty (std sigma_p
+    // in SLAM units, sigma_theta in radians per axis), velocities zero with
+    // the initial uncertainties of a new map, no correlation between the
+    // camera and the features (the features keep theirs among themselves);
+    // the filter's clock moves to t_ns and the bad-frame count restarts.
+    // Nothing happens (false) before initialise() or for a non-finite input.
+    bool relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p,
+                    Scalar sigma_theta);
 
     [[nodiscard]] SlamHealth health() const { return health_; }
     [[nodiscard]] std::int64_t frameIndex() const { return frame_; }
