@@ -85,7 +85,7 @@ ErrorCode codeOf(int err) {
     }
 }
 
-// A sysfs attribute's text without its trailing newline and blanks.
+// A sysfs attribute's text without its trailing newline, NULs and blanks.
 Result<std::string> readAttr(const fs::path& path) {
     const UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
     if (!fd.isValid()) {
@@ -108,7 +108,10 @@ Result<std::string> readAttr(const fs::path& path) {
         }
         text.append(buf.data(), static_cast<std::size_t>(n));
     }
-    while (!text.empty() && (text.back() == '\n' || text.back() == ' ' || text.back() == '\t')) {
+    // Some attributes end in a NUL as well: the kernel's current_timestamp_clock
+    // returns "monotonic\n\0" (6.1, the size of the C string literal).
+    while (!text.empty() && (text.back() == '\n' || text.back() == '\0' || text.back() == ' ' ||
+                             text.back() == '\t')) {
         text.pop_back();
     }
     return text;

@@ -199,6 +199,13 @@ TEST_F(FakeIio, OpensByNameNumberAndPath) {
               "temp timestamp");
     // The timestamp clock was set, so buffered and sysfs times agree.
     EXPECT_EQ(get(dev0() / "current_timestamp_clock"), "monotonic\n");
+    // Already that clock, as the kernel prints it (with a NUL: 6.1's
+    // iio_show_timestamp_clock): not written again, since the kernel refuses
+    // the write (EBUSY) while another reader runs the buffer.
+    put(dev0() / "current_timestamp_clock", std::string("monotonic\n\0", 11));
+    auto again = IioDevice::open("mpu6050", options_);
+    ASSERT_TRUE(again.ok()) << again.error().message;
+    EXPECT_EQ(get(dev0() / "current_timestamp_clock"), std::string("monotonic\n\0", 11));
     const IioChannel* x = dev->channel("accel_x");
     ASSERT_NE(x, nullptr);
     EXPECT_DOUBLE_EQ(x->scale, kAccelScale);
