@@ -80,7 +80,7 @@ Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, 
     if (auto ok = checkOptions(options); !ok) {
         return ok.error();
     }
-    const Eigen::Matrix3d R = R_ItoC.cast<double>();
+    const Eigen::Matrix3d& R = R_ItoC.cast<double>();
     const double orth = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
     if (!R.allFinite() || !(orth <= kRotationTolerance) || !(R.determinant() > 0)) {
         return makeError(ErrorCode::kInvalidArgument,

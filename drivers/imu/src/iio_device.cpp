@@ -273,7 +273,7 @@ Result<fs::path> findDevice(std::string_view spec, const IioOptions& options) {
         }
         auto name = readAttr(options.sysfs_root / entry / "name");
         const std::string shown = name ? *name : std::string("?");
-        seen += (seen.empty() ? "" : ", ") + entry + " [" + shown + "]";
+        seen.append(seen.empty() ? "" : ", ").append(entry).append(" [").append(shown).append("]");
         if (name && *name == spec && (!best || *n < *best)) {
             best = n;
             best_dir = options.sysfs_root / entry;

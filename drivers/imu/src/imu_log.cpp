@@ -83,7 +83,7 @@ Result<core::Scalar> parseBounded(std::string_view field, std::string_view name,
 
 }  // namespace
 
-core::Mat3 tumKinectR_ItoC() {
+core::Mat3 tumKinectImuToCamera() {
     core::Mat3 R = core::Mat3::Identity();
     R(0, 0) = -1;
     R(1, 1) = -1;
@@ -105,7 +105,7 @@ Result<ImuLog> readTumAccelerometer(const std::filesystem::path& path) {
         s.accel_mps2 = row.accel;
         log.samples.push_back(s);
     }
-    log.R_ItoC = tumKinectR_ItoC();
+    log.R_ItoC = tumKinectImuToCamera();
     log.R_ItoC_source = "TUM Kinect default: down_inC = (ax, ay, -az) / |a| (docs/imu.md)";
     return log;
 }
@@ -145,8 +145,9 @@ Result<core::Mat3> readEurocSensorRotation(const std::filesystem::path& sensor_y
     Eigen::Matrix3d R;
     for (int r = 0; r < 3; ++r) {
         for (int c = 0; c < 3; ++c) {
-            auto x = detail::parseFiniteNumber(fields[static_cast<std::size_t>(r * 4 + c)],
-                                               "T_BS element");
+            auto x = detail::parseFiniteNumber(
+                fields[static_cast<std::size_t>(r) * 4 + static_cast<std::size_t>(c)],
+                "T_BS element");
             if (!x) {
                 return detail::lineError(ErrorCode::kParse, sensor_yaml, lineOf(data),
                                          x.error().message, all.substr(data, close - data + 1));

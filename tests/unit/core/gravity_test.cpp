@@ -27,12 +27,12 @@ Mat3 rotation(double angle_rad, const Eigen::Vector3d& axis) {
 
 // The camera-IMU rotation of these tests: an IMU mounted about 30 degrees off
 // the camera's axes, about a skew axis.
-Mat3 testR_ItoC() {
+Mat3 testImuToCamera() {
     return rotation(31 * kDeg, Eigen::Vector3d(0.3, -1.0, 0.4));
 }
 
 // Gravity (down) in the camera frame: a camera pitched down and rolled a bit.
-Vec3 testDown_inC() {
+Vec3 testDownInCamera() {
     return Eigen::Vector3d(0.12, 0.93, 0.34).normalized().cast<Scalar>();
 }
 
@@ -58,8 +58,8 @@ double degrees(Scalar rad) {
 }
 
 TEST(Gravity, StillLogGivesTheKnownDirection) {
-    const Mat3 R_ItoC = testR_ItoC();
-    const Vec3 down_inC = testDown_inC();
+    const Mat3 R_ItoC = testImuToCamera();
+    const Vec3 down_inC = testDownInCamera();
     // 0.05 m/s^2 per axis: a cheap MEMS accelerometer's noise at 200 Hz.
     const auto log = stillLog(R_ItoC, down_inC, 400, 0.05, 7);
     auto est = estimateGravityDown(log, R_ItoC);
@@ -83,8 +83,8 @@ TEST(Gravity, StillLogGivesTheKnownDirection) {
 }
 
 TEST(Gravity, NoiselessLogIsExact) {
-    const Mat3 R_ItoC = testR_ItoC();
-    const Vec3 down_inC = testDown_inC();
+    const Mat3 R_ItoC = testImuToCamera();
+    const Vec3 down_inC = testDownInCamera();
     auto est = estimateGravityDown(stillLog(R_ItoC, down_inC, 20, 0.0, 1), R_ItoC);
     ASSERT_TRUE(est.ok()) << est.error().message;
     EXPECT_LT((est->down_inC - down_inC).norm(), 1e-5);
@@ -124,8 +124,8 @@ TEST(Gravity, WindowBeforeATime) {
 
 TEST(Gravity, MovingLogIsRefusedWithTheReason) {
     // A hand-held camera shaken at 2 Hz with 3 m/s^2 along x_I.
-    const Mat3 R_ItoC = testR_ItoC();
-    auto log = stillLog(R_ItoC, testDown_inC(), 200, 0.05, 11);
+    const Mat3 R_ItoC = testImuToCamera();
+    auto log = stillLog(R_ItoC, testDownInCamera(), 200, 0.05, 11);
     for (ImuSample& s : log) {
         const double t_s = static_cast<double>(s.t_ns) * 1e-9;
         s.accel_mps2.x() += Scalar(3.0 * std::sin(2 * std::numbers::pi * 2.0 * t_s));

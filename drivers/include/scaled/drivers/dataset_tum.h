@@ -20,7 +20,7 @@
 // m/s^2 from the Kinect's built-in accelerometer. Compared with the ground
 // truth on a TUM fr1 sequence, gravity (down) in the colour camera's optical
 // frame is (ax, ay, -az) / |a|. drivers/imu/imu_log.h reads the file as IMU
-// samples with that mapping (tumKinectR_ItoC) and core/geometry/gravity.h
+// samples with that mapping (tumKinectImuToCamera) and core/geometry/gravity.h
 // turns a still window into a direction (docs/imu.md). Here the readings are
 // still exposed raw in Frame::accel_C and are NOT turned into a gravity
 // direction: gravity_down_C comes from ground truth only.

@@ -58,7 +58,7 @@ TEST(TumAccelerometer, ReadsSamplesAndTheKinectMapping) {
     expected(0, 0) = -1;
     expected(1, 1) = -1;
     EXPECT_EQ(log->R_ItoC, expected);
-    EXPECT_EQ(tumKinectR_ItoC(), expected);
+    EXPECT_EQ(tumKinectImuToCamera(), expected);
     EXPECT_NE(log->R_ItoC_source.find("TUM Kinect"), std::string::npos);
 }
 

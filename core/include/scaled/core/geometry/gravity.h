@@ -21,7 +21,7 @@
 //   "gravity: not static in [0.000, 0.500] s (50 samples): accelerometer
 //    spread 1.237 m/s^2 rms > 0.250 (moving or vibrating)".
 //
-// For a TUM RGB-D accelerometer.txt use drivers/imu's kTumKinectR_ItoC
+// For a TUM RGB-D accelerometer.txt use drivers/imu's tumKinectImuToCamera()
 // (docs/imu.md): with it down_inC = (ax, ay, -az) / |a|, measured on TUM fr1
 // against its ground truth.
 

@@ -6,7 +6,7 @@
 //
 //   TUM RGB-D   accelerometer.txt: `timestamp ax ay az` per line, timestamps
 //               in seconds, '#' comments; the Kinect's accelerometer, no gyro.
-//               R_ItoC = tumKinectR_ItoC() (below).
+//               R_ItoC = tumKinectImuToCamera() (below).
 //   EuRoC MAV   imu0/data.csv: `#timestamp [ns],w_RS_S_x [rad s^-1],
 //               w_RS_S_y,w_RS_S_z,a_RS_S_x [m s^-2],a_RS_S_y,a_RS_S_z`,
 //               comma separated, integer nanoseconds. R_ItoC from the
@@ -43,9 +43,9 @@ struct ImuLog {
 // optical frame is (ax, ay, -az) / |a|. With the accelerometer reading the
 // specific force (up at rest, core/imu_sample.h), down_inI = -a / |a| and
 // R_ItoC * down_inI = (ax, ay, -az) / |a| exactly.
-[[nodiscard]] core::Mat3 tumKinectR_ItoC();
+[[nodiscard]] core::Mat3 tumKinectImuToCamera();
 
-// A TUM accelerometer.txt, R_ItoC = tumKinectR_ItoC().
+// A TUM accelerometer.txt, R_ItoC = tumKinectImuToCamera().
 [[nodiscard]] core::Result<ImuLog> readTumAccelerometer(const std::filesystem::path& path);
 
 // An EuRoC imu0/data.csv (accelerometer and gyroscope). R_ItoC = R_CtoB^T *
