@@ -25,6 +25,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr std::size_t kMaxAttrBytes = 4096;  // a sysfs attribute is at most one page
+constexpr std::size_t kMaxScansPerRead = 65536;
 
 struct ClockName {
     const char* name;
@@ -748,6 +749,7 @@ Result<std::vector<IioScan>> IioDevice::readScans(std::size_t max_scans, int tim
     if (max_scans == 0 || scan_bytes_ == 0) {
         return out;
     }
+    max_scans = std::min<std::size_t>(max_scans, kMaxScansPerRead);
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::milliseconds(std::max(timeout_ms, 0));
     std::vector<uint8_t> buf(max_scans * scan_bytes_);

@@ -157,7 +157,8 @@ public:
     // The buffered channels in scan order (their scan_index).
     [[nodiscard]] const std::vector<std::string>& bufferChannels() const { return buffer_names_; }
     [[nodiscard]] std::size_t scanBytes() const { return scan_bytes_; }
-    // Up to `max_scans` scans: waits at most `timeout_ms` for the first, then
+    // Up to `max_scans` scans (at most 65536 a call): waits at most
+    // `timeout_ms` for the first (0: does not wait; negative: no limit), then
     // returns what is there (an empty vector when nothing came in time).
     // kUnavailable when the device ended (read returned 0: a regular file at
     // its end, a device gone).
