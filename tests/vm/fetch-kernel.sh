@@ -5,11 +5,15 @@
 # the host: downloads (apt-get download) the kernel image, headers and kbuild
 # of the ABI that linux-image-amd64 depends on, unpacks them with dpkg -x into
 # CACHE_DIR/root, builds the test drivers Debian does not ship (vimc, gpio-sim,
-# gpio-mockup and the irq-sim they need) out of tree from the same version's
-# linux-source-6.1, installs them into ROOT/lib/modules/VER/extra and runs
-# depmod so that `modprobe -d ROOT` works in the guest.
+# gpio-mockup and the irq-sim they need; the IIO dummy device with its buffer,
+# the IIO configfs, software-device and software-trigger cores and the sysfs
+# and hrtimer triggers) out of tree from the same version's linux-source-6.1,
+# installs them into ROOT/lib/modules/VER/extra and runs depmod so that
+# `modprobe -d ROOT` works in the guest.
 #
-# Idempotent: returns at once when CACHE_DIR/ready exists. Exit codes: 0 ready,
+# Idempotent: returns at once when CACHE_DIR/ready exists and was made by this
+# version of the script (FORMAT below; an older cache is rebuilt from its
+# downloaded packages, without downloading again). Exit codes: 0 ready,
 # 77 something cannot be had here (no apt, no network, no linux-source, no
 # compiler: one line on stderr), 1 any other failure (names the command).
 set -euo pipefail
@@ -37,12 +41,16 @@ run() {
   fi
 }
 
+# What the cache holds; bump it when the set of modules built here changes.
+# 2: the IIO modules (iio_dummy and friends) added.
+format=2
+
 mkdir -p "$1" || die "cannot create cache directory $1"
 cache=$(cd "$1" && pwd -P)
 ready=$cache/ready
 if [[ -f $ready ]]; then
   vmlinuz=$(sed -n 's/^VMLINUZ=//p' "$ready")
-  if [[ -n $vmlinuz && -f $vmlinuz ]]; then
+  if [[ -n $vmlinuz && -f $vmlinuz && $(sed -n 's/^FORMAT=//p' "$ready") == "$format" ]]; then
     exit 0
   fi
   rm -f "$ready"
@@ -125,7 +133,8 @@ config=$root/boot/config-$krel
 has() { grep -Eq "^CONFIG_$1=[ym]" "$config"; }
 for opt in CONFIGFS_FS GPIOLIB GPIO_CDEV IRQ_DOMAIN VIDEO_DEV MEDIA_CONTROLLER \
   VIDEO_V4L2_SUBDEV_API V4L2_FWNODE VIDEO_V4L2_TPG VIDEOBUF2_VMALLOC \
-  VIDEOBUF2_DMA_CONTIG VIDEO_VIVID NET_9P_VIRTIO 9P_FS OVERLAY_FS VIRTIO_PCI; do
+  VIDEOBUF2_DMA_CONTIG VIDEO_VIVID NET_9P_VIRTIO 9P_FS OVERLAY_FS VIRTIO_PCI \
+  IIO IIO_BUFFER IIO_TRIGGER IIO_TRIGGERED_BUFFER IIO_KFIFO_BUF IRQ_WORK; do
   has "$opt" || die "kernel $krel lacks CONFIG_$opt, which the VM tests need"
 done
 want=()
@@ -133,20 +142,34 @@ has VIDEO_VIMC || want+=(vimc)
 has GPIO_SIM || want+=(gpio-sim)
 has GPIO_MOCKUP || want+=(gpio-mockup)
 has IRQ_SIM || want+=(irq_sim)
+# IIO (the imu VM test): Debian 6.1 has the IIO core and triggered buffers as
+# modules but none of these. iio_dummy is built with its buffer
+# (CONFIG_IIO_SIMPLE_DUMMY_BUFFER) and without its events (they need the
+# iio_dummy_evgen irq chip, which nothing here uses).
+has IIO_CONFIGFS || want+=(industrialio-configfs)
+has IIO_SW_DEVICE || want+=(industrialio-sw-device)
+has IIO_SW_TRIGGER || want+=(industrialio-sw-trigger)
+has IIO_SIMPLE_DUMMY_BUFFER || want+=(iio_dummy)
+has IIO_SYSFS_TRIGGER || want+=(iio-trig-sysfs)
+has IIO_HRTIMER_TRIGGER || want+=(iio-trig-hrtimer)
 
 build=$cache/build
 rm -rf "$build" "$cache/src"
-mkdir -p "$build/vimc" "$cache/src"
+mkdir -p "$build/vimc" "$build/iio" "$cache/src"
 if [[ ${#want[@]} -gt 0 ]]; then
   s=linux-source-6.1
   run tar -xJf "$src_tar" -C "$cache/src" "$s/drivers/media/test-drivers/vimc" \
     "$s/drivers/gpio/gpio-sim.c" "$s/drivers/gpio/gpio-mockup.c" "$s/drivers/gpio/gpiolib.h" \
-    "$s/kernel/irq/irq_sim.c" "$s/Makefile"
+    "$s/kernel/irq/irq_sim.c" "$s/drivers/iio/dummy" "$s/drivers/iio/industrialio-configfs.c" \
+    "$s/drivers/iio/industrialio-sw-device.c" "$s/drivers/iio/industrialio-sw-trigger.c" \
+    "$s/drivers/iio/trigger/iio-trig-sysfs.c" "$s/drivers/iio/trigger/iio-trig-hrtimer.c" \
+    "$s/Makefile"
   s=$cache/src/$s
   # The source must be the headers' version (same SUBLEVEL).
   sub=$(sed -n 's/^SUBLEVEL = //p' "$s/Makefile")
   [[ $version == 6.1.$sub-* ]] || die "linux-source is 6.1.$sub but the kernel is $version"
   kbuild=""
+  iio_kbuild=""
   for m in "${want[@]}"; do
     case $m in
       vimc)
@@ -169,8 +192,30 @@ if [[ ${#want[@]} -gt 0 ]]; then
         printf '\nMODULE_DESCRIPTION("Interrupt simulator, built out of tree for the scaled VM tests");\nMODULE_LICENSE("GPL");\n' >>"$build/irq_sim.c"
         kbuild+="obj-m += irq_sim.o"$'\n'
         ;;
+      industrialio-configfs | industrialio-sw-device | industrialio-sw-trigger)
+        run cp "$s/drivers/iio/$m.c" "$build/iio/"
+        iio_kbuild+="obj-m += $m.o"$'\n'
+        ;;
+      iio-trig-sysfs | iio-trig-hrtimer)
+        run cp "$s/drivers/iio/trigger/$m.c" "$build/iio/"
+        iio_kbuild+="obj-m += $m.o"$'\n'
+        ;;
+      iio_dummy)
+        run cp "$s"/drivers/iio/dummy/iio_simple_dummy.[ch] \
+          "$s/drivers/iio/dummy/iio_simple_dummy_buffer.c" "$build/iio/"
+        # The buffer part is compiled in only when its Kconfig symbol is
+        # defined (iio_simple_dummy.h); out of tree, define it by hand.
+        iio_kbuild+="CFLAGS_iio_simple_dummy.o += -DCONFIG_IIO_SIMPLE_DUMMY_BUFFER"$'\n'
+        iio_kbuild+="CFLAGS_iio_simple_dummy_buffer.o += -DCONFIG_IIO_SIMPLE_DUMMY_BUFFER"$'\n'
+        iio_kbuild+="obj-m += iio_dummy.o"$'\n'
+        iio_kbuild+="iio_dummy-y := iio_simple_dummy.o iio_simple_dummy_buffer.o"$'\n'
+        ;;
     esac
   done
+  if [[ -n $iio_kbuild ]]; then
+    printf '%s' "$iio_kbuild" >"$build/iio/Kbuild"
+    kbuild+="obj-m += iio/"$'\n'
+  fi
   printf '%s' "$kbuild" >"$build/Kbuild"
   echo "fetch-kernel: building ${want[*]} for $krel" >&2
   run nice make -C "$headers" M="$build" CONFIG_VIDEO_VIMC=m -j2 modules
@@ -192,6 +237,7 @@ done
   echo "ROOT=$root"
   echo "VMLINUZ=$vmlinuz"
   echo "BUILT=${want[*]}"
+  echo "FORMAT=$format"
 } >"$ready.tmp"
 mv "$ready.tmp" "$ready"
 echo "fetch-kernel: $krel ($version) ready in $cache, $(($(date +%s) - start_s)) s" >&2

@@ -6,7 +6,8 @@
 # Mounts the kernel filesystems, the host's /usr and /etc (9p, read-only, with
 # a tmpfs overlay so the guest may write), the kernel modules root and every
 # share the host asked for at its host path; loads the kernel's virtual
-# devices (vivid, vimc, gpio-sim with a live chip "scaled-leds", gpio-mockup);
+# devices (vivid, vimc, gpio-sim with a live chip "scaled-leds", gpio-mockup,
+# iio_dummy with the sysfs and hrtimer IIO triggers);
 # marks the video and media nodes as udev-initialised for libcamera; then runs
 # the host's command file with stdout/stderr on the console, records its exit
 # code in the control share and powers off.
@@ -137,6 +138,11 @@ step "gpio-sim: label" put "$sim/bank0/label" scaled-leds
 step "gpio-sim: live" put "$sim/live" 1
 # A second, independent chip; nothing needs it yet, so it is not fatal.
 mp gpio-mockup gpio_mockup_ranges=-1,4 gpio_mockup_named_lines=1 || say "gpio-mockup not loaded"
+# IIO: the dummy device (made through configfs by the imu test itself) and the
+# software triggers; only that test needs them, so not fatal here.
+mp iio_dummy || say "iio_dummy not loaded"
+mp iio-trig-sysfs || say "iio-trig-sysfs not loaded"
+mp iio-trig-hrtimer || say "iio-trig-hrtimer not loaded"
 
 # libcamera only lists devices that udev has initialised; there is no udevd.
 step "mkdir /run/udev/data" mkdir -p /run/udev/data

@@ -15,18 +15,15 @@
 // Gravity per frame: Frame::gravity_down_C = R_CtoW^T * gravity_down_W when
 // gravity.txt and the frame's ground-truth pose are both known.
 //
-// Accelerometer convention: NOT ESTABLISHED. A TUM RGB-D accelerometer.txt
-// holds `timestamp ax ay az`, accelerations in m/s^2 from the Kinect's built-in
-// accelerometer. We could not find a source stating the orientation of those
-// axes relative to the colour camera, nor the sign (specific force, +g "up" at
-// rest, or gravity "down"): the benchmark's file-format page
-// (https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats) was not in
-// the reference text we could search, and the readers we found (e.g.
-// SLAMBench's TUM loader) copy the three values unchanged. So the readings are
-// exposed raw in Frame::accel_C and are NOT turned into a gravity direction;
-// gravity_down_C comes from ground truth only. Once the convention is
-// established (e.g. by comparing accel_C with the ground-truth gravity_down_C
-// on a TUM sequence that has both), a derivation can be added here.
+// Accelerometer convention: not documented by the benchmark, since MEASURED.
+// A TUM RGB-D accelerometer.txt holds `timestamp ax ay az`, accelerations in
+// m/s^2 from the Kinect's built-in accelerometer. Compared with the ground
+// truth on a TUM fr1 sequence, gravity (down) in the colour camera's optical
+// frame is (ax, ay, -az) / |a|. drivers/imu/imu_log.h reads the file as IMU
+// samples with that mapping (tumKinectImuToCamera) and core/geometry/gravity.h
+// turns a still window into a direction (docs/imu.md). Here the readings are
+// still exposed raw in Frame::accel_C and are NOT turned into a gravity
+// direction: gravity_down_C comes from ground truth only.
 //
 // File names in rgb.txt/depth.txt are relative to the dataset directory and may
 // not contain spaces. See frame_source.h for the error format and for what
