@@ -12,6 +12,7 @@
 #include <scaled/core/scale/likelihood.h>
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/drivers/depth_image.h>
+#include <scaled/drivers/imu/map_gravity.h>
 #include <scaled/vision/mono_tracker.h>
 
 namespace scaled::tools {
@@ -364,6 +365,10 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
     std::optional<double> epoch_baseline_single;
     double epoch_t0_s = 0;
     int frames_in_map = 0;
+    const auto gravity = drivers::imu::MapGravitySelector::forDataset(info.dir);
+    if (!gravity) {
+        return gravity.error();
+    }
     bool need_gravity = true;
 
     // Depth errors per update, filtered to the converged updates at the end.
@@ -389,13 +394,9 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
         }
         ++r.frames;
         if (need_gravity) {
-            Vec3 down_C(0, 1, 0);
-            r.gravity_source = "assumed level camera (down = +y)";
-            if (frame.gravity_down_C) {
-                down_C = *frame.gravity_down_C;
-                r.gravity_source = "dataset gravity and ground-truth pose";
-            }
-            tracker->setGravityDownC(down_C);
+            const drivers::imu::MapGravity g = gravity->atMapStart(frame);
+            r.gravity_source = g.source;
+            tracker->setGravityDownC(g.down_C);
             need_gravity = false;
         }
         auto t0 = Clock::now();

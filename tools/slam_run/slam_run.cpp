@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include <scaled/core/geometry/trajectory_alignment.h>
+#include <scaled/drivers/imu/map_gravity.h>
 
 #include "json.h"
 
@@ -76,6 +77,10 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
     if (auto s = source.seek(options.first_frame); !s) {
         return s.error();
     }
+    const auto gravity = drivers::imu::MapGravitySelector::forDataset(info.dir);
+    if (!gravity) {
+        return gravity.error();
+    }
     SlamRunResult result;
     std::vector<Segment> segments(1);
     drivers::Frame frame;
@@ -94,14 +99,9 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
         }
         if (need_gravity) {
             // The vertical in the frame of the camera that starts the map.
-            Vec3 down_C(0, 1, 0);
-            result.gravity_source = "assumed level camera (down = +y)";
-            if (frame.gravity_down_C) {
-                // The dataset's gravity rotated by this frame's ground-truth pose.
-                down_C = *frame.gravity_down_C;
-                result.gravity_source = "dataset gravity and ground-truth pose";
-            }
-            tracker->setGravityDownC(down_C);
+            const drivers::imu::MapGravity g = gravity->atMapStart(frame);
+            result.gravity_source = g.source;
+            tracker->setGravityDownC(g.down_C);
             need_gravity = false;
         }
         const auto t0 = std::chrono::steady_clock::now();
