@@ -1,7 +1,8 @@
 // Tracker cost per frame (front end + EKF, detection excluded) at 640x480 with
 // 25, 50 and 100 features measured per frame, one thread: on rendered frames
 // of the synthetic room (always available) and on 7-Scenes redkitchen (when
-// ../shared is present); and corner detection alone on one frame of each.
+// ../shared is present; also at 10 Hz, and at 30 Hz without the pyramid and
+// relocalisation's descriptors); and corner detection alone on one frame of each.
 // Results: docs/benchmarks.md.
 
 #include <filesystem>
@@ -55,32 +56,49 @@ const Sequence& syntheticSequence() {
     return seq;
 }
 
-const Sequence* redkitchenSequence() {
-    static const std::unique_ptr<Sequence> seq = []() -> std::unique_ptr<Sequence> {
-        auto src = drivers::openDataset(test::sharedDataset("redkitchen"));
-        if (!src) {
+std::unique_ptr<Sequence> loadRedkitchen(int stride) {
+    auto src = drivers::openDataset(test::sharedDataset("redkitchen"));
+    if (!src) {
+        return nullptr;
+    }
+    auto s = std::make_unique<Sequence>();
+    s->camera = std::make_unique<core::PinholeRadialCamera>(
+        core::PinholeRadialCamera::create((*src)->info().intrinsics).value());
+    drivers::Frame f;
+    for (int i = 0; i < kFrames; ++i) {
+        if (!(*src)->seek(static_cast<std::size_t>(i * stride))) {
             return nullptr;
         }
-        auto s = std::make_unique<Sequence>();
-        s->camera = std::make_unique<core::PinholeRadialCamera>(
-            core::PinholeRadialCamera::create((*src)->info().intrinsics).value());
-        drivers::Frame f;
-        for (int i = 0; i < kFrames; ++i) {
-            auto got = (*src)->next(f);
-            if (!got || !*got) {
-                return nullptr;
-            }
-            s->t_ns.push_back(f.t_ns);
-            s->gray.push_back(f.gray.clone());
+        auto got = (*src)->next(f);
+        if (!got || !*got) {
+            return nullptr;
         }
-        return s;
-    }();
+        s->t_ns.push_back(f.t_ns);
+        s->gray.push_back(f.gray.clone());
+    }
+    return s;
+}
+
+// The first 150 frames of redkitchen (30 Hz), or every third of the first 450
+// (10 Hz: the coarse-to-fine search at work).
+const Sequence* redkitchenSequence() {
+    static const std::unique_ptr<Sequence> seq = loadRedkitchen(1);
+    return seq.get();
+}
+const Sequence* redkitchen10HzSequence() {
+    static const std::unique_ptr<Sequence> seq = loadRedkitchen(3);
     return seq.get();
 }
 
-void runTracker(benchmark::State& state, const Sequence& seq) {
+void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue21 = false) {
     const int n = static_cast<int>(state.range(0));
     vision::TrackerConfig config;
+    if (before_issue21) {
+        // No pyramid, no relocalisation (no descriptors kept): the tracker's
+        // work before issue 21, for the cost comparison.
+        config.pyramid_levels = 0;
+        config.relocalise_s = 0;
+    }
     config.slam.max_measured = n;
     config.slam.min_visible = n;
     config.slam.max_features = n + n / 2;
@@ -112,6 +130,26 @@ void BM_TrackerSynthetic(benchmark::State& state) {
 void BM_TrackerRedkitchen(benchmark::State& state) {
     cv::setNumThreads(1);
     const Sequence* seq = redkitchenSequence();
+    if (seq == nullptr) {
+        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
+        return;
+    }
+    runTracker(state, *seq);
+}
+
+void BM_TrackerRedkitchenNoPyramid(benchmark::State& state) {
+    cv::setNumThreads(1);
+    const Sequence* seq = redkitchenSequence();
+    if (seq == nullptr) {
+        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
+        return;
+    }
+    runTracker(state, *seq, true);
+}
+
+void BM_TrackerRedkitchen10Hz(benchmark::State& state) {
+    cv::setNumThreads(1);
+    const Sequence* seq = redkitchen10HzSequence();
     if (seq == nullptr) {
         state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
         return;
@@ -151,6 +189,8 @@ BENCHMARK(BM_CornersSynthetic)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond)
 BENCHMARK(BM_CornersRedkitchen)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_TrackerSynthetic)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerRedkitchenNoPyramid)->Arg(30)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerRedkitchen10Hz)->Arg(30)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -669,7 +669,9 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
     const auto report = slam_.update(matches_);
     if (!report.bad_frame) {
         last_good_pose_ = slam_.pose();  // where relocalisation's guided search looks
-        refreshDescriptors(gray, preds);
+        if (config_.relocalise_s > 0) {
+            refreshDescriptors(gray, preds);
+        }
     }
     stats.update_us = lap.next();
     stats.predicted = report.predicted;
