@@ -5,6 +5,7 @@
 
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pose.h>
+#include <scaled/drivers/imu/map_gravity.h>
 
 namespace scaled::daemon {
 
@@ -55,8 +56,20 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
         return makeError(ErrorCode::kInvalidArgument,
                          "pipeline.capture_queue_frames: must be at least 1");
     }
+    // A replayed sequence's maps take their vertical as slam-run and
+    // scale-eval do: its accelerometer log, its gravity and ground truth, a
+    // level camera (drivers::imu::MapGravitySelector).
+    std::optional<drivers::imu::MapGravitySelector> gravity;
+    if (parts.live == nullptr && !info.dir.empty()) {
+        auto g = drivers::imu::MapGravitySelector::forDataset(info.dir);
+        if (!g) {
+            return g.error();
+        }
+        gravity = std::move(*g);
+    }
     core::PriorTable priors = std::move(parts.priors);
     std::unique_ptr<Pipeline> p(new Pipeline(config, std::move(parts), hub, events, *camera));
+    p->gravity_selector_ = std::move(gravity);
     auto tracker = vision::MonoTracker::create(*camera, config.pipeline.tracker);
     if (!tracker) {
         return tracker.error();
@@ -476,13 +489,23 @@ void Pipeline::trackingLoop() {
         have_last = true;
         last_t_ns = frame.t_ns;
         if (need_gravity) {
-            core::Vec3 down_C(0, 1, 0);  // a level camera
+            drivers::imu::MapGravity g;
             if (gravity_override) {
-                down_C = *gravity_override;
+                g.down_C = *gravity_override;
+                g.source = "set_gravity request";
+            } else if (gravity_selector_) {
+                g = gravity_selector_->atMapStart(frame);
             } else if (frame.gravity_down_C) {
-                down_C = *frame.gravity_down_C;
+                g.down_C = *frame.gravity_down_C;
+                g.source = "dataset gravity and ground-truth pose";
+            } else {
+                g.source = "assumed level camera (down = +y)";
             }
-            tracker.setGravityDownC(down_C);
+            tracker.setGravityDownC(g.down_C);
+            {
+                const std::lock_guard lock(report_mutex_);
+                status_.gravity_source = g.source;
+            }
             need_gravity = false;
         }
         const std::int64_t t0 = monotonicNowNs();

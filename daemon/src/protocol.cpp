@@ -204,6 +204,10 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
                   const ClientCounts& clients) {
     out += R"({"class":"STATUS","source":)";
     appendJsonString(out, s.source);
+    if (!s.gravity_source.empty()) {
+        key(out, "gravity_source");
+        appendJsonString(out, s.gravity_source);
+    }
     key(out, "uptime_s");
     appendJsonNumber(out, s.uptime_s);
     key(out, "fps");

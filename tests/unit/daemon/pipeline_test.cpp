@@ -374,6 +374,8 @@ TEST(Pipeline, StatusReportsStageTimes) {
     ASSERT_EQ(st.frames_tracked, 90U);
     ASSERT_EQ(st.epoch, 1U);  // one map: the sample counts below hold exactly
     ASSERT_GT(st.scale_updates, 0U);
+    // The sim knows its gravity (its frames carry it, like a dataset's).
+    EXPECT_EQ(st.gravity_source, "dataset gravity and ground-truth pose");
     const PipelineTiming& t = st.timing;
     const std::pair<const char*, const StageTiming*> stages[] = {
         {"predict", &t.predict},

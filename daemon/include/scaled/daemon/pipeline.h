@@ -48,6 +48,7 @@
 #include <scaled/detector/object_detector.h>
 #include <scaled/drivers/camera.h>
 #include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/imu/map_gravity.h>
 #include <scaled/vision/mono_tracker.h>
 
 namespace scaled::daemon {
@@ -217,6 +218,8 @@ private:
     std::unique_ptr<drivers::FrameSource> source_;
     drivers::LiveCamera* live_ = nullptr;  // source_ when it is a live camera
     std::string source_name_;
+    // The vertical of a replayed sequence's maps (empty for live sources).
+    std::optional<drivers::imu::MapGravitySelector> gravity_selector_;
     // Wakes the capture thread's reconnect backoff at stop().
     std::mutex stop_mutex_;
     std::condition_variable stop_cv_;

@@ -99,7 +99,11 @@ struct PipelineTiming {
 
 // Pipeline health (protocol class STATUS).
 struct PipelineStatus {
-    std::string source;             // "sim", "replay:/path/to/dir", ...
+    std::string source;  // "sim", "replay:/path/to/dir", ...
+    // Where the current map's vertical came from ("accelerometer (...)",
+    // "dataset gravity and ground-truth pose", "set_gravity request",
+    // "assumed level camera (down = +y)"); empty before the first map.
+    std::string gravity_source;
     std::int64_t frame_id = -1;     // last tracked frame
     std::int64_t frames_total = 0;  // frames the source has (replay), 0 when unbounded
     bool source_finished = false;   // replay reached its end (the daemon keeps serving)
