@@ -59,7 +59,9 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
     // A replayed sequence's maps take their vertical as slam-run and
     // scale-eval do: its accelerometer log, its gravity and ground truth, a
     // level camera (drivers::imu::MapGravitySelector).
-    std::optional<drivers::imu::MapGravitySelector> gravity;
+    // A live source has no log: the selector then takes the frame's gravity
+    // or a level camera.
+    drivers::imu::MapGravitySelector gravity;
     if (parts.live == nullptr && !info.dir.empty()) {
         auto g = drivers::imu::MapGravitySelector::forDataset(info.dir);
         if (!g) {
@@ -493,13 +495,8 @@ void Pipeline::trackingLoop() {
             if (gravity_override) {
                 g.down_C = *gravity_override;
                 g.source = "set_gravity request";
-            } else if (gravity_selector_) {
-                g = gravity_selector_->atMapStart(frame);
-            } else if (frame.gravity_down_C) {
-                g.down_C = *frame.gravity_down_C;
-                g.source = "dataset gravity and ground-truth pose";
             } else {
-                g.source = "assumed level camera (down = +y)";
+                g = gravity_selector_.atMapStart(frame);
             }
             tracker.setGravityDownC(g.down_C);
             {

@@ -66,7 +66,7 @@ std::unique_ptr<Sequence> loadRedkitchen(int stride) {
         core::PinholeRadialCamera::create((*src)->info().intrinsics).value());
     drivers::Frame f;
     for (int i = 0; i < kFrames; ++i) {
-        if (!(*src)->seek(static_cast<std::size_t>(i * stride))) {
+        if (!(*src)->seek(static_cast<std::size_t>(i) * static_cast<std::size_t>(stride))) {
             return nullptr;
         }
         auto got = (*src)->next(f);
@@ -127,34 +127,27 @@ void BM_TrackerSynthetic(benchmark::State& state) {
     runTracker(state, syntheticSequence());
 }
 
-void BM_TrackerRedkitchen(benchmark::State& state) {
+// The tracker on a redkitchen sequence, or the benchmark skipped with the
+// reason when ../shared is absent.
+void runTrackerOn(benchmark::State& state, const Sequence* seq, bool before_issue21 = false) {
     cv::setNumThreads(1);
-    const Sequence* seq = redkitchenSequence();
     if (seq == nullptr) {
         state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
         return;
     }
-    runTracker(state, *seq);
+    runTracker(state, *seq, before_issue21);
+}
+
+void BM_TrackerRedkitchen(benchmark::State& state) {
+    runTrackerOn(state, redkitchenSequence());
 }
 
 void BM_TrackerRedkitchenNoPyramid(benchmark::State& state) {
-    cv::setNumThreads(1);
-    const Sequence* seq = redkitchenSequence();
-    if (seq == nullptr) {
-        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
-        return;
-    }
-    runTracker(state, *seq, true);
+    runTrackerOn(state, redkitchenSequence(), true);
 }
 
 void BM_TrackerRedkitchen10Hz(benchmark::State& state) {
-    cv::setNumThreads(1);
-    const Sequence* seq = redkitchen10HzSequence();
-    if (seq == nullptr) {
-        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
-        return;
-    }
-    runTracker(state, *seq);
+    runTrackerOn(state, redkitchen10HzSequence());
 }
 
 // Corner detection alone, as the tracker calls it in steady state: a frame at

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 
 #include <gtest/gtest.h>
 
@@ -13,14 +14,24 @@
 namespace scaled::tools {
 namespace {
 
+// slam-run's library over redkitchen with these options.
+core::Result<SlamRunResult> runRedkitchen(const std::filesystem::path& dir,
+                                          const SlamRunOptions& opt) {
+    auto source = drivers::openDataset(dir);
+    if (!source) {
+        return source.error();
+    }
+    auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
+    if (!camera) {
+        return camera.error();
+    }
+    return runSlam(**source, *camera, opt);
+}
+
 TEST(SlamRedkitchen, TracksEveryFrameWithSmallErrorAndDrift) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
-    auto source = drivers::openDataset(dir);
-    ASSERT_TRUE(source.ok()) << source.error().message;
-    auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
-    ASSERT_TRUE(camera.ok());
     SlamRunOptions opt;  // the defaults slam-run uses
-    const auto r = runSlam(**source, *camera, opt);
+    const auto r = runRedkitchen(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf(
         "redkitchen: %zu/%zu tracked, %d re-init, ATE %.4f m of %.3f m (%.2f%%), "
@@ -42,13 +53,9 @@ TEST(SlamRedkitchen, TracksEveryFrameWithSmallErrorAndDrift) {
 // trajectory in one frame and scale over both parts.
 TEST(SlamRedkitchen, ACoveredLensIsRecoveredInTheSameMap) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
-    auto source = drivers::openDataset(dir);
-    ASSERT_TRUE(source.ok()) << source.error().message;
-    auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
-    ASSERT_TRUE(camera.ok());
     SlamRunOptions opt;
     opt.selection.blank.push_back({300, 320});
-    const auto r = runSlam(**source, *camera, opt);
+    const auto r = runRedkitchen(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf(
         "redkitchen, frames 300-319 black: %d relocalisation(s) after %d frames, %d re-init, "
@@ -68,13 +75,9 @@ TEST(SlamRedkitchen, ACoveredLensIsRecoveredInTheSameMap) {
 // times larger; the coarse-to-fine search keeps every frame tracked in one map.
 TEST(SlamRedkitchen, TenHertzIsTrackedInOneMap) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
-    auto source = drivers::openDataset(dir);
-    ASSERT_TRUE(source.ok()) << source.error().message;
-    auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
-    ASSERT_TRUE(camera.ok());
     SlamRunOptions opt;
     opt.selection.stride = 3;
-    const auto r = runSlam(**source, *camera, opt);
+    const auto r = runRedkitchen(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf("redkitchen at 10 Hz: %zu/%zu tracked, %d re-init, ATE %.2f%%\n", r->tracked_frames,
                 r->frames, r->reinitialisations, 100 * r->ate_rmse_m / r->path_length_m);

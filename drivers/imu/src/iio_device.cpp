@@ -10,6 +10,7 @@
 #include <poll.h>
 #include <string>
 #include <system_error>
+#include <type_traits>
 #include <unistd.h>
 #include <utility>
 
@@ -138,32 +139,32 @@ Result<bool> writeAttr(const fs::path& path, std::string_view value) {
     return true;
 }
 
-Result<int64_t> readIntAttr(const fs::path& path) {
+// A sysfs attribute holding one number of type T (integer, or a finite real).
+template <typename T>
+Result<T> readNumericAttr(const fs::path& path, const char* what) {
     auto text = readAttr(path);
     if (!text) {
         return text.error();
     }
-    int64_t v = 0;
+    T v = 0;
     const char* end = text->data() + text->size();
     const auto [ptr, ec] = std::from_chars(text->data(), end, v);
-    if (ec != std::errc() || ptr != end || text->empty()) {
-        return makeError(ErrorCode::kParse, path.string() + ": not an integer: " + quote(*text));
+    bool ok = ec == std::errc() && ptr == end && !text->empty();
+    if constexpr (std::is_floating_point_v<T>) {
+        ok = ok && std::isfinite(v);
+    }
+    if (!ok) {
+        return makeError(ErrorCode::kParse, path.string() + ": not " + what + ": " + quote(*text));
     }
     return v;
 }
 
+Result<int64_t> readIntAttr(const fs::path& path) {
+    return readNumericAttr<int64_t>(path, "an integer");
+}
+
 Result<double> readNumberAttr(const fs::path& path) {
-    auto text = readAttr(path);
-    if (!text) {
-        return text.error();
-    }
-    double v = 0;
-    const char* end = text->data() + text->size();
-    const auto [ptr, ec] = std::from_chars(text->data(), end, v);
-    if (ec != std::errc() || ptr != end || text->empty() || !std::isfinite(v)) {
-        return makeError(ErrorCode::kParse, path.string() + ": not a number: " + quote(*text));
-    }
-    return v;
+    return readNumericAttr<double>(path, "a number");
 }
 
 bool pathExists(const fs::path& path) {

@@ -41,7 +41,7 @@ core::Result<bool> validate(const TrackerConfig& c) {
     if (auto ok = slam::validate(c.slam); !ok) {
         return ok.error();
     }
-    auto bad = [](const std::string& key, int v, const char* allowed) {
+    auto bad = [](const std::string& key, auto v, const char* allowed) {
         return core::makeError(
             core::ErrorCode::kInvalidArgument,
             "tracker." + key + " = " + std::to_string(v) + ": must be " + allowed);
@@ -63,18 +63,13 @@ core::Result<bool> validate(const TrackerConfig& c) {
         return bad("max_new_per_frame", c.max_new_per_frame, "in [1, slam.max_features]");
     }
     if (!(c.relocalise_s >= 0 && c.relocalise_s <= 3600)) {
-        return core::makeError(
-            core::ErrorCode::kInvalidArgument,
-            "tracker.relocalise_s = " + std::to_string(c.relocalise_s) + ": must be in [0, 3600]");
+        return bad("relocalise_s", c.relocalise_s, "in [0, 3600]");
     }
     if (c.relocalise_min_inliers < 4 || c.relocalise_min_inliers > 1000) {
         return bad("relocalise_min_inliers", c.relocalise_min_inliers, "in [4, 1000]");
     }
     if (!(c.relocalise_reproj_px > 0 && c.relocalise_reproj_px <= 100)) {
-        return core::makeError(
-            core::ErrorCode::kInvalidArgument,
-            "tracker.relocalise_reproj_px = " + std::to_string(c.relocalise_reproj_px) +
-                ": must be in (0, 100]");
+        return bad("relocalise_reproj_px", c.relocalise_reproj_px, "in (0, 100]");
     }
     if (c.relocalise_max_brief_distance < 0 || c.relocalise_max_brief_distance > 256) {
         return bad("relocalise_max_brief_distance", c.relocalise_max_brief_distance, "in [0, 256]");
@@ -89,22 +84,16 @@ core::Result<bool> validate(const TrackerConfig& c) {
         return bad("coarse_max_search_pixels", c.coarse_max_search_pixels, "in [1, 1000000]");
     }
     if (!(c.coarse_min_fraction >= 0 && c.coarse_min_fraction <= 1)) {
-        return core::makeError(core::ErrorCode::kInvalidArgument,
-                               "tracker.coarse_min_fraction = " +
-                                   std::to_string(c.coarse_min_fraction) + ": must be in [0, 1]");
+        return bad("coarse_min_fraction", c.coarse_min_fraction, "in [0, 1]");
     }
     if (c.pyramid_levels < 0 || c.pyramid_levels > 3) {
         return bad("pyramid_levels", c.pyramid_levels, "in [0, 3]");
     }
     if (!(c.coarse_min_ncc > -1 && c.coarse_min_ncc < 1)) {
-        return core::makeError(core::ErrorCode::kInvalidArgument,
-                               "tracker.coarse_min_ncc = " + std::to_string(c.coarse_min_ncc) +
-                                   ": must be in (-1, 1)");
+        return bad("coarse_min_ncc", c.coarse_min_ncc, "in (-1, 1)");
     }
     if (!(c.match.min_ncc > -1 && c.match.min_ncc < 1)) {
-        return core::makeError(
-            core::ErrorCode::kInvalidArgument,
-            "tracker.min_ncc = " + std::to_string(c.match.min_ncc) + ": must be in (-1, 1)");
+        return bad("min_ncc", c.match.min_ncc, "in (-1, 1)");
     }
     return true;
 }

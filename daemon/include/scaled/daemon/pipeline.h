@@ -218,8 +218,8 @@ private:
     std::unique_ptr<drivers::FrameSource> source_;
     drivers::LiveCamera* live_ = nullptr;  // source_ when it is a live camera
     std::string source_name_;
-    // The vertical of a replayed sequence's maps (empty for live sources).
-    std::optional<drivers::imu::MapGravitySelector> gravity_selector_;
+    // The vertical of each new map (a replayed sequence's IMU log first).
+    drivers::imu::MapGravitySelector gravity_selector_;
     // Wakes the capture thread's reconnect backoff at stop().
     std::mutex stop_mutex_;
     std::condition_variable stop_cv_;
