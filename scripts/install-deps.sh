@@ -28,7 +28,7 @@ packages=(
   # tools, V4L2 and GPIO command-line tools. No kernel is installed on the host:
   # tests/vm/fetch-kernel.sh unpacks Debian's kernel package into the build tree.
   qemu-system-x86 busybox-static linux-source-6.1 bc flex bison libelf-dev libssl-dev
-  xz-utils kmod libcamera-ipa libcamera-tools v4l-utils gpiod
+  xz-utils patch kmod libcamera-ipa libcamera-tools v4l-utils gpiod
 )
 
 # aarch64 cross build of core and its tests, run under qemu-user (presets

@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <ctime>
@@ -15,6 +16,7 @@
 
 #include <scaled/daemon/app.h>
 #include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/log_service.h>
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/report.h>
@@ -257,6 +259,7 @@ private:
     void tick(std::int64_t now_ns);
     void teardown(const char* reason);
     void openLights();
+    void openImu();
 
     CommandLine cli_;
     DaemonConfig config_;
@@ -265,6 +268,8 @@ private:
     std::unique_ptr<LogService> log_;
     std::unique_ptr<LogEvents> events_;
     std::unique_ptr<StatusLights> lights_;
+    std::unique_ptr<ImuService> imu_;
+    std::string imu_error_;
     std::unique_ptr<SocketService> socket_;
     std::unique_ptr<Pipeline> pipeline_;
     bool tty_ = false;
@@ -312,6 +317,9 @@ int Daemon::run() {
     // 2b. The status LEDs. Without them the daemon runs on: one line says why.
     openLights();
 
+    // 2c. The IMU. Without it the daemon runs on: one line says why.
+    openImu();
+
     // 3. Source, detector, priors.
     PipelineParts parts;
     if (auto f = openParts(config_, parts)) {
@@ -320,6 +328,8 @@ int Daemon::run() {
         teardown("start failed");
         return f->exit_code;
     }
+    parts.imu = imu_.get();
+    parts.imu_error = imu_error_;
 
     // 4. The socket.
     auto sock = SocketService::create(config_.socket, *hub_, version());
@@ -408,6 +418,32 @@ void Daemon::openLights() {
     lights_->setPattern(LightPattern::kStarting);
     lights_->start();
     printInfo("gpio: status LEDs on " + lights_->describe());
+}
+
+void Daemon::openImu() {
+    if (config_.imu.device.empty()) {
+        return;
+    }
+    auto imu = ImuService::open(config_.imu);
+    if (!imu) {
+        imu_error_ = imu.error().message;
+        printError("imu: " + imu_error_ +
+                   " (running without the IMU: a new map's vertical comes from set_gravity, "
+                   "the dataset or a level camera)");
+        events_->onError("imu", imu_error_);
+        return;
+    }
+    imu_ = std::move(*imu);
+    imu_->start();
+    // The first map takes its vertical from the window before it: let the
+    // window fill (bounded; a silent device is reported, not waited for).
+    const int wait_ms = static_cast<int>(std::lround(config_.imu.window_s * 2000)) + 1000;
+    const bool filled = imu_->waitForWindow(wait_ms);
+    const ImuStatus st = imu_->status();
+    printInfo("imu: " + st.device + ", " + st.mode +
+              (filled ? std::string()
+                      : ": no full window of samples within " + std::to_string(wait_ms) + " ms" +
+                            (st.error.empty() ? "" : " (" + st.error + ")")));
 }
 
 void Daemon::tick(std::int64_t now_ns) {
@@ -510,6 +546,7 @@ void Daemon::teardown(const char* reason) {
     if (socket_) {
         socket_->stop();
     }
+    imu_.reset();     // after the pipeline that reads it: thread joined, buffer disabled
     lights_.reset();  // lines driven inactive and released
     if (events_) {
         events_->stop(reason);

@@ -10,6 +10,7 @@
 // a document or an override checks every key against the list, then the
 // caller runs its cross-field checks and commits the copy.
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -104,6 +105,44 @@ Field choice(const char* section, const char* key, E* target,
                     }
                 }
                 return std::string("\"?\"");
+            }};
+}
+
+// Exactly N numbers in [lo, hi], e.g. a row-major 3x3 matrix.
+template <std::size_t N>
+Field realArray(const char* section, const char* key, std::array<double, N>* target, double lo,
+                double hi) {
+    using drivers::toml_detail::num;
+    using drivers::toml_detail::show;
+    return {section, key,
+            [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
+                const auto* arr = n.as_array();
+                const std::string expected = "must be an array of " + std::to_string(N) +
+                                             " numbers in [" + num(lo) + ", " + num(hi) + "]";
+                if (arr == nullptr) {
+                    return expected + " (got " + show(n) + ")";
+                }
+                if (arr->size() != N) {
+                    return expected + " (got an array of " + std::to_string(arr->size()) + ")";
+                }
+                std::array<double, N> out{};
+                for (std::size_t i = 0; i < N; ++i) {
+                    const toml::node& e = (*arr)[i];
+                    const auto v = drivers::toml_detail::asNumber(e);
+                    if (!v || !std::isfinite(*v) || *v < lo || *v > hi) {
+                        return expected + ": entry " + std::to_string(i) + " (got " + show(e) + ")";
+                    }
+                    out[i] = *v;
+                }
+                *target = out;
+                return std::nullopt;
+            },
+            [=] {
+                std::string s = "[";
+                for (std::size_t i = 0; i < N; ++i) {
+                    s += (i > 0 ? ", " : "") + num((*target)[i]);
+                }
+                return s + "]";
             }};
 }
 

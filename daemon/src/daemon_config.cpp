@@ -3,6 +3,9 @@
 // line (CLI11; its exceptions stay in parseCommandLine).
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <exception>
@@ -87,6 +90,33 @@ Field socketMode(unsigned* target) {
             [=] { return "\"" + octal(*target) + "\""; }};
 }
 
+// imu.rotation_imu_to_camera: a proper rotation, as core::estimateGravityDown
+// demands (max |R^T R - I| <= 1e-3, det > 0); the message says which fails.
+std::optional<std::string> rotationProblem(const std::array<double, 9>& r) {
+    double worst = 0;
+    for (std::size_t i = 0; i < 3; ++i) {
+        for (std::size_t j = 0; j < 3; ++j) {
+            double dot = 0;
+            for (std::size_t k = 0; k < 3; ++k) {
+                dot += r[k * 3 + i] * r[k * 3 + j];
+            }
+            worst = std::max(worst, std::abs(dot - (i == j ? 1.0 : 0.0)));
+        }
+    }
+    const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
+                       r[2] * (r[3] * r[7] - r[4] * r[6]);
+    if (worst > 1e-3) {
+        return "must be a rotation, row-major (orthonormal rows: max |R^T R - I| <= 0.001) (got "
+               "max |R^T R - I| = " +
+               drivers::toml_detail::num(worst) + ")";
+    }
+    if (det <= 0) {
+        return "must be a rotation, row-major (determinant +1, not a reflection) (got det = " +
+               drivers::toml_detail::num(det) + ")";
+    }
+    return std::nullopt;
+}
+
 std::vector<Field> daemonFields(DaemonConfig& c) {
     using config_detail::boolean;
     using config_detail::choice;
@@ -120,6 +150,7 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
     }
     auto& m = c.camera;
     auto& g = c.gpio;
+    auto& u = c.imu;
     auto& q = c.queues;
     auto& k = c.socket;
     auto& l = c.log;
@@ -148,6 +179,13 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         integer("gpio", "heartbeat_line", &g.heartbeat_line, -1, 4095),
         boolean("gpio", "active_low", &g.active_low),
         text("gpio", "consumer", &g.consumer),
+        text("imu", "device", &u.device),
+        choice("imu", "mode", &u.mode, {{"sysfs", ImuMode::kSysfs}, {"buffer", ImuMode::kBuffer}}),
+        real("imu", "rate_hz", &u.rate_hz, 1, 10000),
+        text("imu", "trigger", &u.trigger),
+        integer("imu", "buffer_length", &u.buffer_length, 2, 65536),
+        config_detail::realArray("imu", "rotation_imu_to_camera", &u.rotation_imu_to_camera, -1, 1),
+        real("imu", "window_s", &u.window_s, 0.05, 10),
         integer("pipeline", "capture_queue_frames", &q.capture_queue_frames, 1, 1000),
         integer("pipeline", "status_interval_ms", &q.status_interval_ms, 100, 60000),
         path("socket", "path", &k.path),
@@ -225,6 +263,9 @@ Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where) {
                           "required when gpio.status_line or gpio.heartbeat_line is set "
                           "(a path, name or label) (got \"\")");
     }
+    if (auto bad = rotationProblem(c.imu.rotation_imu_to_camera)) {
+        return checkError(where, {"imu.rotation_imu_to_camera"}, *bad);
+    }
     const std::string socket_path = c.socket.path.string();
     if (socket_path.empty() || socket_path.size() > kMaxSocketPathBytes) {
         return checkError(where, {"socket.path"},
@@ -280,6 +321,10 @@ const char* toString(SourceKind kind) {
             return "libcamera";
     }
     return "?";
+}
+
+const char* toString(ImuMode mode) {
+    return mode == ImuMode::kBuffer ? "buffer" : "sysfs";
 }
 
 DaemonConfig defaultDaemonConfig() {

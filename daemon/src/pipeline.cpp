@@ -148,6 +148,7 @@ Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& h
       detector_(std::move(parts.detector)),
       schedule_(config.pipeline.detection),
       lossless_(parts.lossless) {
+    imu_ = parts.imu;
     status_.source = source_name_;
     status_.frames_total = static_cast<std::int64_t>(source_->info().frame_count);
     if (live_ != nullptr) {
@@ -156,6 +157,16 @@ Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& h
         status_.camera_mode = live_->mode();
     }
     report_.fault.reserve(256);
+    if (imu_ != nullptr) {
+        status_.imu = imu_->status();
+        imu_label_ = status_.imu.device;
+        imu_samples_.reserve(imu_->capacity());
+    } else if (!config.imu.device.empty()) {
+        status_.imu.configured = true;
+        status_.imu.device = config.imu.device;
+        status_.imu.mode = toString(config.imu.mode);
+        status_.imu.error = parts.imu_error;
+    }
 }
 
 Pipeline::~Pipeline() {
@@ -495,6 +506,15 @@ void Pipeline::trackingLoop() {
             if (gravity_override) {
                 g.down_C = *gravity_override;
                 g.source = "set_gravity request";
+            } else if (imu_ != nullptr) {
+                imu_->copyRecent(imu_samples_);
+                drivers::imu::LiveAccelerometer live;
+                live.samples = imu_samples_;
+                live.R_ItoC = imu_->R_ItoC();
+                live.label = imu_label_;
+                live.now_ns = imu_->nowNs();
+                live.window_s = imu_->windowS();
+                g = gravity_selector_.atMapStart(frame, live);
             } else {
                 g = gravity_selector_.atMapStart(frame);
             }
@@ -502,6 +522,9 @@ void Pipeline::trackingLoop() {
             {
                 const std::lock_guard lock(report_mutex_);
                 status_.gravity_source = g.source;
+                status_.gravity_down_C = std::array<double, 3>{static_cast<double>(g.down_C.x()),
+                                                               static_cast<double>(g.down_C.y()),
+                                                               static_cast<double>(g.down_C.z())};
             }
             need_gravity = false;
         }
@@ -860,6 +883,9 @@ void Pipeline::publishStatus(bool force) {
     status_.frames_dropped = dropped_.load();
     status_.source_finished = source_finished_.load();
     status_.uptime_s = static_cast<double>(now - start_mono_ns_) * 1e-9;
+    if (imu_ != nullptr) {
+        status_.imu = imu_->status();
+    }
     hub_.publishStatus(status_);
 }
 

@@ -208,6 +208,32 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         key(out, "gravity_source");
         appendJsonString(out, s.gravity_source);
     }
+    if (s.gravity_down_C) {
+        key(out, "gravity_down_C");
+        out += '[';
+        for (std::size_t i = 0; i < 3; ++i) {
+            if (i > 0) {
+                out += ',';
+            }
+            appendJsonNumber(out, (*s.gravity_down_C)[i]);
+        }
+        out += ']';
+    }
+    if (s.imu.configured) {
+        out += R"(,"imu":{"device":)";
+        appendJsonString(out, s.imu.device);
+        key(out, "mode");
+        appendJsonString(out, s.imu.mode);
+        key(out, "samples");
+        appendJsonInt(out, s.imu.samples);
+        key(out, "errors");
+        appendJsonInt(out, s.imu.errors);
+        if (!s.imu.error.empty()) {
+            key(out, "error");
+            appendJsonString(out, s.imu.error);
+        }
+        out += '}';
+    }
     key(out, "uptime_s");
     appendJsonNumber(out, s.uptime_s);
     key(out, "fps");

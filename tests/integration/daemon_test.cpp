@@ -751,6 +751,64 @@ TEST_F(DaemonTest, UnwritableLogDirIsAFaultNotAStop) {
     EXPECT_TRUE((*st)["log"]["error"].is_string()) << st->dump();
 }
 
+// 12a. An IMU ([imu]): its accelerometer gives the first map its vertical
+// (STATUS gravity_source, gravity_down_C, imu). The device is a directory
+// laid out like /sys/bus/iio/devices/iio:deviceN (sysfs mode reads plain
+// attribute files; the kernel's own device is vm.daemon's): a body-axes IMU
+// (x forward, y left, z up) at rest on a level camera.
+TEST_F(DaemonTest, TheImuGivesTheFirstMapItsVertical) {
+    const fs::path dev = tmp_.path() / "iio" / "iio:device0";
+    fs::create_directories(dev);
+    writeFile(dev / "name", "lsm6dsl\n");
+    writeFile(dev / "current_timestamp_clock", "realtime\n");
+    writeFile(dev / "in_accel_x_raw", "0\n");
+    writeFile(dev / "in_accel_y_raw", "0\n");
+    writeFile(dev / "in_accel_z_raw", "16393\n");
+    writeFile(dev / "in_accel_scale", "0.000598\n");
+    ASSERT_TRUE(startSim({"--set", "imu.device=\"" + dev.string() + "\"", "--set",
+                          "imu.rotation_imu_to_camera=[0,-1,0, 0,0,-1, 1,0,0]"}));
+    Client c = client();
+    std::optional<Json> st;
+    const auto deadline = Clock::now() + Millis(30'000);
+    while (Clock::now() < deadline) {
+        st = status(c);
+        ASSERT_TRUE(st.has_value()) << c.lastLine();
+        if (st->contains("gravity_source")) {
+            break;
+        }
+    }
+    ASSERT_TRUE(st->contains("gravity_source")) << "no map within 30 s: " << st->dump();
+    EXPECT_EQ(str(*st, "gravity_source").rfind("accelerometer (iio:device0 [lsm6dsl], ", 0), 0U)
+        << st->dump();
+    ASSERT_TRUE((*st)["gravity_down_C"].is_array()) << st->dump();
+    EXPECT_NEAR((*st)["gravity_down_C"][0].get<double>(), 0, 1e-6);
+    EXPECT_NEAR((*st)["gravity_down_C"][1].get<double>(), 1, 1e-6);
+    EXPECT_NEAR((*st)["gravity_down_C"][2].get<double>(), 0, 1e-6);
+    EXPECT_EQ(str((*st)["imu"], "device"), "iio:device0 [lsm6dsl]") << st->dump();
+    EXPECT_EQ(str((*st)["imu"], "mode"), "sysfs 100 Hz") << st->dump();
+    EXPECT_GT((*st)["imu"]["samples"].get<std::int64_t>(), 0) << st->dump();
+    EXPECT_FALSE((*st)["imu"].contains("error")) << st->dump();
+}
+
+// 12a'. An IMU that is not there: said once on stderr and in STATUS.imu, and
+// the daemon runs on with the next source of the vertical.
+TEST_F(DaemonTest, AMissingImuIsReportedAndTheDaemonRunsOn) {
+    ASSERT_TRUE(startSim({"--set", "imu.device=\"bmi270\""}));
+    Client c = client();
+    ASSERT_TRUE(enableWatch(c, true));
+    ASSERT_TRUE(watchUntil(c, Millis(30'000), [](const Json& j) {
+        return j["frame_id"].get<std::int64_t>() > 5;
+    })) << "no frames";
+    ASSERT_TRUE(enableWatch(c, false));
+    const auto st = status(c);
+    ASSERT_TRUE(st.has_value());
+    EXPECT_EQ(str((*st)["imu"], "device"), "bmi270") << st->dump();
+    EXPECT_EQ((*st)["imu"]["samples"].get<std::int64_t>(), 0) << st->dump();
+    EXPECT_NE(str((*st)["imu"], "error").find("bmi270"), std::string::npos) << st->dump();
+    EXPECT_EQ(str(*st, "gravity_source"), "dataset gravity and ground-truth pose") << st->dump();
+    EXPECT_NE(readFile(paths().err).find("imu: "), std::string::npos);
+}
+
 // 12b. A camera that is not there (yet): the daemon starts, serves SCALE with
 // state "fault" naming the device, STATUS says the camera is lost, and it
 // stops cleanly. (Its return is tested with a real device in the VM.)

@@ -3,7 +3,8 @@
 # vivid camera as its V4L2 source and the gpio-sim chip "scaled-leds" as its
 # status LEDs, queried over its socket with scalectl:
 #   1. it starts, streams from vivid (STATUS names the card and the mode) and
-#      the heartbeat LED blinks;
+#      the heartbeat LED blinks; its map's vertical comes from the kernel's
+#      iio_dummy (patched into a 3-axis accelerometer) set to a known tilt;
 #   2. vivid is unbound (the device disappears): SCALE says "fault" naming the
 #      camera, the status LED blinks fast;
 #   3. vivid is bound again: the daemon reopens it by card name, without a
@@ -72,6 +73,20 @@ saw_both() { # saw_both LINE WINDOW_S
   return 1
 }
 
+# The IMU: the kernel's iio_dummy as fetch-kernel.sh patches it (a 3-axis
+# accelerometer whose axes are written in mm/s^2), made through configfs
+# (imu_vm_test may have made it in this boot already), reading what a camera
+# pitched 30 degrees down measures with the IMU's axes on the camera's:
+# f = -g (0, cos 30, sin 30) = (0, -8.493, -4.903) m/s^2.
+dummy_cfg=/sys/kernel/config/iio/devices/dummy
+[[ -d $dummy_cfg ]] || fail "no $dummy_cfg (iio_dummy not loaded: the VM setup is broken)"
+[[ -d $dummy_cfg/scaled-imu ]] || mkdir "$dummy_cfg/scaled-imu"
+imu_dir=$(dirname "$(grep -lx scaled-imu /sys/bus/iio/devices/iio:device*/name | head -n 1)")
+[[ -d $imu_dir ]] || fail "no IIO device named scaled-imu"
+echo 0 > "$imu_dir/in_accel_x_raw"
+echo -8493 > "$imu_dir/in_accel_y_raw"
+echo -4903 > "$imu_dir/in_accel_z_raw"
+
 cat > "$work/scaled.toml" <<EOF
 [source]
 kind = "v4l2"
@@ -92,6 +107,9 @@ cy_px = 239.5
 chip = "scaled-leds"
 status_line = 0
 heartbeat_line = 1
+[imu]
+device = "scaled-imu"
+rate_hz = 50
 [detector]
 model = "$model"
 [detection]
@@ -132,6 +150,19 @@ captured=$(field "$reply" frames.captured)
 wait_reply 60 status "j['frames']['captured'] > $captured"
 saw_both 1 8 || fail "the heartbeat LED (line 1) does not blink"
 echo "daemon_vm_test: streaming: $(field "$reply" camera.device), $(field "$reply" camera.mode), $(field "$reply" frames.captured) frames"
+
+# 1b. The map's vertical came from the IIO accelerometer.
+wait_reply 60 status '"gravity_source" in j and j["imu"]["samples"] > 0'
+[[ $(field "$reply" gravity_source) == "accelerometer (iio:device"*" [scaled-imu], "* ]] ||
+  fail "gravity_source: $(field "$reply" gravity_source) (imu: $(field "$reply" imu))"
+/usr/bin/python3 -c '
+import json, math, sys
+g = json.loads(sys.argv[1])["gravity_down_C"]
+want = (0.0, math.cos(math.radians(30)), 0.5)
+sys.exit(0 if max(abs(a - b) for a, b in zip(g, want)) < 1e-3 else 1)' "$reply" ||
+  fail "gravity_down_C $(field "$reply" gravity_down_C), want (0, 0.866, 0.5)"
+[[ -z $(field "$reply" imu.error) ]] || fail "imu.error: $(field "$reply" imu.error)"
+echo "daemon_vm_test: imu: $(field "$reply" imu.device), $(field "$reply" imu.samples) samples; gravity $(field "$reply" gravity_down_C) from $(field "$reply" gravity_source)"
 
 # 2. The camera disappears.
 vivid_dev=$(basename "$(readlink -f /sys/bus/platform/drivers/vivid/vivid.0)")

@@ -6,7 +6,8 @@
 # of the ABI that linux-image-amd64 depends on, unpacks them with dpkg -x into
 # CACHE_DIR/root, builds the test drivers Debian does not ship (vimc, gpio-sim,
 # gpio-mockup and the irq-sim they need; the IIO dummy device with its buffer,
-# the IIO configfs, software-device and software-trigger cores and the sysfs
+# patched into a 3-axis accelerometer (iio_dummy_accel_xyz.patch), the IIO
+# configfs, software-device and software-trigger cores and the sysfs
 # and hrtimer triggers) out of tree from the same version's linux-source-6.1,
 # installs them into ROOT/lib/modules/VER/extra and runs depmod so that
 # `modprobe -d ROOT` works in the guest.
@@ -22,6 +23,8 @@ if [[ $# -ne 1 ]]; then
   echo "usage: $0 CACHE_DIR" >&2
   exit 2
 fi
+
+here=$(cd "$(dirname "$0")" && pwd)
 
 skip() {
   echo "fetch-kernel: skip: $*" >&2
@@ -43,7 +46,8 @@ run() {
 
 # What the cache holds; bump it when the set of modules built here changes.
 # 2: the IIO modules (iio_dummy and friends) added.
-format=2
+# 3: iio_dummy patched into a 3-axis accelerometer (iio_dummy_accel_xyz.patch).
+format=3
 
 mkdir -p "$1" || die "cannot create cache directory $1"
 cache=$(cd "$1" && pwd -P)
@@ -203,6 +207,10 @@ if [[ ${#want[@]} -gt 0 ]]; then
       iio_dummy)
         run cp "$s"/drivers/iio/dummy/iio_simple_dummy.[ch] \
           "$s/drivers/iio/dummy/iio_simple_dummy_buffer.c" "$build/iio/"
+        # A 3-axis accelerometer whose axes the tests set (the daemon's
+        # [imu] in vm.daemon): in_accel_{y,z}_raw, writable raw values and
+        # in_accel_scale. The patch names what it changes.
+        run patch -p1 --forward -d "$build/iio" -i "$here/iio_dummy_accel_xyz.patch"
         # The buffer part is compiled in only when its Kconfig symbol is
         # defined (iio_simple_dummy.h); out of tree, define it by hand.
         iio_kbuild+="CFLAGS_iio_simple_dummy.o += -DCONFIG_IIO_SIMPLE_DUMMY_BUFFER"$'\n'

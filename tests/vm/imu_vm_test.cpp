@@ -4,13 +4,15 @@
 // SCALED_VM=1. Elsewhere every test skips; in the VM a missing module fails.
 //
 // The device is the kernel's dummy, made here through configfs
-// (/sys/kernel/config/iio/devices/dummy/scaled-imu). It has ONE accelerometer
-// axis (in_accel_x_raw = 34, no scale; 344 in the buffer), a voltage channel
+// (/sys/kernel/config/iio/devices/dummy/scaled-imu), as fetch-kernel.sh builds
+// it with iio_dummy_accel_xyz.patch: a 3-axis accelerometer in sysfs
+// (in_accel_{x,y,z}_raw, writable, x = 34 at creation, in_accel_scale
+// 0.001) of which only x is buffered (344 in the buffer), a voltage channel
 // with offset and scale (in_voltage0_raw 73, _offset 7, _scale 0.001333; 7
 // in the buffer, `le:u13/16>>0`), differential voltages and a soft
-// timestamp. So the 3-axis paths (readOnce, readSamples) are checked for
-// their errors here and for their values on the host (imu_tests); the
-// sysfs and buffer mechanics (attributes, scan elements, triggers, poll,
+// timestamp. So readOnce() is checked here with values the test writes, and
+// readSamples() for its error (its values on the host, imu_tests); the sysfs
+// and buffer mechanics (attributes, scan elements, triggers, poll,
 // decoding, timestamps) on the real kernel here.
 
 #include <cerrno>
@@ -124,10 +126,10 @@ TEST_F(ImuVmTest, OpensTheDummyByNameAndPath) {
         ASSERT_TRUE(again.ok()) << spec << ": " << again.error().message;
         EXPECT_EQ(again->name(), kName);
     }
-    for (const char* ch : {"accel_x", "voltage0", "timestamp"}) {
+    for (const char* ch : {"accel_x", "accel_y", "accel_z", "voltage0", "timestamp"}) {
         EXPECT_NE(dev->channel(ch), nullptr) << dev->describe();
     }
-    EXPECT_FALSE(dev->hasAccel()) << "the dummy has one accelerometer axis";
+    EXPECT_TRUE(dev->hasAccel()) << "the patched dummy has three accelerometer axes";
     EXPECT_FALSE(dev->hasGyro());
     // open() set the timestamp clock.
     EXPECT_EQ(readText(dev->sysfsDir() / "current_timestamp_clock"), "monotonic");
@@ -150,20 +152,32 @@ TEST_F(ImuVmTest, SysfsValuesWithOffsetAndScale) {
     auto volts = dev->readChannel("voltage0");
     ASSERT_TRUE(volts.ok()) << volts.error().message;
     EXPECT_DOUBLE_EQ(*volts, (73 + 7) * 0.001333);
-    // accel_x has no scale attribute: scale 1, offset 0.
+    // The accelerometer's shared scale (in_accel_scale), no offset.
     const IioChannel* a = dev->channel("accel_x");
     ASSERT_NE(a, nullptr);
-    EXPECT_FALSE(a->has_scale);
+    EXPECT_TRUE(a->has_scale);
+    EXPECT_DOUBLE_EQ(a->scale, 0.001);
+    EXPECT_DOUBLE_EQ(a->offset, 0);
+    // What the axes read is what the test writes (raw, mm/s^2).
+    std::string why;
+    ASSERT_TRUE(writeText(dev->sysfsDir() / "in_accel_x_raw", "-120", why)) << why;
+    ASSERT_TRUE(writeText(dev->sysfsDir() / "in_accel_y_raw", "4903", why)) << why;
+    ASSERT_TRUE(writeText(dev->sysfsDir() / "in_accel_z_raw", "8493", why)) << why;
     auto accel = dev->readChannel("accel_x");
     ASSERT_TRUE(accel.ok()) << accel.error().message;
-    EXPECT_EQ(*accel, 34);
-    // Not a 3-axis accelerometer: the error names the missing attributes.
+    EXPECT_DOUBLE_EQ(*accel, -0.12);
+    const int64_t before_ns = monotonicNs();
     auto once = dev->readOnce();
-    ASSERT_FALSE(once.ok());
-    EXPECT_EQ(once.error().code, ErrorCode::kNotFound);
-    EXPECT_NE(once.error().message.find((dev->sysfsDir() / "in_accel_y_raw").string()),
-              std::string::npos)
-        << once.error().message;
+    const int64_t after_ns = monotonicNs();
+    ASSERT_TRUE(once.ok()) << once.error().message;
+    EXPECT_NEAR(once->accel_mps2.x(), -0.120, 1e-6);
+    EXPECT_NEAR(once->accel_mps2.y(), 4.903, 1e-6);
+    EXPECT_NEAR(once->accel_mps2.z(), 8.493, 1e-6);
+    EXPECT_FALSE(once->gyro_radps.has_value());
+    EXPECT_GE(once->t_ns, before_ns);
+    EXPECT_LE(once->t_ns, after_ns);
+    // As created, for the buffer tests.
+    ASSERT_TRUE(writeText(dev->sysfsDir() / "in_accel_x_raw", "34", why)) << why;
 }
 
 TEST_F(ImuVmTest, BufferWithTheSysfsTrigger) {
@@ -202,7 +216,7 @@ TEST_F(ImuVmTest, BufferWithTheSysfsTrigger) {
         EXPECT_EQ(got[k].raw[0], 7);    // fakedata voltage0
         EXPECT_EQ(got[k].raw[1], 344);  // fakedata accel x
         EXPECT_DOUBLE_EQ(got[k].value[0], (7 + 7) * 0.001333);
-        EXPECT_DOUBLE_EQ(got[k].value[1], 344);
+        EXPECT_DOUBLE_EQ(got[k].value[1], 344 * 0.001);  // in_accel_scale
         // The kernel's timestamp, on CLOCK_MONOTONIC as open() asked.
         EXPECT_GE(got[k].t_ns, before_ns);
         EXPECT_LE(got[k].t_ns, after_ns);

@@ -30,6 +30,35 @@ core::Result<MapGravitySelector> MapGravitySelector::forDataset(const std::files
     return s;
 }
 
+namespace {
+
+std::string accelerometerSource(std::string_view label, const core::GravityEstimate& est) {
+    char text[192];
+    std::snprintf(text, sizeof text, "accelerometer (%.*s, %zu samples, spread %.3f m/s^2)",
+                  static_cast<int>(label.size()), label.data(), est.samples,
+                  static_cast<double>(est.spread_mps2));
+    return text;
+}
+
+}  // namespace
+
+MapGravity MapGravitySelector::atMapStart(const Frame& frame, const LiveAccelerometer& live) const {
+    core::GravityOptions opt;
+    opt.at_t_ns = live.now_ns;
+    opt.window_ns = static_cast<int64_t>(std::llround(live.window_s * 1e9));
+    const auto est = core::estimateGravityDown(live.samples, live.R_ItoC, opt);
+    if (est) {
+        MapGravity g;
+        g.down_C = est->down_inC;
+        g.source = accelerometerSource(live.label, *est);
+        return g;
+    }
+    MapGravity g = atMapStart(frame);
+    g.source +=
+        "; the accelerometer (" + std::string(live.label) + ") was refused: " + est.error().message;
+    return g;
+}
+
 MapGravity MapGravitySelector::atMapStart(const Frame& frame) const {
     MapGravity g;
     std::string refused;
@@ -38,12 +67,8 @@ MapGravity MapGravitySelector::atMapStart(const Frame& frame) const {
         opt.at_t_ns = frame.t_ns;
         const auto est = core::estimateGravityDown(log_->samples, log_->R_ItoC, opt);
         if (est) {
-            char text[160];
-            std::snprintf(text, sizeof text, "accelerometer (%s, %zu samples, spread %.3f m/s^2)",
-                          log_path_.filename().string().c_str(), est->samples,
-                          static_cast<double>(est->spread_mps2));
             g.down_C = est->down_inC;
-            g.source = text;
+            g.source = accelerometerSource(log_path_.filename().string(), *est);
             return g;
         }
         refused = "; the accelerometer was refused: " + est.error().message;

@@ -274,7 +274,7 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
          "speed, at_end, max_frames, sim_seed, sim_fps, sim_width_px, sim_height_px)"},
         {"\n\n[sorce]\n",
          "3: sorce: unknown section (allowed: source, tracker, detector, detection, estimator, "
-         "objects, camera, gpio, pipeline, socket, log)"},
+         "objects, camera, gpio, imu, pipeline, socket, log)"},
         {"[source]\nkind = \"usb\"\n",
          "2: source.kind: must be one of \"sim\", \"replay\", \"v4l2\", \"libcamera\" (got "
          "\"usb\")"},
@@ -327,6 +327,22 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
         {"[socket]\npath = \"" + long_path + "\"\n",
          "2: socket.path: must be a path of 1 to 107 bytes (a Unix socket) (got \"" + long_path +
              "\")"},
+        // The IMU.
+        {"[imu]\nmode = \"poll\"\n",
+         "2: imu.mode: must be one of \"sysfs\", \"buffer\" (got \"poll\")"},
+        {"[imu]\nrate_hz = 0.5\n", "2: imu.rate_hz: must be a number in [1, 10000] (got 0.5)"},
+        {"[imu]\nrotation_imu_to_camera = [1, 0, 0, 0, 1, 0]\n",
+         "2: imu.rotation_imu_to_camera: must be an array of 9 numbers in [-1, 1] (got an "
+         "array of 6)"},
+        {"[imu]\nrotation_imu_to_camera = [1, 0, 0, 0, 1, 0, 0, 0, 2]\n",
+         "2: imu.rotation_imu_to_camera: must be an array of 9 numbers in [-1, 1]: entry 8 (got "
+         "2)"},
+        {"[imu]\nrotation_imu_to_camera = [1, 0, 0, 0, 1, 0, 0, 0, -1]\n",
+         "2: imu.rotation_imu_to_camera: must be a rotation, row-major (determinant +1, not a "
+         "reflection) (got det = -1)"},
+        {"[imu]\nrotation_imu_to_camera = [1, 0, 0, 0, 0.9, 0, 0, 0, 1]\n",
+         "2: imu.rotation_imu_to_camera: must be a rotation, row-major (orthonormal rows: max "
+         "|R^T R - I| <= 0.001) (got max |R^T R - I| = 0.19)"},
         // The live camera and the LEDs.
         {"[camera]\npixel_format = \"RGB3\"\n",
          "2: camera.pixel_format: must be one of \"auto\", \"YUYV\", \"MJPEG\", \"GREY\", "

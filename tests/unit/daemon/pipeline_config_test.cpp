@@ -293,7 +293,7 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
         "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
     EXPECT_EQ(applyError("\n[estimatr]\n", c),
               "test.toml:2: estimatr: unknown section (allowed: source, tracker, detector, "
-              "detection, estimator, objects, camera, gpio, pipeline, socket, log)");
+              "detection, estimator, objects, camera, gpio, imu, pipeline, socket, log)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 0\n", c),
               "test.toml:2: detection.every_frames: must be an integer in [1, 100000] (got 0)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 2.5\n", c),

@@ -2,6 +2,7 @@
 // object is one line of valid JSON with the documented members, and every bad
 // request becomes an error message instead of a crash.
 
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -186,6 +187,23 @@ TEST(Protocol, StatusHasEveryMember) {
         "detached":1})"));
     EXPECT_EQ(j["log"], json::parse(R"({"state":"fault","lines":5,"dropped":1,"bytes":500,
         "error":"No space left on device"})"));
+
+    // Without an IMU and before the first map: no imu, no vertical.
+    EXPECT_FALSE(j.contains("imu")) << out;
+    EXPECT_FALSE(j.contains("gravity_down_C")) << out;
+    EXPECT_FALSE(j.contains("gravity_source")) << out;
+    s.gravity_source = "assumed level camera (down = +y)";
+    s.gravity_down_C = std::array<double, 3>{0, 1, 0};
+    s.imu.configured = true;
+    s.imu.device = "mpu6050";
+    s.imu.mode = "sysfs";
+    s.imu.error = "no IIO device named 'mpu6050'";
+    out.clear();
+    appendStatus(out, s, log, ClientCounts{});
+    const json with_imu = parseLine(out);
+    EXPECT_EQ(with_imu["gravity_down_C"], json::parse("[0,1,0]"));
+    EXPECT_EQ(with_imu["imu"], json::parse(R"({"device":"mpu6050","mode":"sysfs","samples":0,
+        "errors":0,"error":"no IIO device named 'mpu6050'"})"));
 
     out.clear();
     appendStatus(out, PipelineStatus{}, LogStatus{}, ClientCounts{});
@@ -709,6 +727,17 @@ TEST(ProtocolSamples, Write) {
     st.timing.detect_forward.add(40.5);
     st.timing.scale_publish.add(1e-5);
     appendStatus(out, st, log, ClientCounts{2, 16, 3, 1, 0});
+    // A map started from the live IMU, and an IMU that failed.
+    st.gravity_source = "accelerometer (iio:device0 [lsm6dsl], 51 samples, spread 0.012 m/s^2)";
+    st.gravity_down_C = std::array<double, 3>{0, 0.866, 0.5};
+    st.imu.configured = true;
+    st.imu.device = "iio:device0 [lsm6dsl]";
+    st.imu.mode = "sysfs 100 Hz";
+    st.imu.samples = 5230;
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
+    st.imu.errors = 3;
+    st.imu.error = "/sys/bus/iio/devices/iio:device0/in_accel_z_raw: No such device";
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
     appendPosterior(out, PosteriorSnapshot{});
     PosteriorSnapshot p;
     p.d = {0.5, 1.0};

@@ -9,6 +9,7 @@
 // range or an unknown key/section is an Error reading
 // `FILE:LINE: section.key: what is wrong (allowed range) (got VALUE)`.
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -78,6 +79,29 @@ struct GpioConfig {
     std::string consumer = "scaled";  // label shown by gpioinfo
 };
 
+// [imu]: the accelerometer that gives a new map its vertical (docs/imu.md),
+// read through Linux IIO by the daemon's IMU thread (imu_service.h).
+enum class ImuMode : std::uint8_t {
+    kSysfs,   // one value per channel read (in_accel_*_raw), polled at rate_hz
+    kBuffer,  // the buffered character device /dev/iio:deviceN (scan elements)
+};
+
+struct ImuConfig {
+    std::string device;  // IIO name ("mpu6050"), "iio:deviceN" or a path; empty: no IMU
+    ImuMode mode = ImuMode::kSysfs;
+    // kSysfs: the polling rate. kBuffer: the rate the device's trigger gives
+    // (it sizes the sample ring only).
+    double rate_hz = 100;
+    std::string trigger;      // kBuffer: written to trigger/current_trigger when not empty
+    int buffer_length = 128;  // kBuffer: buffer/length, in scans
+    // R_ItoC, row-major: rotates IMU-frame vectors into the camera's optical
+    // frame (x right, y down, z forward). A proper rotation (checked).
+    std::array<double, 9> rotation_imu_to_camera = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    // The accelerometer average before a map starts (core::estimateGravityDown).
+    double window_s = 0.5;
+};
+const char* toString(ImuMode mode);
+
 // [socket]
 struct SocketConfig {
     std::filesystem::path path = "/run/scaled/scaled.sock";
@@ -113,6 +137,7 @@ struct DaemonConfig {
     SourceConfig source;
     CameraConfig camera;
     GpioConfig gpio;
+    ImuConfig imu;
     SocketConfig socket;
     LogConfig log;
     QueueConfig queues;

@@ -43,6 +43,7 @@
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/slam/slam_snapshot.h>
 #include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
 #include <scaled/detector/object_detector.h>
@@ -128,6 +129,12 @@ struct PipelineParts {
     // Fast replay: capture waits for tracking and tracking for the detector
     // (nothing dropped, deterministic). Else frames are dropped when late.
     bool lossless = false;
+    // The live IMU ([imu]) when one is configured and open: each new map
+    // takes its vertical from the accelerometer first. Not owned; it must
+    // outlive the pipeline.
+    ImuService* imu = nullptr;
+    // imu.device is set but could not be opened: why (STATUS.imu.error).
+    std::string imu_error;
 };
 
 // The estimator's object table into out.objects (cleared first), at most its
@@ -220,6 +227,9 @@ private:
     std::string source_name_;
     // The vertical of each new map (a replayed sequence's IMU log first).
     drivers::imu::MapGravitySelector gravity_selector_;
+    ImuService* imu_ = nullptr;
+    std::string imu_label_;
+    std::vector<core::ImuSample> imu_samples_;  // the ring's copy at a map's start (reserved)
     // Wakes the capture thread's reconnect backoff at stop().
     std::mutex stop_mutex_;
     std::condition_variable stop_cv_;

@@ -97,6 +97,17 @@ struct PipelineTiming {
     StageTiming scale_publish;
 };
 
+// The live IMU (imu_service.h; protocol: STATUS.imu).
+struct ImuStatus {
+    bool configured = false;  // imu.device set
+    std::string device;       // "iio:device0 [mpu6050]", or imu.device when it never opened
+    std::string mode;         // "sysfs 100 Hz", "buffer (trigger mpu6050-dev0)"
+    std::uint64_t samples = 0;
+    std::uint64_t errors = 0;  // failed reads
+    std::string error;         // the latest failure while it lasts; empty once reads succeed
+    std::int64_t last_t_ns = 0;
+};
+
 // Pipeline health (protocol class STATUS).
 struct PipelineStatus {
     std::string source;  // "sim", "replay:/path/to/dir", ...
@@ -104,7 +115,10 @@ struct PipelineStatus {
     // "dataset gravity and ground-truth pose", "set_gravity request",
     // "assumed level camera (down = +y)"); empty before the first map.
     std::string gravity_source;
-    std::int64_t frame_id = -1;     // last tracked frame
+    // That vertical, the unit down direction in the map's first camera frame.
+    std::optional<std::array<double, 3>> gravity_down_C;
+    ImuStatus imu;               // imu.configured false: no [imu] device (STATUS has no imu object)
+    std::int64_t frame_id = -1;  // last tracked frame
     std::int64_t frames_total = 0;  // frames the source has (replay), 0 when unbounded
     bool source_finished = false;   // replay reached its end (the daemon keeps serving)
     double fps = 0;                 // tracked frames per second, recent window

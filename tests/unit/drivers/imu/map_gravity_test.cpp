@@ -3,12 +3,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <random>
 #include <string>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -98,6 +100,83 @@ TEST(MapGravity, WithoutALogTheDatasetOrALevelCamera) {
     g = sel->atMapStart(frame);
     EXPECT_EQ(g.down_C, Vec3(0, 1, 0));
     EXPECT_EQ(g.source, "assumed level camera (down = +y)");
+}
+
+// A live accelerometer (the daemon's [imu]): 100 Hz samples on the
+// monotonic clock up to now_ns, still for `still_s` and swinging before.
+std::vector<core::ImuSample> liveSamples(const core::Mat3& R_ItoC, const Vec3& down_C,
+                                         std::int64_t now_ns, double still_s) {
+    const Vec3 f_I = R_ItoC.transpose() * (-Scalar(9.80665) * down_C);
+    std::mt19937 rng(11);
+    std::normal_distribution<double> noise(0.0, 0.02);
+    std::vector<core::ImuSample> out;
+    for (int k = 200; k >= 0; --k) {  // 2 s, oldest first
+        core::ImuSample s;
+        s.t_ns = now_ns - std::int64_t{k} * 10'000'000;
+        const double age_s = k * 0.01;
+        const double swing = age_s > still_s ? 3.0 * std::sin(0.3 * k) : 0.0;
+        s.accel_mps2 =
+            f_I + Vec3(static_cast<Scalar>(noise(rng) + swing), static_cast<Scalar>(noise(rng)),
+                       static_cast<Scalar>(noise(rng) - swing));
+        out.push_back(s);
+    }
+    return out;
+}
+
+TEST(MapGravity, ALiveAccelerometerComesFirst) {
+    // An IMU mounted with its x forward, y left, z up (a drone's FLU body
+    // axes) on a camera pitched down 30 degrees.
+    core::Mat3 R_ItoC;
+    R_ItoC << 0, -1, 0, 0, 0, -1, 1, 0, 0;
+    const Eigen::AngleAxis<Scalar> pitch(Scalar(30 * std::numbers::pi / 180), Vec3::UnitX());
+    const Vec3 down_C = pitch.toRotationMatrix() * Vec3(0, 1, 0);
+    const std::int64_t now_ns = 5'000'000'000;
+    const auto samples = liveSamples(R_ItoC, down_C, now_ns, 1.0);
+
+    MapGravitySelector sel;  // no log
+    Frame frame;
+    frame.gravity_down_C = Vec3(0, 1, 0);  // a dataset's: the accelerometer wins
+    LiveAccelerometer live;
+    live.samples = samples;
+    live.R_ItoC = R_ItoC;
+    live.label = "iio:device0 [mpu6050]";
+    live.now_ns = now_ns;
+    live.window_s = 0.5;
+    const MapGravity g = sel.atMapStart(frame, live);
+    EXPECT_LT(angleDeg(g.down_C, down_C), 0.5) << g.down_C.transpose();
+    EXPECT_EQ(g.source.rfind("accelerometer (iio:device0 [mpu6050], 51 samples, spread ", 0), 0u)
+        << g.source;
+}
+
+TEST(MapGravity, ALiveAccelerometerThatMovedOrIsSilentIsRefusedWithItsReason) {
+    const core::Mat3 R_ItoC = core::Mat3::Identity();
+    const std::int64_t now_ns = 5'000'000'000;
+    MapGravitySelector sel;
+    Frame frame;
+    frame.gravity_down_C = Vec3(0, 0.6, 0.8);
+    LiveAccelerometer live;
+    live.R_ItoC = R_ItoC;
+    live.label = "iio:device0 [mpu6050]";
+    live.now_ns = now_ns;
+    // Swinging over the whole window.
+    const auto moving = liveSamples(R_ItoC, Vec3(0, 1, 0), now_ns, 0.0);
+    live.samples = moving;
+    MapGravity g = sel.atMapStart(frame, live);
+    EXPECT_EQ(g.down_C, Vec3(0, 0.6, 0.8));
+    EXPECT_EQ(g.source.rfind("dataset gravity and ground-truth pose; the accelerometer "
+                             "(iio:device0 [mpu6050]) was refused: ",
+                             0),
+              0u)
+        << g.source;
+    EXPECT_NE(g.source.find("spread"), std::string::npos) << g.source;
+    // Samples that stopped 3 s ago (a device gone): too few in the window.
+    live.now_ns = now_ns + 3'000'000'000;
+    live.samples = liveSamples(R_ItoC, Vec3(0, 1, 0), now_ns, 2.0);
+    frame.gravity_down_C.reset();
+    g = sel.atMapStart(frame, live);
+    EXPECT_EQ(g.down_C, Vec3(0, 1, 0));
+    EXPECT_EQ(g.source.rfind("assumed level camera (down = +y); the accelerometer", 0), 0u)
+        << g.source;
 }
 
 TEST(MapGravity, ABrokenLogIsAnErrorNamingFileAndLine) {

@@ -140,6 +140,9 @@ public:
     // Every channel the device shows (in_<ch>_raw or a scan element), by name.
     [[nodiscard]] const std::vector<IioChannel>& channels() const { return channels_; }
     [[nodiscard]] const IioChannel* channel(std::string_view name) const;
+    // The clock of the samples' t_ns (CLOCK_MONOTONIC, CLOCK_REALTIME, ...):
+    // current_timestamp_clock as open() left it; CLOCK_REALTIME without one.
+    [[nodiscard]] int clockId() const { return clock_id_; }
     [[nodiscard]] bool hasAccel() const;  // accel_x, accel_y and accel_z readable
     [[nodiscard]] bool hasGyro() const;   // anglvel_x, anglvel_y and anglvel_z readable
     // "iio:device0 [mpu6050]: accel_x accel_y accel_z anglvel_x ... timestamp".

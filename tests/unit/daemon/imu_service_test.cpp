@@ -1,0 +1,213 @@
+// The daemon's live IMU (imu_service.h) on a directory tree laid out like
+// /sys/bus/iio/devices/iio:deviceN (sysfs mode reads plain attribute files,
+// so a tree of real files is the driver's real input); the kernel's own
+// device is tested in the VM (tests/vm, vm.imu_iio, vm.daemon).
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <scaled/core/geometry/gravity.h>
+#include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/imu_service.h>
+#include <scaled/daemon/pipeline.h>
+#include <scaled/daemon/report.h>
+#include <scaled/drivers/priors_toml.h>
+#include <scaled/sim/sim_source.h>
+
+#include "hub_wait.h"
+#include "temp_dir.h"
+
+namespace scaled::daemon {
+namespace {
+
+namespace fs = std::filesystem;
+using test::TempDir;
+
+void put(const fs::path& path, std::string_view content) {
+    fs::create_directories(path.parent_path());
+    std::ofstream out(path, std::ios::trunc);
+    out << content;
+    ASSERT_TRUE(out.good()) << "cannot write " << path;
+}
+
+// An accelerometer at rest, its z axis up: it reads +1 g on z.
+class ImuServiceTest : public ::testing::Test {
+protected:
+    void SetUp() override {
+        options_.sysfs_root = tmp_.path() / "sys";
+        options_.dev_root = tmp_.path() / "dev";
+        const fs::path d = dev0();
+        put(d / "name", "lsm6dsl\n");
+        put(d / "current_timestamp_clock", "realtime\n");  // open() sets monotonic
+        put(d / "in_accel_x_raw", "0\n");
+        put(d / "in_accel_y_raw", "0\n");
+        put(d / "in_accel_z_raw", "16393\n");
+        put(d / "in_accel_scale", "0.000598\n");  // 16393 * 0.000598 = 9.803 m/s^2
+        config_.device = "lsm6dsl";
+        config_.rate_hz = 200;
+    }
+
+    [[nodiscard]] fs::path dev0() const { return options_.sysfs_root / "iio:device0"; }
+
+    // Polls the service's status until `done` holds or 10 s pass.
+    template <typename Pred>
+    bool waitFor(const ImuService& s, Pred done) {
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        while (std::chrono::steady_clock::now() < deadline) {
+            if (done(s.status())) {
+                return true;
+            }
+            std::this_thread::yield();
+        }
+        return done(s.status());
+    }
+
+    TempDir tmp_{"imu_service"};
+    drivers::imu::IioOptions options_;
+    ImuConfig config_;
+};
+
+TEST_F(ImuServiceTest, PollsTheAccelerometerIntoTheRingOldestFirst) {
+    auto s = ImuService::open(config_, options_);
+    ASSERT_TRUE(s) << s.error().message;
+    const ImuStatus before = (*s)->status();
+    EXPECT_TRUE(before.configured);
+    EXPECT_EQ(before.device, "iio:device0 [lsm6dsl]");
+    EXPECT_EQ(before.mode, "sysfs 200 Hz");
+    EXPECT_EQ(before.samples, 0U);
+    // 200 Hz over max(2 window_s, 2 s), plus a margin.
+    EXPECT_EQ((*s)->capacity(), 416U);
+
+    (*s)->start();
+    ASSERT_TRUE(waitFor(**s, [](const ImuStatus& st) { return st.samples >= 20; }));
+    (*s)->stop();
+    std::vector<core::ImuSample> got;
+    got.reserve((*s)->capacity());
+    (*s)->copyRecent(got);
+    ASSERT_GE(got.size(), 20U);
+    EXPECT_EQ(got.size(), (*s)->status().samples);
+    for (std::size_t i = 0; i < got.size(); ++i) {
+        EXPECT_NEAR(got[i].accel_mps2.z(), 16393 * 0.000598, 1e-4);
+        EXPECT_EQ(got[i].accel_mps2.x(), 0);
+        if (i > 0) {
+            EXPECT_GT(got[i].t_ns, got[i - 1].t_ns) << i;
+        }
+    }
+    // Stamped on the monotonic clock, as the daemon's frames.
+    std::string clock;
+    std::ifstream(dev0() / "current_timestamp_clock") >> clock;
+    EXPECT_EQ(clock, "monotonic");
+    EXPECT_LE(got.back().t_ns, (*s)->nowNs());
+    EXPECT_LE(got.back().t_ns, monotonicNowNs());
+    EXPECT_GT(got.back().t_ns, monotonicNowNs() - 10'000'000'000);
+    // Those samples give the vertical: IMU z up is camera -y with the
+    // identity mount, so down is +z of the IMU.
+    core::GravityOptions opt;
+    opt.at_t_ns = got.back().t_ns;
+    opt.window_ns = got.back().t_ns - got.front().t_ns;
+    const auto g = core::estimateGravityDown(got, (*s)->R_ItoC(), opt);
+    ASSERT_TRUE(g) << g.error().message;
+    EXPECT_NEAR(g->down_inC.z(), -1, 1e-6);
+}
+
+TEST_F(ImuServiceTest, AFailingReadIsCountedNamedAndClearedWhenItReadsAgain) {
+    auto s = ImuService::open(config_, options_);
+    ASSERT_TRUE(s) << s.error().message;
+    fs::remove(dev0() / "in_accel_z_raw");  // the device went away, in part
+    (*s)->start();
+    ASSERT_TRUE(waitFor(**s, [](const ImuStatus& st) { return st.errors >= 3; }));
+    const ImuStatus bad = (*s)->status();
+    EXPECT_EQ(bad.samples, 0U);
+    EXPECT_NE(bad.error.find("in_accel_z_raw"), std::string::npos) << bad.error;
+    put(dev0() / "in_accel_z_raw", "16393\n");
+    ASSERT_TRUE(waitFor(**s, [](const ImuStatus& st) { return st.samples >= 3; }));
+    (*s)->stop();
+    EXPECT_EQ((*s)->status().error, "");
+}
+
+TEST_F(ImuServiceTest, OpenNamesWhatIsMissing) {
+    config_.device = "bmi270";
+    auto missing = ImuService::open(config_, options_);
+    ASSERT_FALSE(missing);
+    EXPECT_NE(missing.error().message.find("bmi270"), std::string::npos) << missing.error().message;
+
+    const fs::path d1 = options_.sysfs_root / "iio:device1";
+    put(d1 / "name", "adc\n");
+    put(d1 / "in_voltage0_raw", "7\n");
+    config_.device = "adc";
+    auto no_accel = ImuService::open(config_, options_);
+    ASSERT_FALSE(no_accel);
+    EXPECT_NE(
+        no_accel.error().message.find("no accelerometer (needs accel_x, accel_y and accel_z)"),
+        std::string::npos)
+        << no_accel.error().message;
+}
+
+// The daemon's pipeline starts its map with the live accelerometer's
+// vertical and says so in STATUS: an IMU in a drone's body axes (x forward,
+// y left, z up) on a camera pitched down 30 degrees.
+TEST_F(ImuServiceTest, ThePipelineStartsItsMapWithTheAccelerometersVertical) {
+    // f_I = -g R_ItoC^T down_C with down_C = (0, cos 30, sin 30):
+    // (-4.903, 0, 8.493) m/s^2 at 0.000598 per LSB.
+    put(dev0() / "in_accel_x_raw", "-8199\n");
+    put(dev0() / "in_accel_z_raw", "14202\n");
+    config_.rotation_imu_to_camera = {0, -1, 0, 0, 0, -1, 1, 0, 0};
+    auto imu = ImuService::open(config_, options_);
+    ASSERT_TRUE(imu) << imu.error().message;
+    (*imu)->start();
+    // Half a second of samples before the first frame (window_s 0.5).
+    ASSERT_TRUE(waitFor(**imu, [](const ImuStatus& st) { return st.samples >= 100; }));
+
+    DaemonConfig c = defaultDaemonConfig();
+    c.source.kind = SourceKind::kSim;
+    c.source.pacing = drivers::PacingMode::kAsFastAsPossible;
+    c.source.at_end = AtEnd::kExit;
+    c.log.frame_every = 0;
+    c.imu = config_;
+    PipelineParts p;
+    sim::SimConfig sc;
+    sc.duration_s = 1.0;
+    auto src = sim::openSimSource(sc);
+    ASSERT_TRUE(src) << src.error().message;
+    p.source = std::move(*src);
+    auto det = sim::createSimDetector(sc);
+    ASSERT_TRUE(det) << det.error().message;
+    p.detector = std::move(*det);
+    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    ASSERT_TRUE(priors) << priors.error().message;
+    p.priors = std::move(*priors);
+    p.source_name = "sim";
+    p.lossless = true;
+    p.imu = imu->get();
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    auto pipeline = Pipeline::create(c, std::move(p), hub, nullptr);
+    ASSERT_TRUE(pipeline) << pipeline.error().message;
+    ASSERT_TRUE((*pipeline)->start());
+    ASSERT_TRUE(test::waitUntil(
+        hub, [&] { return (*pipeline)->finished(); }, std::chrono::seconds(120)));
+    (*pipeline)->stop();
+    (*imu)->stop();
+
+    const PipelineStatus st = hub.status();
+    EXPECT_EQ(st.gravity_source.rfind("accelerometer (iio:device0 [lsm6dsl], ", 0), 0U)
+        << st.gravity_source;
+    ASSERT_TRUE(st.gravity_down_C.has_value());
+    EXPECT_NEAR((*st.gravity_down_C)[0], 0, 1e-3);
+    EXPECT_NEAR((*st.gravity_down_C)[1], std::cos(M_PI / 6), 1e-3);
+    EXPECT_NEAR((*st.gravity_down_C)[2], 0.5, 1e-3);
+    EXPECT_TRUE(st.imu.configured);
+    EXPECT_EQ(st.imu.device, "iio:device0 [lsm6dsl]");
+    EXPECT_GE(st.imu.samples, 100U);
+    EXPECT_EQ(st.imu.errors, 0U);
+}
+
+}  // namespace
+}  // namespace scaled::daemon
