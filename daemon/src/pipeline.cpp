@@ -510,7 +510,7 @@ void Pipeline::trackingLoop() {
                 imu_->copyRecent(imu_samples_);
                 drivers::imu::LiveAccelerometer live;
                 live.samples = imu_samples_;
-                live.R_ItoC = imu_->R_ItoC();
+                live.R_ItoC = imu_->rotationImuToCamera();
                 live.label = imu_label_;
                 live.now_ns = imu_->nowNs();
                 live.window_s = imu_->windowS();

@@ -113,7 +113,7 @@ TEST_F(ImuServiceTest, PollsTheAccelerometerIntoTheRingOldestFirst) {
     core::GravityOptions opt;
     opt.at_t_ns = got.back().t_ns;
     opt.window_ns = got.back().t_ns - got.front().t_ns;
-    const auto g = core::estimateGravityDown(got, (*s)->R_ItoC(), opt);
+    const auto g = core::estimateGravityDown(got, (*s)->rotationImuToCamera(), opt);
     ASSERT_TRUE(g) << g.error().message;
     EXPECT_NEAR(g->down_inC.z(), -1, 1e-6);
 }

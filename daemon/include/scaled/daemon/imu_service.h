@@ -63,7 +63,7 @@ public:
     // out.capacity() >= capacity() nothing is allocated).
     void copyRecent(std::vector<core::ImuSample>& out) const;
     [[nodiscard]] std::size_t capacity() const { return ring_.size(); }
-    [[nodiscard]] const core::Mat3& R_ItoC() const { return R_ItoC_; }
+    [[nodiscard]] const core::Mat3& rotationImuToCamera() const { return R_ItoC_; }
     [[nodiscard]] double windowS() const { return config_.window_s; }
     // Now on the samples' clock (the device's timestamp clock: monotonic
     // unless the kernel has no current_timestamp_clock, then realtime).
