@@ -437,6 +437,16 @@ void Pipeline::setSlamState(DaemonState state, std::int64_t frame_id, std::int64
     }
     slam_state_ = state;
     if (new_epoch) {
+        if (report_.has_scale) {
+            // The map that ends had a scale: keep its last one for the clients.
+            report_.previous = {true,
+                                report_.epoch,
+                                report_.scale,
+                                report_.ci95_lo,
+                                report_.ci95_hi,
+                                report_.observations,
+                                report_.frame_id};
+        }
         report_.epoch += 1;
         report_.has_scale = false;
         report_.scale = report_.mean = 0;

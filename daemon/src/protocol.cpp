@@ -197,6 +197,19 @@ void appendScale(std::string& out, const ScaleReport& r, std::int64_t now_mono_n
         key(out, "fault");
         appendJsonString(out, r.fault);
     }
+    if (r.previous.present) {
+        out += R"(,"previous":{"epoch":)";
+        appendJsonInt(out, r.previous.epoch);
+        key(out, "scale");
+        appendJsonNumber(out, r.previous.scale);
+        key(out, "ci95");
+        appendJsonInterval(out, true, r.previous.ci95_lo, r.previous.ci95_hi);
+        key(out, "observations");
+        appendJsonInt(out, r.previous.observations);
+        key(out, "frame_id");
+        appendJsonInt(out, r.previous.frame_id);
+        out += '}';
+    }
     out += "}\n";
 }
 

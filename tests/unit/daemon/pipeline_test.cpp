@@ -580,6 +580,15 @@ TEST(Pipeline, LoopStartsANewEpochAndClearsTheScale) {
             EXPECT_GT(scales[i - 1].observations, 0) << "no observation in the first map";
             EXPECT_LT(scales[i].observations, scales[i - 1].observations);
             EXPECT_GT(scales[i].frame_id, 450);
+            // The new map's reports carry the first map's last scale.
+            EXPECT_FALSE(scales[i - 1].previous.present);
+            ASSERT_TRUE(scales[i].previous.present);
+            EXPECT_EQ(scales[i].previous.epoch, 1U);
+            EXPECT_EQ(scales[i].previous.scale, scales[i - 1].scale);
+            EXPECT_EQ(scales[i].previous.ci95_lo, scales[i - 1].ci95_lo);
+            EXPECT_EQ(scales[i].previous.ci95_hi, scales[i - 1].ci95_hi);
+            EXPECT_EQ(scales[i].previous.observations, scales[i - 1].observations);
+            EXPECT_EQ(scales[i].previous.frame_id, scales[i - 1].frame_id);
         }
     }
     EXPECT_TRUE(saw_epoch2);

@@ -138,6 +138,23 @@ TEST(Protocol, ScaleWithoutAScaleHasNulls) {
     EXPECT_EQ(j["state"], "initialising");
     EXPECT_EQ(j["frame_id"], -1);
     EXPECT_EQ(j["fault"], "log: No space left on device");
+    EXPECT_FALSE(j.contains("previous")) << out;
+}
+
+// A new map: no scale of its own yet, the previous map's last one beside it.
+TEST(Protocol, ScaleOfANewMapCarriesThePreviousMapsScale) {
+    ScaleReport r;
+    r.state = DaemonState::kTracking;
+    r.epoch = 3;
+    r.frame_id = 1204;
+    r.previous = {true, 2, 0.971, 0.95, 0.99, 52, 1180};
+    std::string out;
+    appendScale(out, r, 123);
+    const json j = parseLine(out);
+    EXPECT_TRUE(j["scale"].is_null());
+    EXPECT_EQ(j["previous"], json::parse(R"({"epoch":2,"scale":0.971,"ci95":[0.95,0.99],
+        "observations":52,"frame_id":1180})"))
+        << out;
 }
 
 TEST(Protocol, StatusHasEveryMember) {
@@ -715,6 +732,10 @@ TEST(ProtocolSamples, Write) {
     faulty.state = DaemonState::kFault;
     appendScale(out, faulty, 6'000'000'000);
     appendScale(out, ScaleReport{}, 1);
+    ScaleReport after_break;
+    after_break.epoch = 3;
+    after_break.previous = {true, 2, 0.971, 0.95, 0.99, 52, 1180};
+    appendScale(out, after_break, 1);
     LogStatus log;
     log.state = LogStatus::State::kFault;
     log.error = "No space left on device";

@@ -39,6 +39,19 @@ enum class DaemonState : std::uint8_t {
 const char* toString(DaemonState state);
 
 // One scale report (protocol class SCALE).
+// The scale of an earlier map (protocol: SCALE.previous): a new map has a
+// scale of its own, so its evidence starts again; the previous map's last
+// estimate shows the client where the break is and what was known before it.
+struct PreviousScale {
+    bool present = false;     // false until a map with a scale was replaced
+    std::uint64_t epoch = 0;  // the latest earlier epoch that had a scale
+    double scale = 0;         // its last MAP, metres per (its) SLAM unit
+    double ci95_lo = 0;
+    double ci95_hi = 0;
+    int observations = 0;
+    std::int64_t frame_id = -1;  // the frame of its last update
+};
+
 struct ScaleReport {
     bool has_scale = false;  // false until the first observation of the epoch
     double scale = 0;        // metres per SLAM unit: the posterior mode (MAP)
@@ -57,6 +70,7 @@ struct ScaleReport {
     // Set when something is wrong that does not stop the scale (e.g. the field
     // log stopped: "log: No space left on device"). Empty when all is well.
     std::string fault;
+    PreviousScale previous;
 };
 
 // Wall-time statistics of one pipeline stage (protocol: an entry of
