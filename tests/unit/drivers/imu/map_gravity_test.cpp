@@ -171,7 +171,8 @@ TEST(MapGravity, ALiveAccelerometerThatMovedOrIsSilentIsRefusedWithItsReason) {
     EXPECT_NE(g.source.find("spread"), std::string::npos) << g.source;
     // Samples that stopped 3 s ago (a device gone): too few in the window.
     live.now_ns = now_ns + 3'000'000'000;
-    live.samples = liveSamples(R_ItoC, Vec3(0, 1, 0), now_ns, 2.0);
+    const auto silent = liveSamples(R_ItoC, Vec3(0, 1, 0), now_ns, 2.0);
+    live.samples = silent;
     frame.gravity_down_C.reset();
     g = sel.atMapStart(frame, live);
     EXPECT_EQ(g.down_C, Vec3(0, 1, 0));
