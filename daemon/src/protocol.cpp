@@ -223,14 +223,7 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     }
     if (s.gravity_down_C) {
         key(out, "gravity_down_C");
-        out += '[';
-        for (std::size_t i = 0; i < 3; ++i) {
-            if (i > 0) {
-                out += ',';
-            }
-            appendJsonNumber(out, (*s.gravity_down_C)[i]);
-        }
-        out += ']';
+        appendArray(out, *s.gravity_down_C);
     }
     if (s.imu.configured) {
         out += R"(,"imu":{"device":)";
