@@ -3,9 +3,7 @@
 // line (CLI11; its exceptions stay in parseCommandLine).
 
 #include <CLI/CLI.hpp>
-#include <algorithm>
 #include <array>
-#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <exception>
@@ -20,6 +18,7 @@
 
 #include <toml++/toml.h>
 
+#include <scaled/core/geometry/gravity.h>
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/version.h>
 #include <scaled/drivers/toml_detail.h>
@@ -90,29 +89,22 @@ Field socketMode(unsigned* target) {
             [=] { return "\"" + octal(*target) + "\""; }};
 }
 
-// imu.rotation_imu_to_camera: a proper rotation, as core::estimateGravityDown
-// demands (max |R^T R - I| <= 1e-3, det > 0); the message says which fails.
+// imu.rotation_imu_to_camera: a proper rotation, by core's test (the one
+// estimateGravityDown applies); the message says which part fails.
 std::optional<std::string> rotationProblem(const std::array<double, 9>& r) {
-    double worst = 0;
-    for (std::size_t i = 0; i < 3; ++i) {
-        for (std::size_t j = 0; j < 3; ++j) {
-            double dot = 0;
-            for (std::size_t k = 0; k < 3; ++k) {
-                dot += r[k * 3 + i] * r[k * 3 + j];
-            }
-            worst = std::max(worst, std::abs(dot - (i == j ? 1.0 : 0.0)));
-        }
+    core::Mat3 R;
+    for (Eigen::Index i = 0; i < 9; ++i) {
+        R(i / 3, i % 3) = static_cast<core::Scalar>(r[static_cast<std::size_t>(i)]);
     }
-    const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
-                       r[2] * (r[3] * r[7] - r[4] * r[6]);
-    if (worst > 1e-3) {
-        return "must be a rotation, row-major (orthonormal rows: max |R^T R - I| <= 0.001) (got "
-               "max |R^T R - I| = " +
-               drivers::toml_detail::num(worst) + ")";
+    const core::RotationDefect d = core::rotationDefect(R);
+    if (!(d.orthogonality <= core::kRotationTolerance)) {
+        return "must be a rotation, row-major (orthonormal rows: max |R^T R - I| <= " +
+               drivers::toml_detail::num(core::kRotationTolerance) +
+               ") (got max |R^T R - I| = " + drivers::toml_detail::num(d.orthogonality) + ")";
     }
-    if (det <= 0) {
+    if (!core::isRotation(d)) {
         return "must be a rotation, row-major (determinant +1, not a reflection) (got det = " +
-               drivers::toml_detail::num(det) + ")";
+               drivers::toml_detail::num(d.determinant) + ")";
     }
     return std::nullopt;
 }

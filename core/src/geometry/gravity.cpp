@@ -17,8 +17,6 @@ namespace scaled::core {
 
 namespace {
 
-constexpr double kRotationTolerance = 1e-3;
-
 // `v` with `decimals` digits after the point ("9.807").
 std::string fixed(double v, int decimals = 3) {
     std::array<char, 64> buf{};
@@ -75,17 +73,29 @@ Scalar angleBetween(const Vec3& a, const Vec3& b) {
     return std::atan2(a.cross(b).norm(), a.dot(b));
 }
 
+RotationDefect rotationDefect(const Mat3& R_in) {
+    const Eigen::Matrix3d R = R_in.cast<double>();
+    RotationDefect d;
+    d.orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    d.determinant = R.determinant();
+    return d;
+}
+
+bool isRotation(const RotationDefect& d) {
+    return d.orthogonality <= kRotationTolerance && d.determinant > 0;
+}
+
 Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, const Mat3& R_ItoC,
                                             const GravityOptions& options) {
     if (auto ok = checkOptions(options); !ok) {
         return ok.error();
     }
-    const Eigen::Matrix3d& R = R_ItoC.cast<double>();
-    const double orth = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    if (!R.allFinite() || !(orth <= kRotationTolerance) || !(R.determinant() > 0)) {
+    const RotationDefect defect = rotationDefect(R_ItoC);
+    if (!R_ItoC.allFinite() || !isRotation(defect)) {
         return makeError(ErrorCode::kInvalidArgument,
-                         "gravity: R_ItoC is not a rotation (max |R^T R - I| = " + fixed(orth, 6) +
-                             ", det = " + fixed(R.determinant(), 6) + ")");
+                         "gravity: R_ItoC is not a rotation (max |R^T R - I| = " +
+                             fixed(defect.orthogonality, 6) +
+                             ", det = " + fixed(defect.determinant, 6) + ")");
     }
     for (std::size_t k = 1; k < samples.size(); ++k) {
         if (samples[k].t_ns < samples[k - 1].t_ns) {

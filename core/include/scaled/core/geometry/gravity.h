@@ -72,6 +72,19 @@ struct GravityEstimate {
     int64_t t_last_ns = 0;
 };
 
+// How far a matrix is from a proper rotation, computed in double: the
+// largest |R^T R - I| entry and det R. estimateGravityDown accepts R_ItoC
+// when isRotation() holds; the daemon checks imu.rotation_imu_to_camera with
+// the same test when its configuration is read.
+struct RotationDefect {
+    double orthogonality = 0;  // max |R^T R - I|
+    double determinant = 1;
+};
+inline constexpr double kRotationTolerance = 1e-3;
+[[nodiscard]] RotationDefect rotationDefect(const Mat3& R);
+// orthogonality <= kRotationTolerance and determinant > 0 (false for NaN).
+[[nodiscard]] bool isRotation(const RotationDefect& d);
+
 // The gravity direction from `samples` (in time order, t_ns non-decreasing)
 // over the window of `options`. Errors: kInvalidArgument for options out of
 // range, R_ItoC not a rotation (max |R^T R - I| > 1e-3 or det <= 0),
