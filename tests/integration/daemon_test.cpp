@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 
 #include "daemon_harness.h"
+#include "fake_iio.h"
 #include "shared_dir.h"
 #include "temp_dir.h"
 
@@ -758,13 +759,7 @@ TEST_F(DaemonTest, UnwritableLogDirIsAFaultNotAStop) {
 // (x forward, y left, z up) at rest on a level camera.
 TEST_F(DaemonTest, TheImuGivesTheFirstMapItsVertical) {
     const fs::path dev = tmp_.path() / "iio" / "iio:device0";
-    fs::create_directories(dev);
-    writeFile(dev / "name", "lsm6dsl\n");
-    writeFile(dev / "current_timestamp_clock", "realtime\n");
-    writeFile(dev / "in_accel_x_raw", "0\n");
-    writeFile(dev / "in_accel_y_raw", "0\n");
-    writeFile(dev / "in_accel_z_raw", "16393\n");
-    writeFile(dev / "in_accel_scale", "0.000598\n");
+    test::writeFakeAccelerometer(dev, "lsm6dsl", {0, 0, 16393}, "0.000598");
     ASSERT_TRUE(startSim({"--set", "imu.device=\"" + dev.string() + "\"", "--set",
                           "imu.rotation_imu_to_camera=[0,-1,0, 0,0,-1, 1,0,0]"}));
     Client c = client();

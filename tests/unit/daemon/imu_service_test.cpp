@@ -22,6 +22,7 @@
 #include <scaled/drivers/priors_toml.h>
 #include <scaled/sim/sim_source.h>
 
+#include "fake_iio.h"
 #include "hub_wait.h"
 #include "temp_dir.h"
 
@@ -29,14 +30,8 @@ namespace scaled::daemon {
 namespace {
 
 namespace fs = std::filesystem;
+using test::putFile;
 using test::TempDir;
-
-void put(const fs::path& path, std::string_view content) {
-    fs::create_directories(path.parent_path());
-    std::ofstream out(path, std::ios::trunc);
-    out << content;
-    ASSERT_TRUE(out.good()) << "cannot write " << path;
-}
 
 // An accelerometer at rest, its z axis up: it reads +1 g on z.
 class ImuServiceTest : public ::testing::Test {
@@ -44,13 +39,8 @@ protected:
     void SetUp() override {
         options_.sysfs_root = tmp_.path() / "sys";
         options_.dev_root = tmp_.path() / "dev";
-        const fs::path d = dev0();
-        put(d / "name", "lsm6dsl\n");
-        put(d / "current_timestamp_clock", "realtime\n");  // open() sets monotonic
-        put(d / "in_accel_x_raw", "0\n");
-        put(d / "in_accel_y_raw", "0\n");
-        put(d / "in_accel_z_raw", "16393\n");
-        put(d / "in_accel_scale", "0.000598\n");  // 16393 * 0.000598 = 9.803 m/s^2
+        // 16393 * 0.000598 = 9.803 m/s^2
+        test::writeFakeAccelerometer(dev0(), "lsm6dsl", {0, 0, 16393}, "0.000598");
         config_.device = "lsm6dsl";
         config_.rate_hz = 200;
     }
@@ -127,7 +117,7 @@ TEST_F(ImuServiceTest, AFailingReadIsCountedNamedAndClearedWhenItReadsAgain) {
     const ImuStatus bad = (*s)->status();
     EXPECT_EQ(bad.samples, 0U);
     EXPECT_NE(bad.error.find("in_accel_z_raw"), std::string::npos) << bad.error;
-    put(dev0() / "in_accel_z_raw", "16393\n");
+    putFile(dev0() / "in_accel_z_raw", "16393\n");
     ASSERT_TRUE(waitFor(**s, [](const ImuStatus& st) { return st.samples >= 3; }));
     (*s)->stop();
     EXPECT_EQ((*s)->status().error, "");
@@ -140,8 +130,8 @@ TEST_F(ImuServiceTest, OpenNamesWhatIsMissing) {
     EXPECT_NE(missing.error().message.find("bmi270"), std::string::npos) << missing.error().message;
 
     const fs::path d1 = options_.sysfs_root / "iio:device1";
-    put(d1 / "name", "adc\n");
-    put(d1 / "in_voltage0_raw", "7\n");
+    putFile(d1 / "name", "adc\n");
+    putFile(d1 / "in_voltage0_raw", "7\n");
     config_.device = "adc";
     auto no_accel = ImuService::open(config_, options_);
     ASSERT_FALSE(no_accel);
@@ -157,8 +147,8 @@ TEST_F(ImuServiceTest, OpenNamesWhatIsMissing) {
 TEST_F(ImuServiceTest, ThePipelineStartsItsMapWithTheAccelerometersVertical) {
     // f_I = -g R_ItoC^T down_C with down_C = (0, cos 30, sin 30):
     // (-4.903, 0, 8.493) m/s^2 at 0.000598 per LSB.
-    put(dev0() / "in_accel_x_raw", "-8199\n");
-    put(dev0() / "in_accel_z_raw", "14202\n");
+    putFile(dev0() / "in_accel_x_raw", "-8199\n");
+    putFile(dev0() / "in_accel_z_raw", "14202\n");
     config_.rotation_imu_to_camera = {0, -1, 0, 0, 0, -1, 1, 0, 0};
     auto imu = ImuService::open(config_, options_);
     ASSERT_TRUE(imu) << imu.error().message;

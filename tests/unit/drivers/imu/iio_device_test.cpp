@@ -18,21 +18,16 @@
 
 #include <scaled/drivers/imu/iio_device.h>
 
+#include "fake_iio.h"
 #include "temp_dir.h"
 
 namespace scaled::drivers::imu {
 namespace {
 
 using core::ErrorCode;
+using test::putFile;
 using test::TempDir;
 namespace fs = std::filesystem;
-
-void put(const fs::path& path, std::string_view content) {
-    fs::create_directories(path.parent_path());
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out << content;
-    ASSERT_TRUE(out.good()) << "cannot write " << path;
-}
 
 std::string get(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
@@ -52,21 +47,21 @@ protected:
         options_.sysfs_root = tmp_.path() / "sys";
         options_.dev_root = tmp_.path() / "dev";
         const fs::path d = dev0();
-        put(d / "name", "mpu6050\n");
-        put(d / "current_timestamp_clock", "realtime\n");
-        put(d / "in_accel_x_raw", "100\n");
-        put(d / "in_accel_y_raw", "-200\n");
-        put(d / "in_accel_z_raw", "16384\n");
-        put(d / "in_accel_scale", "0.000598\n");
-        put(d / "in_accel_x_offset", "-10\n");  // own offset of x; y and z have none
-        put(d / "in_anglvel_x_raw", "5\n");
-        put(d / "in_anglvel_y_raw", "-3\n");
-        put(d / "in_anglvel_z_raw", "0\n");
-        put(d / "in_anglvel_scale", "0.001064724\n");
-        put(d / "in_temp_raw", "-521\n");
-        put(d / "in_temp_offset", "12420\n");
-        put(d / "in_temp_scale", "2.941176\n");
-        put(d / "in_accel_scale_available", "0.000598 0.001196 0.002392 0.004785\n");
+        putFile(d / "name", "mpu6050\n");
+        putFile(d / "current_timestamp_clock", "realtime\n");
+        putFile(d / "in_accel_x_raw", "100\n");
+        putFile(d / "in_accel_y_raw", "-200\n");
+        putFile(d / "in_accel_z_raw", "16384\n");
+        putFile(d / "in_accel_scale", "0.000598\n");
+        putFile(d / "in_accel_x_offset", "-10\n");  // own offset of x; y and z have none
+        putFile(d / "in_anglvel_x_raw", "5\n");
+        putFile(d / "in_anglvel_y_raw", "-3\n");
+        putFile(d / "in_anglvel_z_raw", "0\n");
+        putFile(d / "in_anglvel_scale", "0.001064724\n");
+        putFile(d / "in_temp_raw", "-521\n");
+        putFile(d / "in_temp_offset", "12420\n");
+        putFile(d / "in_temp_scale", "2.941176\n");
+        putFile(d / "in_accel_scale_available", "0.000598 0.001196 0.002392 0.004785\n");
         // Scan elements: accel big-endian 16 bits (as the MPU-6050), temp,
         // gyro little-endian 12 bits shifted by 4, the timestamp last.
         const std::array<std::pair<const char*, const char*>, 8> elements = {{
@@ -81,21 +76,21 @@ protected:
         }};
         for (std::size_t k = 0; k < elements.size(); ++k) {
             const std::string ch = elements[k].first;
-            put(d / "scan_elements" / ("in_" + ch + "_en"), "0\n");
-            put(d / "scan_elements" / ("in_" + ch + "_index"), std::to_string(k) + "\n");
-            put(d / "scan_elements" / ("in_" + ch + "_type"),
-                std::string(elements[k].second) + "\n");
+            putFile(d / "scan_elements" / ("in_" + ch + "_en"), "0\n");
+            putFile(d / "scan_elements" / ("in_" + ch + "_index"), std::to_string(k) + "\n");
+            putFile(d / "scan_elements" / ("in_" + ch + "_type"),
+                    std::string(elements[k].second) + "\n");
         }
-        put(d / "buffer" / "enable", "0\n");
-        put(d / "buffer" / "length", "0\n");
-        put(d / "trigger" / "current_trigger", "\n");
+        putFile(d / "buffer" / "enable", "0\n");
+        putFile(d / "buffer" / "length", "0\n");
+        putFile(d / "trigger" / "current_trigger", "\n");
 
         const fs::path d1 = options_.sysfs_root / "iio:device1";
-        put(d1 / "name", "adxl-2axis\n");
-        put(d1 / "in_accel_x_raw", "1\n");
-        put(d1 / "in_accel_y_raw", "2\n");
-        put(options_.sysfs_root / "trigger0" / "name", "mpu6050-dev0\n");
-        put(options_.dev_root / "iio:device0", "");
+        putFile(d1 / "name", "adxl-2axis\n");
+        putFile(d1 / "in_accel_x_raw", "1\n");
+        putFile(d1 / "in_accel_y_raw", "2\n");
+        putFile(options_.sysfs_root / "trigger0" / "name", "mpu6050-dev0\n");
+        putFile(options_.dev_root / "iio:device0", "");
     }
 
     [[nodiscard]] fs::path dev0() const { return options_.sysfs_root / "iio:device0"; }
@@ -202,7 +197,7 @@ TEST_F(FakeIio, OpensByNameNumberAndPath) {
     // Already that clock, as the kernel prints it (with a NUL: 6.1's
     // iio_show_timestamp_clock): not written again, since the kernel refuses
     // the write (EBUSY) while another reader runs the buffer.
-    put(dev0() / "current_timestamp_clock", std::string("monotonic\n\0", 11));
+    putFile(dev0() / "current_timestamp_clock", std::string("monotonic\n\0", 11));
     auto again = IioDevice::open("mpu6050", options_);
     ASSERT_TRUE(again.ok()) << again.error().message;
     EXPECT_EQ(get(dev0() / "current_timestamp_clock"), std::string("monotonic\n\0", 11));
@@ -258,25 +253,25 @@ TEST_F(FakeIio, ReadOnceAppliesOffsetAndScale) {
 }
 
 TEST_F(FakeIio, BadAttributesAreNamedWithTheirValue) {
-    put(dev0() / "in_accel_scale", "abc\n");
+    putFile(dev0() / "in_accel_scale", "abc\n");
     auto scale = IioDevice::open("mpu6050", options_);
     ASSERT_FALSE(scale.ok());
     EXPECT_EQ(scale.error().code, ErrorCode::kParse);
     EXPECT_EQ(scale.error().message,
               (dev0() / "in_accel_scale").string() + ": not a number: 'abc'");
 
-    put(dev0() / "in_accel_scale", "0.000598\n");
-    put(dev0() / "scan_elements" / "in_anglvel_y_type", "le:s16/8>>0\n");
+    putFile(dev0() / "in_accel_scale", "0.000598\n");
+    putFile(dev0() / "scan_elements" / "in_anglvel_y_type", "le:s16/8>>0\n");
     auto type = IioDevice::open("mpu6050", options_);
     ASSERT_FALSE(type.ok());
     EXPECT_EQ(type.error().message,
               (dev0() / "scan_elements" / "in_anglvel_y_type").string() +
                   ": bad scan type 'le:s16/8>>0' (real bits + shift exceed the storage bits)");
 
-    put(dev0() / "scan_elements" / "in_anglvel_y_type", "le:s12/16>>4\n");
+    putFile(dev0() / "scan_elements" / "in_anglvel_y_type", "le:s12/16>>4\n");
     auto dev = IioDevice::open("mpu6050", options_);
     ASSERT_TRUE(dev.ok()) << dev.error().message;
-    put(dev0() / "in_accel_z_raw", "12.5\n");
+    putFile(dev0() / "in_accel_z_raw", "12.5\n");
     auto raw = dev->readOnce();
     ASSERT_FALSE(raw.ok());
     EXPECT_EQ(raw.error().message,
@@ -342,7 +337,7 @@ TEST_F(FakeIio, BufferedSamplesAreDecoded) {
         scans += std::string(4, '\xaa');  // padding, ignored
         appendLe(scans, 1'700'000'000'000'000'000ULL + static_cast<uint64_t>(r[6]) * 5'000'000, 8);
     }
-    put(options_.dev_root / "iio:device0", scans);
+    putFile(options_.dev_root / "iio:device0", scans);
 
     auto dev = IioDevice::open("mpu6050", options_);
     ASSERT_TRUE(dev.ok()) << dev.error().message;
@@ -409,7 +404,7 @@ TEST_F(FakeIio, ChosenChannelsAndThePartialScan) {
         appendLe(scans, 1000U + static_cast<uint64_t>(k), 8);
     }
     scans += std::string(5, '\x01');  // a scan cut short
-    put(options_.dev_root / "iio:device0", scans);
+    putFile(options_.dev_root / "iio:device0", scans);
     auto dev = IioDevice::open("mpu6050", options_);
     ASSERT_TRUE(dev.ok()) << dev.error().message;
     IioBufferOptions opt;
@@ -457,14 +452,14 @@ TEST_F(FakeIio, BufferErrors) {
               std::string::npos)
         << bad_channel.error().message;
 
-    put(dev0() / "buffer" / "enable", "1\n");
+    putFile(dev0() / "buffer" / "enable", "1\n");
     auto busy = dev->startBuffer();
     ASSERT_FALSE(busy.ok());
     EXPECT_EQ(busy.error().code, ErrorCode::kUnavailable);
     EXPECT_EQ(busy.error().message, (dev0() / "buffer" / "enable").string() +
                                         " is '1': the buffer is in use (another reader?)");
 
-    put(dev0() / "buffer" / "enable", "0\n");
+    putFile(dev0() / "buffer" / "enable", "0\n");
     fs::remove(options_.dev_root / "iio:device0");
     auto no_dev = dev->startBuffer();
     ASSERT_FALSE(no_dev.ok());
@@ -473,8 +468,8 @@ TEST_F(FakeIio, BufferErrors) {
                                           ": cannot open: No such file or directory");
     EXPECT_EQ(get(dev0() / "buffer" / "enable"), "0\n") << "never enabled";
 
-    put(dev0() / "scan_elements" / "in_accel_y_type", "le:s16/16X2>>0\n");
-    put(options_.dev_root / "iio:device0", "");
+    putFile(dev0() / "scan_elements" / "in_accel_y_type", "le:s16/16X2>>0\n");
+    putFile(options_.dev_root / "iio:device0", "");
     auto repeat_dev = IioDevice::open("mpu6050", options_);
     ASSERT_TRUE(repeat_dev.ok()) << repeat_dev.error().message;
     auto repeat = repeat_dev->startBuffer();
