@@ -123,7 +123,6 @@ void ImuService::push(const core::ImuSample& sample) {
         head_ = (head_ + 1) % ring_.size();
         count_ = std::min(count_ + 1, ring_.size());
         ++status_.samples;
-        status_.last_t_ns = sample.t_ns;
         status_.error.clear();
     }
     pushed_.notify_all();

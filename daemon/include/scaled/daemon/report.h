@@ -119,7 +119,6 @@ struct ImuStatus {
     std::uint64_t samples = 0;
     std::uint64_t errors = 0;  // failed reads
     std::string error;         // the latest failure while it lasts; empty once reads succeed
-    std::int64_t last_t_ns = 0;
 };
 
 // Pipeline health (protocol class STATUS).
