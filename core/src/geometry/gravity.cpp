@@ -74,7 +74,7 @@ Scalar angleBetween(const Vec3& a, const Vec3& b) {
 }
 
 RotationDefect rotationDefect(const Mat3& R_in) {
-    const Eigen::Matrix3d R = R_in.cast<double>();
+    const Eigen::Matrix3d& R = R_in.cast<double>();
     RotationDefect d;
     d.orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
     d.determinant = R.determinant();
