@@ -33,6 +33,10 @@ struct PointSimOptions {
     // Features are initialised with their true inverse depth and this relative
     // depth std (known scale, for NEES); <= 0 uses the filter's rho0/sigma_rho.
     Scalar known_depth_rel_sigma = 0;
+    // A shake on top of the smooth path: yaw and pitch oscillations of this
+    // amplitude (rad) at 4 and 5 rad/s (a hand or a drone's vibration that a
+    // constant-velocity model cannot follow at a low frame rate).
+    Scalar shake_rad = 0;
 };
 
 // A filter configuration suited to the point simulation (smooth motion,
@@ -49,11 +53,12 @@ inline core::slam::SlamConfig pointSimSlamConfig() {
 
 // Camera-to-world pose of the simulated camera at time t (world z up, camera
 // looking roughly along +y, moving along a smooth loop).
-inline core::CameraPose pointSimPose(Scalar t) {
+inline core::CameraPose pointSimPose(Scalar t, Scalar shake_rad = 0) {
     core::Mat3 R0;  // camera x right = world x, camera y down = -world z, z forward = world y
     R0 << 1, 0, 0, 0, 0, 1, 0, -1, 0;
-    const Scalar yaw = Scalar(0.35) * std::sin(Scalar(0.4) * t);
-    const Scalar pitch = Scalar(0.1) * std::sin(Scalar(0.7) * t + 1);
+    const Scalar yaw = Scalar(0.35) * std::sin(Scalar(0.4) * t) + shake_rad * std::sin(4 * t);
+    const Scalar pitch =
+        Scalar(0.1) * std::sin(Scalar(0.7) * t + 1) + shake_rad * std::sin(5 * t + 2);
     using AA = Eigen::AngleAxis<Scalar>;
     core::CameraPose pose;
     pose.R_CtoW = AA(yaw, Vec3::UnitZ()).toRotationMatrix() * R0 *
@@ -87,12 +92,12 @@ public:
             }
             points_.push_back(p);
         }
-        T0_ = pointSimPose(0);
+        T0_ = pointSimPose(0, opt.shake_rad);
     }
 
     // Ground truth in the SLAM world frame (the first camera frame).
     [[nodiscard]] core::CameraPose truthInC0(Scalar t) const {
-        const core::CameraPose p = pointSimPose(t);
+        const core::CameraPose p = pointSimPose(t, opt_.shake_rad);
         core::CameraPose out;
         out.R_CtoW = T0_.R_CtoW.transpose() * p.R_CtoW;
         out.p_CinW = T0_.R_CtoW.transpose() * (p.p_CinW - T0_.p_CinW);
@@ -103,14 +108,25 @@ public:
         return static_cast<std::int64_t>(std::llround(Scalar(k) / opt_.fps * Scalar(1e9)));
     }
 
+    // The true mean angular rate of the camera over frame k-1 to k, in the
+    // camera frame (what an ideal gyro integrates to).
+    [[nodiscard]] Vec3 trueRateC(int k) const {
+        const core::Mat3 R0 = pointSimPose(Scalar(k - 1) / opt_.fps, opt_.shake_rad).R_CtoW;
+        const core::Mat3 R1 = pointSimPose(Scalar(k) / opt_.fps, opt_.shake_rad).R_CtoW;
+        const Eigen::AngleAxis<Scalar> aa(R0.transpose() * R1);
+        return aa.axis() * aa.angle() * opt_.fps;
+    }
+
     // Runs one frame k of the loop on the filter (predict must not be called
-    // for k = 0). Returns the update report.
-    core::slam::UpdateReport step(core::slam::EkfSlam& slam, int k) {
+    // for k = 0), with the gyro's rate for the interval when one is given.
+    // Returns the update report.
+    core::slam::UpdateReport step(core::slam::EkfSlam& slam, int k,
+                                  const core::slam::GyroRate* gyro = nullptr) {
         const Scalar t = Scalar(k) / opt_.fps;
-        const core::CameraPose truth = pointSimPose(t);
+        const core::CameraPose truth = pointSimPose(t, opt_.shake_rad);
         core::slam::UpdateReport report;
         if (k > 0) {
-            slam.predict(timeNs(k));
+            slam.predict(timeNs(k), gyro);
             const auto preds = slam.predictMeasurements();
             matches_.clear();
             outlier_ids_.clear();

@@ -173,7 +173,7 @@ std::uint64_t EkfSlam::nextRandom() {
     return rng_ * 0x2545F4914F6CDD1DULL;
 }
 
-SlamHealth EkfSlam::predict(std::int64_t t_ns) {
+SlamHealth EkfSlam::predict(std::int64_t t_ns, const GyroRate* gyro) {
     if (health_ == SlamHealth::kUninitialised) {
         return health_;
     }
@@ -181,10 +181,23 @@ SlamHealth EkfSlam::predict(std::int64_t t_ns) {
     if (!(dt > 0) || dt > config_.max_dt_s) {
         return SlamHealth::kBadTimestamp;
     }
+    MotionNoise noise = config_.motion;
+    if (gyro != nullptr && gyro->w_C_radps.allFinite() && std::isfinite(gyro->sigma_radps) &&
+        gyro->sigma_radps > 0) {
+        // The gyro replaces the angular velocity: its mean, its variance, no
+        // correlation with the rest; F then carries that variance into the
+        // rotation (d q' / d w), and no impulse W is added on top.
+        x_.segment<3>(kAngVel) = gyro->w_C_radps;
+        P_.block(kAngVel, 0, 3, n_).setZero();
+        P_.block(0, kAngVel, n_, 3).setZero();
+        P_.block<3, 3>(kAngVel, kAngVel) =
+            Mat3::Identity() * (gyro->sigma_radps * gyro->sigma_radps);
+        noise.sigma_alpha = 0;
+    }
     Mat13 F;
     Mat13 Q;
     const Vec13 xc = x_.head<kCameraDim>();
-    x_.head<kCameraDim>() = predictCamera(xc, dt, config_.motion, &F, &Q);
+    x_.head<kCameraDim>() = predictCamera(xc, dt, noise, &F, &Q);
     // P_cc = F P_cc F^T + Q, P_cf = F P_cf.
     // F P_cf column by column (allocation-free), mirrored into P_fc.
     for (int j = kCameraDim; j < n_; ++j) {

@@ -4,7 +4,8 @@
 // features, 2008; 1-point RANSAC, 2010).
 //
 // One frame:
-//   predict(t_ns)                  constant-velocity motion model
+//   predict(t_ns[, gyro])          constant-velocity motion model, or the
+//                                  gyro's rotation (gyro_prior.h)
 //   predictMeasurements()          which features should be in view, where, and
 //                                  their innovation covariance S (active search)
 //   update(matches)                the front end's matches -> 1-point RANSAC,
@@ -27,6 +28,7 @@
 #include <scaled/core/result.h>
 #include <scaled/core/scale/vertical_extent.h>
 #include <scaled/core/slam/feature_model.h>
+#include <scaled/core/slam/gyro_prior.h>
 #include <scaled/core/slam/motion_model.h>
 #include <scaled/core/slam/slam_types.h>
 
@@ -154,7 +156,12 @@ public:
 
     // Motion model up to t_ns. kBadTimestamp if t_ns is not after the last frame
     // or the gap exceeds max_dt_s (state unchanged).
-    SlamHealth predict(std::int64_t t_ns);
+    // With a gyro rate over (last frame, t_ns] (gyro_prior.h), the angular
+    // velocity is the gyro's (its variance sigma^2, uncorrelated with the rest
+    // of the state) and the rotation is propagated without the
+    // angular-acceleration impulse; a rate that is not finite or has no
+    // positive sigma is ignored (the constant-velocity model runs).
+    SlamHealth predict(std::int64_t t_ns, const GyroRate* gyro = nullptr);
 
     // Features predicted in view (at most max_measured, oldest first).
     std::span<const FeaturePrediction> predictMeasurements();
