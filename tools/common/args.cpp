@@ -1,5 +1,6 @@
 #include "args.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <string>
 
@@ -23,6 +24,24 @@ bool parseFrameRange(std::string_view s, std::size_t& first, std::optional<std::
         }
         end = e;
     }
+    return true;
+}
+
+bool parseGyroSim(std::string_view s, double& noise_density, double& bias_sigma_radps) {
+    const auto colon = s.find(':');
+    if (colon == std::string_view::npos) {
+        return false;
+    }
+    double d = 0;
+    double b = 0;
+    if (!parseNumber(s.substr(0, colon), d) || !parseNumber(s.substr(colon + 1), b)) {
+        return false;
+    }
+    if (!(std::isfinite(d) && std::isfinite(b) && d >= 0 && b >= 0)) {
+        return false;
+    }
+    noise_density = d;
+    bias_sigma_radps = b;
     return true;
 }
 

@@ -24,6 +24,10 @@ bool parseNumber(std::string_view s, T& out) {
 // --frames A:B: A (default 0) inclusive, B exclusive and > A (default: open).
 bool parseFrameRange(std::string_view s, std::size_t& first, std::optional<std::size_t>& end);
 
+// --gyro-sim D:B: the simulated gyro's noise density (rad/s/sqrt(Hz)) and bias
+// sigma (rad/s), both finite and >= 0.
+bool parseGyroSim(std::string_view s, double& noise_density, double& bias_sigma_radps);
+
 // --intrinsics fx,fy,cx,cy (sets those four fields only).
 bool parseIntrinsics(std::string_view s, core::CameraIntrinsics& k);
 

@@ -38,7 +38,7 @@ void usage(std::FILE* out) {
         "                  [--set section.key=value]... [--frames A:B] [--out DIR] [--json]\n"
         "                  [--stride N] [--blank A:B]...\n"
         "                  [--intrinsics fx,fy,cx,cy] [--window N] [--delta N] [--no-plots]\n"
-        "                  [--truth-geometry]\n"
+        "                  [--truth-geometry] [--gyro-sim D:B]\n"
         "Runs EKF MonoSLAM, the object detector (synchronously, every detection.every_frames\n"
         "frames) and the metric scale estimator over a dataset and compares the estimate with\n"
         "the ground truth (Sim(3) alignment of the trajectory).\n"
@@ -49,6 +49,9 @@ void usage(std::FILE* out) {
         "  --frames A:B    frames A (inclusive) to B (exclusive); either may be omitted\n"
         "  --stride N      every Nth frame of the range (a 30 Hz sequence at 10 Hz: 3)\n"
         "  --blank A:B     frames A to B-1 delivered black (loss and recovery); repeatable\n"
+        "  --gyro-sim D:B  the gyro prior fed by a gyro simulated from the ground truth (200 Hz,\n"
+        "                  white noise D rad/s/sqrt(Hz), a bias drawn with sigma B rad/s from\n"
+        "                  tracker.seed): what a gyro would give on a sequence without one\n"
         "  --out DIR       write frames.csv, updates.csv, observations.csv, posterior.csv,\n"
         "                  likelihoods.csv, summary.json, config.toml and the figures\n"
         "                  fig_{a,b,c,d}_*.png (tools/scale_eval_plot.py, python3-matplotlib)\n"
@@ -144,6 +147,12 @@ int main(int argc, char** argv) {
             ok = r.ok();
             if (ok) {
                 opt.selection.blank.push_back(*r);
+            }
+        } else if (a == "--gyro-sim") {
+            scaled::drivers::imu::SimulatedGyroOptions g;
+            ok = parseGyroSim(v, g.noise_density, g.bias_sigma_radps);
+            if (ok) {
+                opt.gyro_sim = g;
             }
         } else if (a == "--intrinsics") {
             scaled::core::CameraIntrinsics k;
@@ -242,6 +251,9 @@ int main(int argc, char** argv) {
                 std::fputc('\n', stderr);
             }
         };
+    }
+    if (opt.gyro_sim) {
+        opt.gyro_sim->seed = opt.config.tracker.slam.seed;  // one seed per run
     }
     auto result = evaluate(**source, **detector, *priors, opt);
     if (!result) {

@@ -237,7 +237,9 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
     s += ",\"tracker_ms_per_frame\":" + jsonNumber(r.tracker_ms_per_frame, 4);
     s += ",\"detector_ms_per_update\":" + jsonNumber(r.detector_ms_per_update, 4);
     s += ",\"estimator_ms_per_update\":" + jsonNumber(r.estimator_ms_per_update, 4);
-    s += ",\"gravity_source\":" + jsonString(r.gravity_source) + "}";
+    s += ",\"gravity_source\":" + jsonString(r.gravity_source);
+    s += ",\"gyro_source\":" + jsonString(r.gyro_source);
+    s += ",\"gyro_frames\":" + std::to_string(r.gyro_frames) + "}";
     return s;
 }
 

@@ -12,6 +12,7 @@
 #include <scaled/core/scale/likelihood.h>
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/drivers/depth_image.h>
+#include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
 #include <scaled/vision/mono_tracker.h>
 
@@ -370,6 +371,11 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
         return gravity.error();
     }
     bool need_gravity = true;
+    auto gyro_feed = drivers::imu::GyroFeed::create(*gravity, options.gyro_sim);
+    if (!gyro_feed) {
+        return gyro_feed.error();
+    }
+    r.gyro_source = gyro_feed->source();
 
     // Depth errors per update, filtered to the converged updates at the end.
     std::vector<std::pair<std::size_t, double>> depth_rel;
@@ -400,8 +406,12 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             need_gravity = false;
         }
         auto t0 = Clock::now();
-        const vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray);
+        const vision::TrackStats stats =
+            tracker->processFrame(frame.t_ns, frame.gray, gyro_feed->forFrame(frame));
         tracker_ms += msSince(t0);
+        if (stats.gyro == core::slam::GyroCoverage::kOk) {
+            ++r.gyro_frames;
+        }
 
         FrameRow row;
         row.frame = frame.id;

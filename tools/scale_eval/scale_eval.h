@@ -21,6 +21,7 @@
 #include <scaled/detector/object_detector.h>
 #include <scaled/drivers/frame_selection.h>
 #include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/imu/simulated_gyro.h>
 
 namespace scaled::tools {
 
@@ -29,6 +30,9 @@ struct EvalOptions {
     std::size_t first_frame = 0;
     std::optional<std::size_t> end_frame;  // exclusive
     drivers::FrameSelection selection;     // --stride, --blank
+    // --gyro-sim: the gyro prior fed by a gyro simulated from the ground truth
+    // (drivers/imu/gyro_feed.h); else the dataset's IMU log when it has a gyro.
+    std::optional<drivers::imu::SimulatedGyroOptions> gyro_sim;
     // Ground-truth scale over a sliding window of this many tracked frames.
     int window_frames = 150;
     // The constant-scale baseline is fitted on this much ground truth at the
@@ -168,6 +172,8 @@ struct EvalResult {
     std::size_t unreadable_frames = 0;
     bool has_ground_truth = false;
     std::string gravity_source;
+    std::string gyro_source;      // what fed the gyro prior ("none" when nothing did)
+    std::size_t gyro_frames = 0;  // frames predicted with the gyro
 
     std::vector<FrameRow> frame_rows;
     std::vector<UpdateRow> updates;

@@ -43,7 +43,7 @@ void usage(std::FILE* out) {
         "                [--stride N] [--blank A:B]...\n"
         "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
         "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
-        "                [--seed N] [--set KEY=VALUE]... [--window N]\n"
+        "                [--seed N] [--set KEY=VALUE]... [--window N] [--gyro-sim D:B]\n"
         "                [--window-out CSV] [--verbose]\n"
         "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, a folder of\n"
         "images or a video file, writes the trajectory (TUM format, SLAM units, world = first\n"
@@ -52,6 +52,9 @@ void usage(std::FILE* out) {
         "                 overrides the dataset's\n"
         "  --stride N     every Nth frame of the range (a 30 Hz sequence at 10 Hz: 3)\n"
         "  --blank A:B    frames A to B-1 delivered black (loss and recovery); repeatable\n"
+        "  --gyro-sim D:B the gyro prior fed by a gyro simulated from the ground truth (200 Hz,\n"
+        "                 white noise D rad/s/sqrt(Hz), a bias drawn with sigma B rad/s from the\n"
+        "                 seed): what a gyro would give on a sequence without one\n"
         "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
         "                 container has none (default 30)\n"
         "  --window N     tracked frames of the sliding-window Sim(3) scale whose range\n"
@@ -134,6 +137,16 @@ bool setParameter(std::string_view kv, scaled::vision::TrackerConfig& c) {
         c.relocalise_search_px = v;
     } else if (key == "relocalise_max_rel_sigma") {
         c.relocalise_max_rel_sigma = v;
+    } else if (key == "use_gyro") {
+        c.use_gyro = v != 0;
+    } else if (key == "gyro_noise_density") {
+        c.gyro_noise_density = v;
+    } else if (key == "gyro_bias_sigma_radps") {
+        c.gyro_bias_sigma_radps = v;
+    } else if (key == "gyro_max_gap_s") {
+        c.gyro_max_gap_s = v;
+    } else if (key == "gyro_bias_time_s") {
+        c.gyro_bias_time_s = v;
     } else if (key == "feature_border_px") {
         c.feature_border_px = i;
     } else if (key == "pyramid_levels") {
@@ -234,6 +247,12 @@ int main(int argc, char** argv) {
             ok = r.ok();
             if (ok) {
                 ropt.selection.blank.push_back(*r);
+            }
+        } else if (a == "--gyro-sim") {
+            scaled::drivers::imu::SimulatedGyroOptions g;
+            ok = scaled::tools::parseGyroSim(*v, g.noise_density, g.bias_sigma_radps);
+            if (ok) {
+                ropt.gyro_sim = g;
             }
         } else if (a == "--intrinsics") {
             scaled::core::CameraIntrinsics k;
@@ -347,6 +366,9 @@ int main(int argc, char** argv) {
                 }
             }
         };
+    }
+    if (ropt.gyro_sim) {
+        ropt.gyro_sim->seed = ropt.tracker.slam.seed;  // one seed per run
     }
     const auto result = scaled::tools::runSlam(src, *camera, ropt);
     if (!result) {

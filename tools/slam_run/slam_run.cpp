@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include <scaled/core/geometry/trajectory_alignment.h>
+#include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
 
 #include "json.h"
@@ -82,6 +83,11 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
         return gravity.error();
     }
     SlamRunResult result;
+    auto gyro_feed = drivers::imu::GyroFeed::create(*gravity, options.gyro_sim);
+    if (!gyro_feed) {
+        return gyro_feed.error();
+    }
+    result.gyro_source = gyro_feed->source();
     std::vector<Segment> segments(1);
     drivers::Frame frame;
     double ms_sum = 0;
@@ -105,7 +111,11 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
             need_gravity = false;
         }
         const auto t0 = std::chrono::steady_clock::now();
-        const vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray);
+        const core::slam::ImuWindow* imu = gyro_feed->forFrame(frame);
+        const vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray, imu);
+        if (stats.gyro == core::slam::GyroCoverage::kOk) {
+            ++result.gyro_frames;
+        }
         const double ms =
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                 .count();
@@ -153,6 +163,7 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
                                    ? result.nis_by_age[b] / double(result.nis_by_age_count[b])
                                    : 0;
     }
+    result.gyro_bias_C = tracker->gyroBiasC();
     result.ms_per_frame = result.frames > 0 ? ms_sum / double(result.frames) : 0;
     result.mean_features_measured =
         result.tracked_frames > 0 ? measured_sum / double(result.tracked_frames) : 0;
@@ -260,7 +271,12 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
                  num(g.z()) + "]";
         }
     }
-    s += ",\"gravity_source\":" + jsonString(r.gravity_source) + "}";
+    s += ",\"gravity_source\":" + jsonString(r.gravity_source);
+    s += ",\"gyro_source\":" + jsonString(r.gyro_source);
+    s += ",\"gyro_frames\":" + std::to_string(r.gyro_frames);
+    s += ",\"gyro_bias_C_radps\":[" + jsonNumber(double(r.gyro_bias_C.x()), 5) + "," +
+         jsonNumber(double(r.gyro_bias_C.y()), 5) + "," + jsonNumber(double(r.gyro_bias_C.z()), 5) +
+         "]}";
     return s;
 }
 

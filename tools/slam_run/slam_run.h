@@ -16,6 +16,7 @@
 #include <scaled/core/result.h>
 #include <scaled/drivers/frame_selection.h>
 #include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/imu/simulated_gyro.h>
 #include <scaled/vision/mono_tracker.h>
 
 namespace scaled::tools {
@@ -25,7 +26,11 @@ struct SlamRunOptions {
     std::size_t first_frame = 0;
     std::optional<std::size_t> end_frame;  // exclusive
     drivers::FrameSelection selection;     // --stride, --blank
-    int window_frames = 150;               // the sliding-window scale's window (tracked frames)
+    // --gyro-sim: the gyro prior fed from the ground truth (an evaluation of
+    // what a gyro would give; drivers/imu/simulated_gyro.h). Without it the
+    // dataset's own IMU log feeds the prior when it has a gyroscope.
+    std::optional<drivers::imu::SimulatedGyroOptions> gyro_sim;
+    int window_frames = 150;  // the sliding-window scale's window (tracked frames)
     // Called after every frame (progress display); may be empty.
     std::function<void(std::size_t done, std::size_t total, const vision::TrackStats&)> progress;
 };
@@ -62,7 +67,10 @@ struct SlamRunResult {
     // and the matches in each: is a young feature as trustworthy as its S says?
     std::array<double, 4> nis_by_age{};
     std::array<long, 4> nis_by_age_count{};
-    std::string gravity_source;  // where the vertical came from
+    std::string gravity_source;   // where the vertical came from
+    std::string gyro_source;      // what fed the gyro prior ("none" when nothing did)
+    std::size_t gyro_frames = 0;  // frames predicted with the gyro
+    core::Vec3 gyro_bias_C = core::Vec3::Zero();  // the tracker's bias estimate at the end
 };
 
 core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,

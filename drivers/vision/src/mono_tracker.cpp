@@ -8,6 +8,7 @@
 #include <Eigen/LU>
 
 #include <scaled/core/slam/feature_model.h>
+#include <scaled/core/slam/quaternion.h>
 #include <scaled/vision/mono_tracker.h>
 
 namespace scaled::vision {
@@ -91,6 +92,22 @@ core::Result<bool> validate(const TrackerConfig& c) {
     }
     if (!(c.coarse_min_ncc > -1 && c.coarse_min_ncc < 1)) {
         return bad("coarse_min_ncc", c.coarse_min_ncc, "in (-1, 1)");
+    }
+    if (!(c.gyro_noise_density >= 0 && c.gyro_noise_density <= 1)) {
+        return bad("gyro_noise_density", c.gyro_noise_density, "in [0, 1] rad/s/sqrt(Hz)");
+    }
+    if (!(c.gyro_bias_sigma_radps >= 0 && c.gyro_bias_sigma_radps <= 10)) {
+        return bad("gyro_bias_sigma_radps", c.gyro_bias_sigma_radps, "in [0, 10]");
+    }
+    if (c.use_gyro && !(c.gyro_noise_density > 0 || c.gyro_bias_sigma_radps > 0)) {
+        return bad("gyro_bias_sigma_radps", c.gyro_bias_sigma_radps,
+                   "> 0 when gyro_noise_density is 0 (a gyro without noise)");
+    }
+    if (!(c.gyro_bias_time_s >= 0 && c.gyro_bias_time_s <= 3600)) {
+        return bad("gyro_bias_time_s", c.gyro_bias_time_s, "in [0, 3600]");
+    }
+    if (!(c.gyro_max_gap_s > 0 && c.gyro_max_gap_s <= 1)) {
+        return bad("gyro_max_gap_s", c.gyro_max_gap_s, "in (0, 1]");
     }
     if (!(c.match.min_ncc > -1 && c.match.min_ncc < 1)) {
         return bad("min_ncc", c.match.min_ncc, "in (-1, 1)");
@@ -567,7 +584,29 @@ bool MonoTracker::tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackSta
     return slam_.relocalise(t_ns, *pose, 3 * px_angle * depth, 3 * px_angle);
 }
 
-TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
+void MonoTracker::updateGyroBias(const slam::GyroRate& rate, const core::Mat3& R_prev_CtoW,
+                                 std::int64_t t_prev_ns, std::int64_t t_ns) {
+    const Scalar dt = Scalar(t_ns - t_prev_ns) * Scalar(1e-9);
+    if (!(dt > 0)) {
+        return;
+    }
+    // The map's rotation rate over the interval, from the updated poses.
+    const Vec3 w_map = slam::rotationError(R_prev_CtoW, slam_.pose().R_CtoW) / dt;
+    const Vec3 residual = rate.w_C_radps - w_map;  // the bias the estimate still misses
+    // An exponential average. (A running mean at first, the n-th residual
+    // weighing 1/n, was measured worse: its first noisy estimates bend the
+    // young map; docs/slam.md "The gyro prior".)
+    const Scalar gain = std::min(Scalar(1), dt / static_cast<Scalar>(config_.gyro_bias_time_s));
+    gyro_bias_C_ += gain * residual;
+    // A bias beyond this is a broken device or a wrong R_ItoC, not a bias.
+    constexpr Scalar kMaxBias = Scalar(0.5);
+    if (gyro_bias_C_.norm() > kMaxBias) {
+        gyro_bias_C_ *= kMaxBias / gyro_bias_C_.norm();
+    }
+}
+
+TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
+                                     const slam::ImuWindow* imu) {
     TrackStats stats;
     if (gray.empty() || gray.type() != CV_8UC1 || gray.cols != slam_.camera().width() ||
         gray.rows != slam_.camera().height()) {
@@ -589,6 +628,12 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
         return stats;
     }
     pyramid_built_ = 0;
+    const slam::GyroRate* rate = nullptr;
+    slam::GyroIntegration gyro;
+    const bool bias_reference = previous_frame_good_;
+    const core::Mat3 R_prev_CtoW = slam_.pose().R_CtoW;
+    const std::int64_t t_prev_ns = slam_.timestampNs();
+    previous_frame_good_ = false;
     if (relocalising_) {
         stats.health = slam::SlamHealth::kRelocalising;
         stats.features = static_cast<int>(slam_.features().size());
@@ -605,7 +650,18 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
         relocalising_ = false;
         stats.relocalised = true;
     } else {
-        const slam::SlamHealth predicted = slam_.predict(t_ns);
+        if (imu != nullptr && config_.use_gyro) {
+            slam::GyroModel model;
+            model.R_ItoC = imu->R_ItoC;
+            model.bias_I_radps = imu->R_ItoC.transpose() * gyro_bias_C_;
+            model.noise_density = static_cast<Scalar>(config_.gyro_noise_density);
+            model.bias_sigma_radps = static_cast<Scalar>(config_.gyro_bias_sigma_radps);
+            model.max_gap_ns = static_cast<std::int64_t>(config_.gyro_max_gap_s * 1e9);
+            gyro = slam::integrateGyro(imu->samples, slam_.timestampNs(), t_ns, model);
+            stats.gyro = gyro.coverage;
+            rate = gyro.coverage == slam::GyroCoverage::kOk ? &gyro.rate : nullptr;
+        }
+        const slam::SlamHealth predicted = slam_.predict(t_ns, rate);
         stats.predict_us = lap.next();
         if (predicted != slam::SlamHealth::kOk) {
             stats.health = predicted;
@@ -661,6 +717,9 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
         if (config_.relocalise_s > 0) {
             refreshDescriptors(gray, preds);
         }
+        if (rate != nullptr && bias_reference && config_.gyro_bias_time_s > 0) {
+            updateGyroBias(*rate, R_prev_CtoW, t_prev_ns, t_ns);
+        }
     }
     stats.update_us = lap.next();
     stats.predicted = report.predicted;
@@ -670,6 +729,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray) {
     stats.nis_sum = report.nis_sum;
     stats.nis_count = report.nis_count;
     stats.health = slam_.manageMap();
+    previous_frame_good_ = !report.bad_frame && stats.health == slam::SlamHealth::kOk;
     if (stats.health == slam::SlamHealth::kLost && config_.relocalise_s > 0 &&
         !slam_.features().empty()) {
         // Keep the map and look for the camera in it from the next frame on.

@@ -71,24 +71,40 @@ struct TrackerConfig {
     // Map features whose position std exceeds this fraction of their distance
     // from the camera are not used (their point is a guess along the ray).
     double relocalise_max_rel_sigma = 0.1;
+    // The gyro motion prior (issue 21, core/slam/gyro_prior.h): a frame
+    // given IMU samples with a gyroscope that cover its interval is predicted
+    // with the gyro's rotation; otherwise (no gyro, a gap, another clock) the
+    // constant-velocity model runs. false: never.
+    bool use_gyro = true;
+    double gyro_noise_density = 2e-4;     // rad/s/sqrt(Hz), white rate noise
+    double gyro_bias_sigma_radps = 0.02;  // what is left of the bias (1 sigma)
+    double gyro_max_gap_s = 0.05;         // a longer silence gives no gyro rate
+    // The gyro's bias, estimated on line: on every well-tracked frame
+    // predicted with the gyro, the gyro's rate (less the estimate) minus the
+    // map's own rotation rate over the interval is averaged with this time
+    // constant (seconds) into the estimate the next frames subtract. 0: none.
+    double gyro_bias_time_s = 10;
 };
 
 core::Result<bool> validate(const TrackerConfig& config);
 
 struct TrackStats {
     core::slam::SlamHealth health = core::slam::SlamHealth::kUninitialised;
-    bool new_map = false;           // this frame started a new map
-    int predicted = 0;              // features searched
-    int matched = 0;                // found by NCC
-    int inliers = 0;                // low-innovation inliers of 1-point RANSAC
-    int rescued = 0;                // high-innovation inliers rescued
-    int added = 0;                  // new features initialised
-    int features = 0;               // map size after the frame
-    int visible = 0;                // predicted in view
-    int search_evaluations = 0;     // NCC evaluations (front-end cost)
-    int coarse_searches = 0;        // features searched coarse-to-fine (pyramid_levels)
-    int coarse_matches = 0;         // of which matched at full resolution
-    bool relocalised = false;       // this frame put the camera back into the lost map
+    bool new_map = false;        // this frame started a new map
+    int predicted = 0;           // features searched
+    int matched = 0;             // found by NCC
+    int inliers = 0;             // low-innovation inliers of 1-point RANSAC
+    int rescued = 0;             // high-innovation inliers rescued
+    int added = 0;               // new features initialised
+    int features = 0;            // map size after the frame
+    int visible = 0;             // predicted in view
+    int search_evaluations = 0;  // NCC evaluations (front-end cost)
+    int coarse_searches = 0;     // features searched coarse-to-fine (pyramid_levels)
+    int coarse_matches = 0;      // of which matched at full resolution
+    bool relocalised = false;    // this frame put the camera back into the lost map
+    // The gyro prior on this frame: kOk when the prediction used it; unset
+    // when no IMU samples were given (or use_gyro is off, or no prediction ran).
+    std::optional<core::slam::GyroCoverage> gyro;
     int relocalise_candidates = 0;  // map features matched to corners (relocalising frames)
     int relocalise_inliers = 0;     // of which the PnP pose kept
     // The update's normalised innovations by feature age (UpdateReport).
@@ -143,11 +159,16 @@ public:
         depth_prior_rel_sigma_ = rel_sigma;
     }
 
-    // gray: CV_8UC1 of the camera's size. t_ns strictly increasing.
-    TrackStats processFrame(std::int64_t t_ns, const cv::Mat& gray);
+    // gray: CV_8UC1 of the camera's size. t_ns strictly increasing. imu: the
+    // samples for the gyro prior, when the system has a gyroscope.
+    TrackStats processFrame(std::int64_t t_ns, const cv::Mat& gray,
+                            const core::slam::ImuWindow* imu = nullptr);
 
     [[nodiscard]] const core::slam::EkfSlam& filter() const { return slam_; }
     [[nodiscard]] bool hasMap() const { return has_map_; }
+    // The gyro bias estimate (gyro_bias_time_s), camera frame, rad/s: kept
+    // across maps (it belongs to the device, not the map).
+    [[nodiscard]] const core::Vec3& gyroBiasC() const { return gyro_bias_C_; }
     [[nodiscard]] const TrackerConfig& config() const { return config_; }
 
 private:
@@ -164,6 +185,10 @@ private:
     };
 
     MonoTracker(core::slam::EkfSlam slam, const TrackerConfig& config);
+    // One step of the on-line gyro bias estimate (gyro_bias_time_s) after a
+    // good update of a frame predicted with `rate`.
+    void updateGyroBias(const core::slam::GyroRate& rate, const core::Mat3& R_prev_CtoW,
+                        std::int64_t t_prev_ns, std::int64_t t_ns);
     FeatureAppearance* appearanceOf(std::uint64_t id);
     void dropDeletedAppearances();
     // Forgets every appearance, keeping the patch buffers for new features.
@@ -232,6 +257,10 @@ private:
     std::vector<BriefDescriptor> corner_briefs_;  // of corners_, while relocalising
     std::vector<unsigned char> corner_has_brief_;
     core::CameraPose last_good_pose_;  // the last frame that was not a bad frame
+    core::Vec3 gyro_bias_C_ = core::Vec3::Zero();
+    // The previous frame's updated pose was good (same map, not a bad frame):
+    // the reference the gyro bias is measured against.
+    bool previous_frame_good_ = false;
     DepthPrior depth_prior_;
     core::Scalar depth_prior_rel_sigma_ = 0;
 };

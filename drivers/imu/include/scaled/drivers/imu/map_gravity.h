@@ -57,6 +57,10 @@ public:
     [[nodiscard]] MapGravity atMapStart(const Frame& frame, const LiveAccelerometer& live) const;
 
     [[nodiscard]] bool hasImuLog() const { return log_.has_value(); }
+    // The sequence's IMU log (also the gyro prior's samples when it has a
+    // gyroscope), or nullptr; and where it was read from.
+    [[nodiscard]] const ImuLog* imuLog() const { return log_ ? &*log_ : nullptr; }
+    [[nodiscard]] const std::filesystem::path& imuLogPath() const { return log_path_; }
 
 private:
     std::optional<ImuLog> log_;
