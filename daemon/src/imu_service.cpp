@@ -105,6 +105,23 @@ void ImuService::copyRecent(std::vector<core::ImuSample>& out) const {
     }
 }
 
+void ImuService::copySince(std::int64_t t_ns, std::vector<core::ImuSample>& out) const {
+    out.clear();
+    const std::lock_guard lock(mutex_);
+    const std::size_t n = ring_.size();
+    const std::size_t oldest = head_ + n - count_;
+    // The first sample at or after t_ns, less one (the sample that bounds the
+    // interval's start), scanning from the oldest.
+    std::size_t first = 0;
+    while (first < count_ && ring_[(oldest + first) % n].t_ns < t_ns) {
+        ++first;
+    }
+    first = first > 0 ? first - 1 : 0;
+    for (std::size_t i = first; i < count_; ++i) {
+        out.push_back(ring_[(oldest + i) % n]);
+    }
+}
+
 std::int64_t ImuService::nowNs() const {
     timespec ts{};
     clock_gettime(device_.clockId(), &ts);

@@ -72,6 +72,17 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
     core::PriorTable priors = std::move(parts.priors);
     std::unique_ptr<Pipeline> p(new Pipeline(config, std::move(parts), hub, events, *camera));
     p->gravity_selector_ = std::move(gravity);
+    // A replayed sequence's IMU log with a gyroscope feeds the gyro prior, as
+    // in scale-eval and slam-run (drivers/imu/gyro_feed.h).
+    auto feed = drivers::imu::GyroFeed::create(p->gravity_selector_, std::nullopt);
+    if (!feed) {
+        return feed.error();
+    }
+    p->gyro_feed_ = std::move(*feed);
+    if (p->imu_ == nullptr && p->gyro_feed_.source() != "none") {
+        p->status_.gyro.present = true;
+        p->status_.gyro.source = p->gyro_feed_.source();
+    }
     auto tracker = vision::MonoTracker::create(*camera, config.pipeline.tracker);
     if (!tracker) {
         return tracker.error();
@@ -161,6 +172,11 @@ Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& h
         status_.imu = imu_->status();
         imu_label_ = status_.imu.device;
         imu_samples_.reserve(imu_->capacity());
+        if (imu_->hasGyro()) {
+            gyro_samples_.reserve(imu_->capacity());
+            status_.gyro.present = true;
+            status_.gyro.source = imu_label_;
+        }
     } else if (!config.imu.device.empty()) {
         status_.imu.configured = true;
         status_.imu.device = config.imu.device;
@@ -509,6 +525,21 @@ void Pipeline::trackingLoop() {
             setSlamState(DaemonState::kInitialising, frame.id, frame.t_ns,
                          live_ != nullptr ? "camera reconnected" : "replay restarted", false);
         }
+        // The gyro prior's samples for the interval since the previous frame:
+        // the live IMU's (on the frames' clock, CLOCK_MONOTONIC), else a
+        // replayed log's. Samples on another clock cover no interval: the
+        // tracker then predicts with constant velocity.
+        const core::slam::ImuWindow* imu_window = nullptr;
+        if (imu_ != nullptr) {
+            if (status_.gyro.present && have_last) {
+                imu_->copySince(last_t_ns, gyro_samples_);
+                imu_window_.samples = gyro_samples_;
+                imu_window_.R_ItoC = imu_->rotationImuToCamera();
+                imu_window = &imu_window_;
+            }
+        } else {
+            imu_window = gyro_feed_.forFrame(frame);
+        }
         have_last = true;
         last_t_ns = frame.t_ns;
         if (need_gravity) {
@@ -539,7 +570,7 @@ void Pipeline::trackingLoop() {
             need_gravity = false;
         }
         const std::int64_t t0 = monotonicNowNs();
-        const vision::TrackStats stats = tracker.processFrame(frame.t_ns, frame.gray);
+        const vision::TrackStats stats = tracker.processFrame(frame.t_ns, frame.gray, imu_window);
         const double ms = msBetween(t0, monotonicNowNs());
         ++tracked;
         const bool ok = stats.health == core::slam::SlamHealth::kOk;
@@ -561,6 +592,12 @@ void Pipeline::trackingLoop() {
             status_.frames_tracked = tracked;
             status_.features_in_map = stats.features;
             status_.features_tracked = stats.inliers + stats.rescued;
+            if (stats.gyro == core::slam::GyroCoverage::kOk) {
+                ++status_.gyro.frames;
+                const core::Vec3& b = tracker.gyroBiasC();
+                status_.gyro.bias_C_radps = {static_cast<double>(b.x()), static_cast<double>(b.y()),
+                                             static_cast<double>(b.z())};
+            }
             // Stage statistics live in status_ itself (a few flops under the
             // lock taken anyway): publishStatus copies them to the hub.
             PipelineTiming& timing = status_.timing;

@@ -175,6 +175,11 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
              Bound::kOpen),
         integer("tracker", "relocalise_corners", &c.tracker.relocalise_corners, 1, 10000),
         real("tracker", "relocalise_search_px", &c.tracker.relocalise_search_px, 0, 10000),
+        boolean("tracker", "use_gyro", &c.tracker.use_gyro),
+        real("tracker", "gyro_noise_density", &c.tracker.gyro_noise_density, 0, 1),
+        real("tracker", "gyro_bias_sigma_radps", &c.tracker.gyro_bias_sigma_radps, 0, 10),
+        real("tracker", "gyro_max_gap_s", &c.tracker.gyro_max_gap_s, 0, 1, Bound::kOpen),
+        real("tracker", "gyro_bias_time_s", &c.tracker.gyro_bias_time_s, 0, 3600),
         // [detector]
         choice("detector", "family", &d.family,
                {{"yolox", detector::ModelFamily::kYolox},

@@ -240,6 +240,15 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         }
         out += '}';
     }
+    if (s.gyro.present) {
+        out += R"(,"gyro":{"source":)";
+        appendJsonString(out, s.gyro.source);
+        key(out, "frames");
+        appendJsonInt(out, s.gyro.frames);
+        key(out, "bias_C_radps");
+        appendArray(out, s.gyro.bias_C_radps);
+        out += '}';
+    }
     key(out, "uptime_s");
     appendJsonNumber(out, s.uptime_s);
     key(out, "fps");

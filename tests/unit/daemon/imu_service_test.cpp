@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/geometry/gravity.h>
+#include <scaled/core/slam/gyro_prior.h>
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/pipeline.h>
@@ -139,6 +140,54 @@ TEST_F(ImuServiceTest, OpenNamesWhatIsMissing) {
         no_accel.error().message.find("no accelerometer (needs accel_x, accel_y and accel_z)"),
         std::string::npos)
         << no_accel.error().message;
+}
+
+// With a gyroscope (in_anglvel_*): the samples carry the rate, copySince
+// gives a frame interval's samples with the one before it, and they
+// integrate to the rate in the camera frame (the gyro prior's input).
+TEST_F(ImuServiceTest, AGyroscopesSamplesServeTheGyroPrior) {
+    // 0.5 rad/s about the IMU's z (1000 LSB at 0.0005 rad/s per LSB).
+    putFile(dev0() / "in_anglvel_x_raw", "0\n");
+    putFile(dev0() / "in_anglvel_y_raw", "0\n");
+    putFile(dev0() / "in_anglvel_z_raw", "1000\n");
+    putFile(dev0() / "in_anglvel_scale", "0.0005\n");
+    config_.rotation_imu_to_camera = {0, -1, 0, 0, 0, -1, 1, 0, 0};
+    auto s = ImuService::open(config_, options_);
+    ASSERT_TRUE(s) << s.error().message;
+    EXPECT_TRUE((*s)->hasGyro());
+    (*s)->start();
+    ASSERT_TRUE(waitFor(**s, [](const ImuStatus& st) { return st.samples >= 30; }));
+    (*s)->stop();
+    std::vector<core::ImuSample> all;
+    all.reserve((*s)->capacity());
+    (*s)->copyRecent(all);
+    ASSERT_GE(all.size(), 30U);
+    ASSERT_TRUE(all.front().gyro_radps.has_value());
+    EXPECT_NEAR(all.front().gyro_radps->z(), 0.5, 1e-9);
+
+    std::vector<core::ImuSample> since;
+    since.reserve((*s)->capacity());
+    const std::int64_t t0 = all[10].t_ns + 1;
+    (*s)->copySince(t0, since);
+    ASSERT_EQ(since.size(), all.size() - 10);
+    EXPECT_EQ(since.front().t_ns, all[10].t_ns);  // the sample before t0 bounds it
+    EXPECT_EQ(since.back().t_ns, all.back().t_ns);
+    // Nothing before the ring: everything; after the last sample: the last.
+    (*s)->copySince(0, since);
+    EXPECT_EQ(since.size(), all.size());
+    (*s)->copySince(all.back().t_ns + 1, since);
+    ASSERT_EQ(since.size(), 1U);
+
+    core::slam::GyroModel model;
+    model.R_ItoC = (*s)->rotationImuToCamera();
+    model.max_gap_ns = 1'000'000'000;  // a loaded test machine polls unevenly
+    (*s)->copySince(t0, since);
+    const auto g = core::slam::integrateGyro(since, t0, all.back().t_ns, model);
+    ASSERT_EQ(g.coverage, core::slam::GyroCoverage::kOk) << core::slam::toString(g.coverage);
+    // IMU z (up) is the camera's -y: a yaw to the left.
+    EXPECT_NEAR(g.rate.w_C_radps.x(), 0, 1e-9);
+    EXPECT_NEAR(g.rate.w_C_radps.y(), -0.5, 1e-9);
+    EXPECT_NEAR(g.rate.w_C_radps.z(), 0, 1e-9);
 }
 
 // The daemon's pipeline starts its map with the live accelerometer's

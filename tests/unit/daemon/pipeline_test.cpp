@@ -9,9 +9,14 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iomanip>
 #include <memory>
 #include <mutex>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <utility>
 #include <vector>
@@ -22,10 +27,13 @@
 
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pose.h>
+#include <scaled/daemon/protocol.h>
+#include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/priors_toml.h>
 #include <scaled/sim/sim_source.h>
 
 #include "hub_wait.h"
+#include "temp_dir.h"
 
 namespace scaled::daemon {
 namespace {
@@ -708,6 +716,89 @@ TEST(Pipeline, RejectsMissingParts) {
     auto q = Pipeline::create(c, std::move(no_source), hub, nullptr);
     ASSERT_FALSE(q.ok());
     EXPECT_NE(q.error().message.find("source"), std::string::npos);
+}
+
+// A replayed sequence whose IMU log has a gyroscope (EuRoC imu0/data.csv next
+// to the images) feeds the gyro prior, as in scale-eval and slam-run, and
+// STATUS.gyro says so: a still camera looking at a textured wall, 12 frames,
+// a 200 Hz gyro reading zero.
+TEST(Pipeline, AReplayedGyroLogFeedsTheGyroPrior) {
+    const test::TempDir dir("pipeline_gyro");
+    const auto seq = dir.path() / "seq";
+    std::filesystem::create_directories(seq / "rgb");
+    std::filesystem::create_directories(seq / "imu0");
+    cv::Mat noise(480, 640, CV_8UC1);
+    cv::RNG rng(1);
+    rng.fill(noise, cv::RNG::UNIFORM, 0, 255);
+    cv::Mat wall;
+    cv::GaussianBlur(noise, wall, cv::Size(0, 0), 2.0);
+    std::ofstream rgb(seq / "rgb.txt");
+    rgb << "# timestamp filename\n";
+    constexpr int kFrames = 12;
+    for (int k = 0; k < kFrames; ++k) {
+        char name[32];
+        std::snprintf(name, sizeof name, "rgb/%06d.png", k);
+        ASSERT_TRUE(cv::imwrite((seq / name).string(), wall));
+        rgb << std::fixed << std::setprecision(9) << 1.0 + k / 30.0 << " " << name << "\n";
+    }
+    rgb.close();
+    std::ofstream(seq / "camera.txt") << "# width height fx fy cx cy\n640 480 525 525 320 240\n";
+    std::ofstream imu(seq / "imu0" / "data.csv");
+    imu << "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+           "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n";
+    for (std::int64_t t = 900'000'000; t <= 1'500'000'000; t += 5'000'000) {
+        imu << t << ",0,0,0,0,-9.81,0\n";
+    }
+    imu.close();
+
+    DaemonConfig c = config(AtEnd::kExit);
+    c.source.kind = SourceKind::kReplay;
+    c.source.replay_path = seq;
+    PipelineParts p = parts(1.0, true);
+    auto src = drivers::openDataset(seq);
+    ASSERT_TRUE(src.ok()) << src.error().message;
+    p.source = std::move(*src);
+    p.source_name = "replay:" + seq.string();
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    auto pipeline = Pipeline::create(c, std::move(p), hub, nullptr);
+    ASSERT_TRUE(pipeline.ok()) << pipeline.error().message;
+    ASSERT_TRUE((*pipeline)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*pipeline)->finished(); }, std::chrono::seconds(120)));
+    (*pipeline)->stop();
+    ASSERT_FALSE((*pipeline)->failure().has_value());
+
+    const PipelineStatus st = hub.status();
+    EXPECT_EQ(st.frames_tracked, std::uint64_t{kFrames});
+    EXPECT_EQ(st.epoch, 1U);
+    ASSERT_TRUE(st.gyro.present);
+    EXPECT_NE(st.gyro.source.find("imu0/data.csv"), std::string::npos) << st.gyro.source;
+    // Every frame after the map's first is predicted with the gyro.
+    EXPECT_EQ(st.gyro.frames, std::uint64_t{kFrames - 1});
+    // The accelerometer log gave the vertical: +y down in the camera frame.
+    EXPECT_EQ(st.gravity_source.rfind("accelerometer (", 0), 0U) << st.gravity_source;
+    // STATUS carries it (docs/protocol.md).
+    std::string out;
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
+    EXPECT_NE(out.find(R"("gyro":{"source":)"), std::string::npos) << out;
+}
+
+// The sim has no gyro: STATUS has no gyro object.
+TEST(Pipeline, WithoutAGyroStatusHasNoGyro) {
+    DaemonConfig c = config(AtEnd::kExit);
+    ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+    auto p = Pipeline::create(c, parts(0.5, true), hub, nullptr);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitUntil(
+        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(120)));
+    (*p)->stop();
+    const PipelineStatus st = hub.status();
+    EXPECT_FALSE(st.gyro.present);
+    EXPECT_EQ(st.gyro.frames, 0U);
+    std::string out;
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
+    EXPECT_EQ(out.find(R"("gyro")"), std::string::npos) << out;
 }
 
 }  // namespace

@@ -221,6 +221,15 @@ TEST(Protocol, StatusHasEveryMember) {
     EXPECT_EQ(with_imu["gravity_down_C"], json::parse("[0,1,0]"));
     EXPECT_EQ(with_imu["imu"], json::parse(R"({"device":"mpu6050","mode":"sysfs","samples":0,
         "errors":0,"error":"no IIO device named 'mpu6050'"})"));
+    EXPECT_FALSE(with_imu.contains("gyro")) << out;  // no gyroscope feeds the prior
+    s.gyro.present = true;
+    s.gyro.source = "iio:device0 [lsm6dsl]";
+    s.gyro.frames = 5120;
+    s.gyro.bias_C_radps = {0.0031, -0.0102, 0.0007};
+    out.clear();
+    appendStatus(out, s, log, ClientCounts{});
+    EXPECT_EQ(parseLine(out)["gyro"], json::parse(R"({"source":"iio:device0 [lsm6dsl]",
+        "frames":5120,"bias_C_radps":[0.0031,-0.0102,0.0007]})"));
 
     out.clear();
     appendStatus(out, PipelineStatus{}, LogStatus{}, ClientCounts{});
@@ -758,6 +767,12 @@ TEST(ProtocolSamples, Write) {
     appendStatus(out, st, LogStatus{}, ClientCounts{});
     st.imu.errors = 3;
     st.imu.error = "/sys/bus/iio/devices/iio:device0/in_accel_z_raw: No such device";
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
+    // Its gyroscope feeding the gyro prior.
+    st.gyro.present = true;
+    st.gyro.source = "iio:device0 [lsm6dsl]";
+    st.gyro.frames = 5120;
+    st.gyro.bias_C_radps = {0.0031, -0.0102, 0.0007};
     appendStatus(out, st, LogStatus{}, ClientCounts{});
     appendPosterior(out, PosteriorSnapshot{});
     PosteriorSnapshot p;

@@ -5,7 +5,9 @@
 // (drivers::imu::IioDevice), by sysfs polling at imu.rate_hz or from the
 // buffered character device, into a fixed ring of the last few seconds of
 // samples. The tracking thread copies the ring when a map starts and takes
-// the map's vertical from it (drivers::imu::MapGravitySelector::atMapStart).
+// the map's vertical from it (drivers::imu::MapGravitySelector::atMapStart),
+// and, when the device has a gyroscope, copies each frame interval's samples
+// for the gyro motion prior (copySince; core/slam/gyro_prior.h).
 //
 // A read that fails is counted and its message kept (STATUS.imu); the thread
 // keeps trying (sysfs: at the polling rate; buffer: the buffer is restarted
@@ -62,7 +64,13 @@ public:
     // The ring's samples, oldest first, into `out` (cleared; with
     // out.capacity() >= capacity() nothing is allocated).
     void copyRecent(std::vector<core::ImuSample>& out) const;
+    // The ring's samples from the last one before `t_ns` on, oldest first,
+    // into `out` (cleared; no allocation with out.capacity() >= capacity()):
+    // the gyro prior's samples for a frame interval that starts at t_ns.
+    void copySince(std::int64_t t_ns, std::vector<core::ImuSample>& out) const;
     [[nodiscard]] std::size_t capacity() const { return ring_.size(); }
+    // The device has a gyroscope (anglvel_x/y/z): its samples carry rates.
+    [[nodiscard]] bool hasGyro() const { return device_.hasGyro(); }
     [[nodiscard]] const core::Mat3& rotationImuToCamera() const { return R_ItoC_; }
     [[nodiscard]] double windowS() const { return config_.window_s; }
     // Now on the samples' clock (the device's timestamp clock: monotonic

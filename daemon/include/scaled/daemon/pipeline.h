@@ -49,6 +49,7 @@
 #include <scaled/detector/object_detector.h>
 #include <scaled/drivers/camera.h>
 #include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
 #include <scaled/vision/mono_tracker.h>
 
@@ -230,6 +231,12 @@ private:
     ImuService* imu_ = nullptr;
     std::string imu_label_;
     std::vector<core::ImuSample> imu_samples_;  // the ring's copy at a map's start (reserved)
+    // The gyro prior's samples: a replayed sequence's own log (gyro_feed_), or
+    // the live IMU's ring since the previous frame (imu_window_ over
+    // gyro_samples_, reserved to the ring's capacity).
+    drivers::imu::GyroFeed gyro_feed_;
+    std::vector<core::ImuSample> gyro_samples_;
+    core::slam::ImuWindow imu_window_;
     // Wakes the capture thread's reconnect backoff at stop().
     std::mutex stop_mutex_;
     std::condition_variable stop_cv_;

@@ -121,6 +121,14 @@ struct ImuStatus {
     std::string error;         // the latest failure while it lasts; empty once reads succeed
 };
 
+// The gyro motion prior (STATUS.gyro): what feeds it and how often it served.
+struct GyroStatus {
+    bool present = false;                  // a gyro can feed the prior (STATUS has a gyro object)
+    std::string source;                    // "iio:device0 [mpu6050]", or the replayed log's path
+    std::uint64_t frames = 0;              // frames predicted with the gyro
+    std::array<double, 3> bias_C_radps{};  // the on-line bias estimate, camera frame
+};
+
 // Pipeline health (protocol class STATUS).
 struct PipelineStatus {
     std::string source;  // "sim", "replay:/path/to/dir", ...
@@ -130,8 +138,9 @@ struct PipelineStatus {
     std::string gravity_source;
     // That vertical, the unit down direction in the map's first camera frame.
     std::optional<std::array<double, 3>> gravity_down_C;
-    ImuStatus imu;               // imu.configured false: no [imu] device (STATUS has no imu object)
-    std::int64_t frame_id = -1;  // last tracked frame
+    ImuStatus imu;  // imu.configured false: no [imu] device (STATUS has no imu object)
+    GyroStatus gyro;
+    std::int64_t frame_id = -1;     // last tracked frame
     std::int64_t frames_total = 0;  // frames the source has (replay), 0 when unbounded
     bool source_finished = false;   // replay reached its end (the daemon keeps serving)
     double fps = 0;                 // tracked frames per second, recent window
