@@ -90,7 +90,8 @@ GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns,
             const int64_t a = std::max(prev_t, t0_ns);
             const int64_t b = std::min(t, t1_ns);
             if (b > a) {
-                const Scalar f = Scalar((a + b) / 2 - prev_t) / Scalar(t - prev_t);
+                const int64_t mid = a + (b - a) / 2;  // ns: rounding is far below any rate change
+                const Scalar f = Scalar(mid - prev_t) / Scalar(t - prev_t);
                 integrate(a, b, prev_w + (w - prev_w) * f);
             }
         }
