@@ -14,6 +14,7 @@
 #include <benchmark/benchmark.h>
 
 #include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/imu/simulated_gyro.h>
 #include <scaled/synth/renderer.h>
 #include <scaled/synth/scene.h>
 #include <scaled/synth/trajectory.h>
@@ -30,6 +31,9 @@ struct Sequence {
     std::unique_ptr<core::PinholeRadialCamera> camera;
     std::vector<std::int64_t> t_ns;
     std::vector<cv::Mat> gray;
+    // A 200 Hz gyro simulated from the ground truth over the whole sequence
+    // (drivers/imu/simulated_gyro.h), for the gyro prior's cost.
+    std::vector<core::ImuSample> gyro;
 };
 
 constexpr int kFrames = 150;
@@ -62,6 +66,7 @@ std::unique_ptr<Sequence> loadRedkitchen(int stride) {
         return nullptr;
     }
     auto s = std::make_unique<Sequence>();
+    std::vector<core::Mat3> R_gt;
     s->camera = std::make_unique<core::PinholeRadialCamera>(
         core::PinholeRadialCamera::create((*src)->info().intrinsics).value());
     drivers::Frame f;
@@ -75,6 +80,19 @@ std::unique_ptr<Sequence> loadRedkitchen(int stride) {
         }
         s->t_ns.push_back(f.t_ns);
         s->gray.push_back(f.gray.clone());
+        if (!f.T_CtoW_gt) {
+            return nullptr;
+        }
+        R_gt.push_back(f.T_CtoW_gt->R_CtoW);
+    }
+    auto sim = drivers::imu::SimulatedGyro::create({});
+    if (!sim) {
+        return nullptr;
+    }
+    for (std::size_t k = 1; k < s->t_ns.size(); ++k) {
+        const auto part = sim->between(s->t_ns[k - 1], R_gt[k - 1], s->t_ns[k], R_gt[k]);
+        // Each interval's samples end where the next one's begin: keep one.
+        s->gyro.insert(s->gyro.end(), part.begin() + (k > 1 ? 1 : 0), part.end());
     }
     return s;
 }
@@ -90,7 +108,8 @@ const Sequence* redkitchen10HzSequence() {
     return seq.get();
 }
 
-void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue21 = false) {
+void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue21 = false,
+                bool gyro = false) {
     const int n = static_cast<int>(state.range(0));
     vision::TrackerConfig config;
     if (before_issue21) {
@@ -104,6 +123,8 @@ void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue2
     config.slam.max_features = n + n / 2;
     config.max_new_per_frame = std::max(10, n / 4);
     auto tracker = vision::MonoTracker::create(*seq.camera, config);
+    core::slam::ImuWindow imu;
+    imu.samples = seq.gyro;
     std::size_t i = 0;
     double measured = 0;
     double frames = 0;
@@ -114,7 +135,7 @@ void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue2
             i = 0;
             state.ResumeTiming();
         }
-        const auto stats = tracker->processFrame(seq.t_ns[i], seq.gray[i]);
+        const auto stats = tracker->processFrame(seq.t_ns[i], seq.gray[i], gyro ? &imu : nullptr);
         measured += stats.inliers + stats.rescued;
         frames += 1;
         ++i;
@@ -129,13 +150,14 @@ void BM_TrackerSynthetic(benchmark::State& state) {
 
 // The tracker on a redkitchen sequence, or the benchmark skipped with the
 // reason when ../shared is absent.
-void runTrackerOn(benchmark::State& state, const Sequence* seq, bool before_issue21 = false) {
+void runTrackerOn(benchmark::State& state, const Sequence* seq, bool before_issue21 = false,
+                  bool gyro = false) {
     cv::setNumThreads(1);
     if (seq == nullptr) {
         state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
         return;
     }
-    runTracker(state, *seq, before_issue21);
+    runTracker(state, *seq, before_issue21, gyro);
 }
 
 void BM_TrackerRedkitchen(benchmark::State& state) {
@@ -148,6 +170,15 @@ void BM_TrackerRedkitchenNoPyramid(benchmark::State& state) {
 
 void BM_TrackerRedkitchen10Hz(benchmark::State& state) {
     runTrackerOn(state, redkitchen10HzSequence());
+}
+
+// The same with the gyro prior (a gyro simulated from the ground truth).
+void BM_TrackerRedkitchen10HzGyro(benchmark::State& state) {
+    runTrackerOn(state, redkitchen10HzSequence(), false, true);
+}
+
+void BM_TrackerRedkitchenGyro(benchmark::State& state) {
+    runTrackerOn(state, redkitchenSequence(), false, true);
 }
 
 // Corner detection alone, as the tracker calls it in steady state: a frame at
@@ -184,6 +215,8 @@ BENCHMARK(BM_TrackerSynthetic)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchm
 BENCHMARK(BM_TrackerRedkitchen)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchenNoPyramid)->Arg(30)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen10Hz)->Arg(30)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerRedkitchen10HzGyro)->Arg(30)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerRedkitchenGyro)->Arg(30)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
