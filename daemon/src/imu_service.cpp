@@ -110,11 +110,11 @@ void ImuService::copySince(std::int64_t t_ns, std::vector<core::ImuSample>& out)
     const std::lock_guard lock(mutex_);
     const std::size_t n = ring_.size();
     const std::size_t oldest = head_ + n - count_;
-    // The first sample at or after t_ns, less one (the sample that bounds the
-    // interval's start), scanning from the oldest.
-    std::size_t first = 0;
-    while (first < count_ && ring_[(oldest + first) % n].t_ns < t_ns) {
-        ++first;
+    // The last sample before t_ns (it bounds the interval's start), scanning
+    // back from the newest: a frame interval is a few samples.
+    std::size_t first = count_;
+    while (first > 0 && ring_[(oldest + first - 1) % n].t_ns >= t_ns) {
+        --first;
     }
     first = first > 0 ? first - 1 : 0;
     for (std::size_t i = first; i < count_; ++i) {

@@ -79,7 +79,7 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
         return feed.error();
     }
     p->gyro_feed_ = std::move(*feed);
-    if (p->imu_ == nullptr && p->gyro_feed_.source() != "none") {
+    if (p->imu_ == nullptr && p->gyro_feed_.active()) {
         p->status_.gyro.present = true;
         p->status_.gyro.source = p->gyro_feed_.source();
     }
@@ -531,7 +531,7 @@ void Pipeline::trackingLoop() {
         // tracker then predicts with constant velocity.
         const core::slam::ImuWindow* imu_window = nullptr;
         if (imu_ != nullptr) {
-            if (status_.gyro.present && have_last) {
+            if (status_.gyro.present && have_last && config_.pipeline.tracker.use_gyro) {
                 imu_->copySince(last_t_ns, gyro_samples_);
                 imu_window_.samples = gyro_samples_;
                 imu_window_.R_ItoC = imu_->rotationImuToCamera();

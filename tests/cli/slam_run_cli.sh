@@ -59,7 +59,7 @@ assert d["gyro_frames"] == 59 and d["tracked_frames"] == 60 and d["reinitialisat
 assert len(d["gyro_bias_C_radps"]) == 3 and all(abs(b) < 0.05 for b in d["gyro_bias_C_radps"]), d
 assert d["ate_rmse_m"] < 0.01 * d["path_length_m"], d
 PY
-for bad in x 1e-4 -1:0.01 1e-4:nan; do
+for bad in x 1e-4 -1:0.01 1e-4:nan 5:0.01 1e-4:11; do
   set +e
   err=$("$run" --dataset "$tmp/seq" --gyro-sim "$bad" 2>&1 >/dev/null); rc=$?
   set -e

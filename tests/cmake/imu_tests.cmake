@@ -3,7 +3,9 @@
 #                 the IIO driver against a directory tree laid out like
 #                 /sys/bus/iio/devices/iio:deviceN with a regular file as the
 #                 character device; the vertical of a replayed sequence's maps
-#                 (map_gravity.h). Gravity itself is core's (core_tests).
+#                 (map_gravity.h); what feeds the gyro prior on a replay
+#                 (gyro_feed.h, simulated_gyro.h). Gravity itself is core's
+#                 (core_tests).
 #   imu_vm_tests  the IIO driver on the kernel's iio_dummy device, sysfs and
 #                 buffer (sysfs and hrtimer triggers); run inside the VM
 #                 (tests/vm, vm.imu_iio), not registered with ctest here.
@@ -12,6 +14,7 @@ scaled_unit_test(imu_tests
     unit/drivers/imu/imu_log_test.cpp
     unit/drivers/imu/iio_device_test.cpp
     unit/drivers/imu/map_gravity_test.cpp
+    unit/drivers/imu/gyro_feed_test.cpp
   LIBS scaled::imu
   LABELS unit drivers)
 

@@ -37,7 +37,7 @@ bool parseGyroSim(std::string_view s, double& noise_density, double& bias_sigma_
     if (!parseNumber(s.substr(0, colon), d) || !parseNumber(s.substr(colon + 1), b)) {
         return false;
     }
-    if (!(std::isfinite(d) && std::isfinite(b) && d >= 0 && b >= 0)) {
+    if (!(std::isfinite(d) && std::isfinite(b) && d >= 0 && d <= 1 && b >= 0 && b <= 10)) {
         return false;
     }
     noise_density = d;

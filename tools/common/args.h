@@ -25,7 +25,7 @@ bool parseNumber(std::string_view s, T& out) {
 bool parseFrameRange(std::string_view s, std::size_t& first, std::optional<std::size_t>& end);
 
 // --gyro-sim D:B: the simulated gyro's noise density (rad/s/sqrt(Hz)) and bias
-// sigma (rad/s), both finite and >= 0.
+// sigma (rad/s): D in [0, 1], B in [0, 10] (the simulated gyro's ranges).
 bool parseGyroSim(std::string_view s, double& noise_density, double& bias_sigma_radps);
 
 // --intrinsics fx,fy,cx,cy (sets those four fields only).

@@ -98,7 +98,8 @@ GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns,
         have_prev = true;
         prev_t = t;
         prev_w = w;
-        ++used;
+        // Counted: the last sample at or before t0 and those after it.
+        used = t <= t0_ns ? 1 : used + 1;
         if (t >= t1_ns) {
             break;
         }

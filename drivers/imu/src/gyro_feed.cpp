@@ -17,8 +17,17 @@ core::Result<GyroFeed> GyroFeed::create(const MapGravitySelector& dataset,
         return feed;
     }
     const ImuLog* log = dataset.imuLog();
-    if (log != nullptr && std::any_of(log->samples.begin(), log->samples.end(),
-                                      [](const core::ImuSample& s) { return s.gyro_radps; })) {
+    const bool has_gyro =
+        log != nullptr && std::any_of(log->samples.begin(), log->samples.end(),
+                                      [](const core::ImuSample& s) { return s.gyro_radps; });
+    if (has_gyro && !log->R_ItoC_known) {
+        // A gyro about unknown axes would turn the camera the wrong way with
+        // confidence: constant velocity instead, and the reason said.
+        feed.source_ = "none (" + dataset.imuLogPath().string() +
+                       " has a gyroscope but no camera-IMU rotation: " + log->R_ItoC_source + ")";
+        return feed;
+    }
+    if (has_gyro) {
         core::slam::ImuWindow w;
         w.samples = log->samples;
         w.R_ItoC = log->R_ItoC;

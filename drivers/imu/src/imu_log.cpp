@@ -222,6 +222,7 @@ Result<ImuLog> readEurocImu(const std::filesystem::path& path) {
     const std::filesystem::path imu_yaml = mav / "imu0" / "sensor.yaml";
     if (!detail::isRegularFile(cam_yaml)) {
         log.R_ItoC_source = "identity (no " + cam_yaml.string() + ")";
+        log.R_ItoC_known = false;
         log.notes.push_back(path.string() + ": no " + cam_yaml.string() +
                             ": R_ItoC is the identity; give the camera-IMU rotation");
         return log;

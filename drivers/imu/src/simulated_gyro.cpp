@@ -1,5 +1,6 @@
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 
 #include <Eigen/Geometry>
 
@@ -20,7 +21,7 @@ std::uint64_t splitmix64(std::uint64_t& s) {
 double gaussian(std::uint64_t& s) {
     const double u1 = (double(splitmix64(s) >> 11U) + 0.5) * 0x1.0p-53;
     const double u2 = double(splitmix64(s) >> 11U) * 0x1.0p-53;
-    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * u2);
 }
 
 }  // namespace
@@ -56,7 +57,8 @@ std::span<const core::ImuSample> SimulatedGyro::between(std::int64_t t0_ns,
                                                         std::int64_t t1_ns,
                                                         const core::Mat3& R1_CtoW) {
     samples_.clear();
-    if (t1_ns <= t0_ns) {
+    constexpr std::int64_t kMaxIntervalNs = 10'000'000'000;  // no frame gap a tracker keeps
+    if (t1_ns <= t0_ns || t1_ns - t0_ns > kMaxIntervalNs) {
         return samples_;
     }
     const double dt = double(t1_ns - t0_ns) * 1e-9;
@@ -66,7 +68,9 @@ std::span<const core::ImuSample> SimulatedGyro::between(std::int64_t t0_ns,
     const auto n = static_cast<std::int64_t>(std::ceil(dt * options_.rate_hz));
     for (std::int64_t k = 0; k <= n; ++k) {
         core::ImuSample s;
-        s.t_ns = k == n ? t1_ns : t0_ns + (t1_ns - t0_ns) * k / n;
+        s.t_ns = k == n ? t1_ns
+                        : t0_ns + static_cast<std::int64_t>(
+                                      std::llround(double(t1_ns - t0_ns) * double(k) / double(n)));
         s.accel_mps2 = core::Vec3::Zero();
         core::Vec3 g;
         for (int a = 0; a < 3; ++a) {

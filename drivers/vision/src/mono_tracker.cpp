@@ -160,6 +160,7 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, const TrackerConfig& config)
 void MonoTracker::reset() {
     has_map_ = false;
     relocalising_ = false;
+    previous_frame_good_ = false;
     clearAppearances();
 }
 
@@ -618,6 +619,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         slam_.initialise(t_ns, gravity_down_C_);
         last_good_pose_ = slam_.pose();
         clearAppearances();
+        previous_frame_good_ = true;  // the map's origin: a reference for the gyro bias
         has_map_ = true;
         stats.new_map = true;
         stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
@@ -665,6 +667,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         stats.predict_us = lap.next();
         if (predicted != slam::SlamHealth::kOk) {
             stats.health = predicted;
+            stats.gyro.reset();  // nothing was predicted, with the gyro or without
             return stats;
         }
     }

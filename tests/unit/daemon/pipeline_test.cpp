@@ -750,6 +750,10 @@ TEST(Pipeline, AReplayedGyroLogFeedsTheGyroPrior) {
         imu << t << ",0,0,0,0,-9.81,0\n";
     }
     imu.close();
+    // The camera-IMU rotation (EuRoC's T_BS): without it the gyro is not used.
+    std::filesystem::create_directories(seq / "cam0");
+    std::ofstream(seq / "cam0" / "sensor.yaml") << "T_BS:\n  cols: 4\n  rows: 4\n  data: [1, 0, 0, "
+                                                   "0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]\n";
 
     DaemonConfig c = config(AtEnd::kExit);
     c.source.kind = SourceKind::kReplay;

@@ -64,7 +64,7 @@ TEST(GyroPrior, AConstantRateComesOutRotatedIntoTheCameraFrameWithItsSigma) {
     EXPECT_LE((g.rate.w_C_radps - model.R_ItoC * w_I).norm(), test::tolerance(1e-9, 1e-5));
     const double dt = 0.033;
     EXPECT_NEAR(g.rate.sigma_radps, std::sqrt(1e-6 / dt + 1e-4), test::tolerance(1e-12, 1e-6));
-    EXPECT_GE(g.rate.samples, 7);  // 50..85 ms at 5 ms, bounds included
+    EXPECT_EQ(g.rate.samples, 8);  // 50..85 ms at 5 ms, bounds included
     // The bias is taken off every sample.
     model.bias_I_radps = Vec3(Scalar(0.1), 0, 0);
     const GyroIntegration b = integrateGyro(samples, 50 * kMs, 83 * kMs, model);

@@ -44,7 +44,7 @@ struct GyroModel {
 struct GyroRate {
     Vec3 w_C_radps = Vec3::Zero();  // camera frame
     Scalar sigma_radps = 0;         // per axis, 1 sigma
-    int samples = 0;                // gyro samples that bounded the pieces
+    int samples = 0;  // gyro samples used: the last at or before t0, and those after it
 };
 
 // The samples one frame's prediction may draw on: in time order, stamped on

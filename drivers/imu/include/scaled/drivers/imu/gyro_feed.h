@@ -31,7 +31,12 @@ public:
     // frame's and the previous frame's ground truth.
     const core::slam::ImuWindow* forFrame(const Frame& frame);
 
-    // "none", "imu0/data.csv (EuRoC, 3 axes)", or the simulated gyro's description.
+    // Something feeds the prior (a log with a gyroscope and a known R_ItoC,
+    // or the simulated gyro).
+    [[nodiscard]] bool active() const { return simulated_.has_value() || log_window_.has_value(); }
+    // "none" (with the reason when a log has a gyro that cannot be used), the
+    // log's path and where its R_ItoC came from, or the simulated gyro's
+    // description.
     [[nodiscard]] const std::string& source() const { return source_; }
 
 private:

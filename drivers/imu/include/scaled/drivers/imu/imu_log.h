@@ -34,6 +34,10 @@ struct ImuLog {
     // Where R_ItoC came from, e.g. "TUM Kinect default (docs/imu.md)" or
     // "cam0/sensor.yaml T_BS"; for logs and messages.
     std::string R_ItoC_source;
+    // False when R_ItoC is a default taken for want of the rotation (an EuRoC
+    // log without cam0/sensor.yaml): fine for nothing that turns with it (the
+    // gyro prior refuses such a log).
+    bool R_ItoC_known = true;
     std::vector<std::string> notes;  // what a user should know (defaults taken)
 };
 

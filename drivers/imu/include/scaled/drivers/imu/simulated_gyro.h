@@ -33,10 +33,11 @@ class SimulatedGyro {
 public:
     // rate_hz in [10, 10000], noise_density in [0, 1], bias_sigma_radps in
     // [0, 10]; the message names the value.
-    static core::Result<SimulatedGyro> create(const SimulatedGyroOptions& options);
+    [[nodiscard]] static core::Result<SimulatedGyro> create(const SimulatedGyroOptions& options);
 
     // Samples covering [t0_ns, t1_ns] (both ends included) for a camera that
-    // turned from R0_CtoW to R1_CtoW; empty when t1_ns <= t0_ns. The span
+    // turned from R0_CtoW to R1_CtoW; empty when t1_ns <= t0_ns or the
+    // interval is longer than 10 s (no tracker bridges such a gap). The span
     // stays valid until the next call.
     std::span<const core::ImuSample> between(std::int64_t t0_ns, const core::Mat3& R0_CtoW,
                                              std::int64_t t1_ns, const core::Mat3& R1_CtoW);
