@@ -43,9 +43,14 @@ Result<std::vector<KittiTime>> readKittiTimes(const std::filesystem::path& times
     if (!text) {
         return text.error();
     }
+    return parseKittiTimes(*text, times_file);
+}
+
+Result<std::vector<KittiTime>> parseKittiTimes(std::string_view text,
+                                               const std::filesystem::path& times_file) {
     std::vector<KittiTime> out;
     detail::IncreasingTimestamps times;
-    for (const detail::TextLine& line : detail::dataLines(*text)) {
+    for (const detail::TextLine& line : detail::dataLines(text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
             return detail::lineError(ErrorCode::kParse, times_file, line.number, what, line.text);
@@ -67,8 +72,13 @@ Result<std::vector<CameraPose>> readKittiPoses(const std::filesystem::path& pose
     if (!text) {
         return text.error();
     }
+    return parseKittiPoses(*text, poses_file);
+}
+
+Result<std::vector<CameraPose>> parseKittiPoses(std::string_view text,
+                                                const std::filesystem::path& poses_file) {
     std::vector<CameraPose> out;
-    for (const detail::TextLine& line : detail::dataLines(*text)) {
+    for (const detail::TextLine& line : detail::dataLines(text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
             return detail::lineError(ErrorCode::kParse, poses_file, line.number, what, line.text);
@@ -110,10 +120,16 @@ Result<std::array<double, 12>> readKittiProjection(const std::filesystem::path& 
     if (!text) {
         return text.error();
     }
+    return parseKittiProjection(*text, calib_file, key);
+}
+
+Result<std::array<double, 12>> parseKittiProjection(std::string_view text,
+                                                    const std::filesystem::path& calib_file,
+                                                    std::string_view key) {
     const std::string label = std::string(key) + ":";
     std::optional<std::array<double, 12>> found;
     std::size_t found_line = 0;
-    for (const detail::TextLine& line : detail::dataLines(*text)) {
+    for (const detail::TextLine& line : detail::dataLines(text)) {
         const auto fields = detail::splitFields(line.text);
         if (fields.empty() || fields[0] != label) {
             continue;  // other matrices (P1..P3, Tr) are not needed

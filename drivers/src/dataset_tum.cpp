@@ -28,27 +28,6 @@ constexpr double kMaxImageSide = 100000;
 constexpr double kTumDepthScaleM = 1.0 / 5000.0;  // TUM RGB-D depth PNGs: 5000 units per metre
 constexpr double kMillimetre = 1e-3;
 
-Result<std::vector<TumListEntry>> parseImageList(const std::filesystem::path& list_file,
-                                                 std::string_view text) {
-    std::vector<TumListEntry> out;
-    detail::IncreasingTimestamps times;
-    for (const detail::TextLine& line : detail::dataLines(text)) {
-        const auto fields = detail::splitFields(line.text);
-        const auto bad = [&](const std::string& what) {
-            return detail::lineError(ErrorCode::kParse, list_file, line.number, what, line.text);
-        };
-        if (fields.size() != 2) {
-            return bad("expected 2 fields `timestamp file`, got " + std::to_string(fields.size()));
-        }
-        auto t = times.next(fields[0], line.number);
-        if (!t) {
-            return bad(t.error().message);
-        }
-        out.push_back({*t, std::string(fields[1]), line.number});
-    }
-    return out;
-}
-
 // The single data line of a small settings file (camera.txt, gravity.txt).
 Result<detail::TextLine> singleDataLine(const std::filesystem::path& file, std::string_view text,
                                         std::string_view expected) {
@@ -68,21 +47,47 @@ Result<detail::TextLine> singleDataLine(const std::filesystem::path& file, std::
 
 }  // namespace
 
+Result<std::vector<TumListEntry>> parseTumImageList(std::string_view text,
+                                                    const std::filesystem::path& list_file) {
+    std::vector<TumListEntry> out;
+    detail::IncreasingTimestamps times;
+    for (const detail::TextLine& line : detail::dataLines(text)) {
+        const auto fields = detail::splitFields(line.text);
+        const auto bad = [&](const std::string& what) {
+            return detail::lineError(ErrorCode::kParse, list_file, line.number, what, line.text);
+        };
+        if (fields.size() != 2) {
+            return bad("expected 2 fields `timestamp file`, got " + std::to_string(fields.size()));
+        }
+        auto t = times.next(fields[0], line.number);
+        if (!t) {
+            return bad(t.error().message);
+        }
+        out.push_back({*t, std::string(fields[1]), line.number});
+    }
+    return out;
+}
+
 Result<std::vector<TumListEntry>> readTumImageList(const std::filesystem::path& list_file) {
     auto text = detail::readTextFile(list_file);
     if (!text) {
         return text.error();
     }
-    return parseImageList(list_file, *text);
+    return parseTumImageList(*text, list_file);
 }
 
 Result<CameraIntrinsics> readTumCameraFile(const std::filesystem::path& camera_file) {
-    constexpr std::string_view kExpected = "width height fx fy cx cy [k1 k2]";
     auto text = detail::readTextFile(camera_file);
     if (!text) {
         return text.error();
     }
-    auto line = singleDataLine(camera_file, *text, kExpected);
+    return parseTumCameraFile(*text, camera_file);
+}
+
+Result<CameraIntrinsics> parseTumCameraFile(std::string_view text,
+                                            const std::filesystem::path& camera_file) {
+    constexpr std::string_view kExpected = "width height fx fy cx cy [k1 k2]";
+    auto line = singleDataLine(camera_file, text, kExpected);
     if (!line) {
         return line.error();
     }
@@ -157,7 +162,12 @@ Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file) {
     if (!text) {
         return text.error();
     }
-    auto line = singleDataLine(gravity_file, *text, "gx gy gz");
+    return parseGravityFile(*text, gravity_file);
+}
+
+Result<core::Vec3> parseGravityFile(std::string_view text,
+                                    const std::filesystem::path& gravity_file) {
+    auto line = singleDataLine(gravity_file, text, "gx gy gz");
     if (!line) {
         return line.error();
     }
@@ -187,15 +197,20 @@ Result<core::Vec3> readGravityFile(const std::filesystem::path& gravity_file) {
 }
 
 Result<std::vector<TumAccelSample>> readTumAccelerometer(const std::filesystem::path& accel_file) {
-    constexpr double kMaxAccel = 1e4;  // m/s^2: about 1000 g, far beyond any handheld sensor
     auto text = detail::readTextFile(accel_file);
     if (!text) {
         return text.error();
     }
+    return parseTumAccelerometer(*text, accel_file);
+}
+
+Result<std::vector<TumAccelSample>> parseTumAccelerometer(std::string_view text,
+                                                          const std::filesystem::path& accel_file) {
+    constexpr double kMaxAccel = 1e4;  // m/s^2: about 1000 g, far beyond any handheld sensor
     static constexpr std::array<std::string_view, 3> kNames = {"ax", "ay", "az"};
     std::vector<TumAccelSample> out;
     detail::IncreasingTimestamps times;
-    for (const detail::TextLine& line : detail::dataLines(*text)) {
+    for (const detail::TextLine& line : detail::dataLines(text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
             return detail::lineError(ErrorCode::kParse, accel_file, line.number, what, line.text);
@@ -299,7 +314,7 @@ Result<std::unique_ptr<FrameSource>> openTumDataset(const std::filesystem::path&
         if (!text) {
             return text.error();
         }
-        auto depth = parseImageList(depth_file, *text);
+        auto depth = parseTumImageList(*text, depth_file);
         if (!depth) {
             return depth.error();
         }

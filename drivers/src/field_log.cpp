@@ -103,7 +103,7 @@ void note(FieldLogContents& out, const std::filesystem::path& file, std::size_t 
     }
 }
 
-void splitLines(const std::string& text, std::size_t file_index, const std::filesystem::path& file,
+void splitLines(std::string_view text, std::size_t file_index, const std::filesystem::path& file,
                 FieldLogContents& out) {
     struct Segment {
         std::size_t begin;
@@ -114,14 +114,14 @@ void splitLines(const std::string& text, std::size_t file_index, const std::file
     std::size_t pos = 0;
     while (pos < text.size()) {
         const std::size_t nl = text.find('\n', pos);
-        if (nl == std::string::npos) {
+        if (nl == std::string_view::npos) {
             segments.push_back({pos, text.size() - pos, false});
             break;
         }
         segments.push_back({pos, nl - pos, true});
         pos = nl + 1;
     }
-    const std::string_view all(text);
+    const std::string_view all = text;
     std::size_t last = segments.size();
     for (std::size_t i = segments.size(); i > 0; --i) {
         if (!isBlank(all.substr(segments[i - 1].begin, segments[i - 1].size))) {
@@ -377,6 +377,12 @@ bool isJsonObjectLine(std::string_view text) {
         return false;
     }
     return nlohmann::json::accept(text);
+}
+
+void readFieldLogText(std::string_view text, const std::filesystem::path& file,
+                      FieldLogContents& out) {
+    out.files.push_back(file);
+    splitLines(text, out.files.size() - 1, file, out);
 }
 
 Result<FieldLogContents> readFieldLog(const std::filesystem::path& path) {

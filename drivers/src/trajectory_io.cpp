@@ -294,9 +294,14 @@ Result<std::vector<std::pair<int64_t, CameraPose>>> readTumTrajectory(
     if (!text) {
         return text.error();
     }
+    return parseTumTrajectory(*text, path);
+}
+
+Result<std::vector<std::pair<int64_t, CameraPose>>> parseTumTrajectory(
+    std::string_view text, const std::filesystem::path& path) {
     std::vector<std::pair<int64_t, CameraPose>> out;
     detail::IncreasingTimestamps times;
-    for (const detail::TextLine& line : detail::dataLines(*text)) {
+    for (const detail::TextLine& line : detail::dataLines(text)) {
         const auto fields = detail::splitFields(line.text);
         const auto bad = [&](const std::string& what) {
             return detail::lineError(ErrorCode::kParse, path, line.number, what, line.text);

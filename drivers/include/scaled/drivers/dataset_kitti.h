@@ -45,4 +45,14 @@ core::Result<std::vector<core::CameraPose>> readKittiPoses(const std::filesystem
 core::Result<std::array<double, 12>> readKittiProjection(const std::filesystem::path& calib_file,
                                                          std::string_view key = "P0");
 
+// The readers above on a file's text (they read the file and call these);
+// `file` names it in error messages. The fuzz targets (tests/fuzz) call these.
+core::Result<std::vector<KittiTime>> parseKittiTimes(std::string_view text,
+                                                     const std::filesystem::path& file);
+core::Result<std::vector<core::CameraPose>> parseKittiPoses(std::string_view text,
+                                                            const std::filesystem::path& file);
+core::Result<std::array<double, 12>> parseKittiProjection(std::string_view text,
+                                                          const std::filesystem::path& file,
+                                                          std::string_view key = "P0");
+
 }  // namespace scaled::drivers

@@ -35,6 +35,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <scaled/core/camera/pinhole_radial.h>
@@ -77,5 +78,15 @@ struct TumAccelSample {
 // timestamps, finite values of at most 1e4 m/s^2.
 core::Result<std::vector<TumAccelSample>> readTumAccelerometer(
     const std::filesystem::path& accel_file);
+
+// The readers above on a file's text (they read the file and call these);
+// `file` names it in error messages. The fuzz targets (tests/fuzz) call these.
+core::Result<std::vector<TumListEntry>> parseTumImageList(std::string_view text,
+                                                          const std::filesystem::path& file);
+core::Result<core::CameraIntrinsics> parseTumCameraFile(std::string_view text,
+                                                        const std::filesystem::path& file);
+core::Result<core::Vec3> parseGravityFile(std::string_view text, const std::filesystem::path& file);
+core::Result<std::vector<TumAccelSample>> parseTumAccelerometer(std::string_view text,
+                                                                const std::filesystem::path& file);
 
 }  // namespace scaled::drivers

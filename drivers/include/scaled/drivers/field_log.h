@@ -132,6 +132,12 @@ struct FieldLogContents {
 // exist, cannot be read, or a directory holds no log files.
 core::Result<FieldLogContents> readFieldLog(const std::filesystem::path& path);
 
+// One file's text, as readFieldLog() reads it: appends `file` to out.files
+// and its lines (and skipped lines) to `out`. Never fails. The fuzz target
+// tests/fuzz/field_log_fuzz.cpp calls it.
+void readFieldLogText(std::string_view text, const std::filesystem::path& file,
+                      FieldLogContents& out);
+
 // Whether `text` is one JSON object (what the reader keeps).
 bool isJsonObjectLine(std::string_view text);
 

@@ -30,6 +30,9 @@ core::Result<bool> writeTumTrajectory(const std::filesystem::path& path,
 // Errors read `FILE:LINE: what is wrong (the offending text)`.
 core::Result<std::vector<std::pair<int64_t, core::CameraPose>>> readTumTrajectory(
     const std::filesystem::path& path);
+// The same on a file's text; `path` names it in error messages.
+core::Result<std::vector<std::pair<int64_t, core::CameraPose>>> parseTumTrajectory(
+    std::string_view text, const std::filesystem::path& path);
 
 // Decimal seconds ("1341847980.722988", "1.037359e-01", "-2.5") to nanoseconds,
 // exactly (digits beyond 1 ns are rounded half away from zero). Fails on
