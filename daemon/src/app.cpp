@@ -15,6 +15,7 @@
 #include <vector>
 
 #include <scaled/daemon/app.h>
+#include <scaled/daemon/config_check.h>
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/log_service.h>
@@ -70,6 +71,25 @@ int exitCodeFor(const Error& e, int fallback) {
 }
 
 sim::SimConfig simConfig(const SourceConfig& s) {
+// --check-config: every problem on stderr, notes and the verdict on stdout.
+int checkConfigurationAndReport(const CommandLine& cli, const std::filesystem::path& default_file) {
+    const ConfigCheckReport report = checkConfiguration(cli, default_file);
+    for (const auto& e : report.errors) {
+        printError(e);
+    }
+    const std::string name = report.file.empty() ? "built-in defaults" : report.file.string();
+    for (const auto& n : report.notes) {
+        std::printf("%s: note: %s\n", name.c_str(), n.c_str());
+    }
+    if (!report.ok()) {
+        std::fprintf(stderr, "scaled: %s: %zu error%s\n", name.c_str(), report.errors.size(),
+                     report.errors.size() == 1 ? "" : "s");
+        return EX_CONFIG;
+    }
+    std::printf("%s: configuration OK\n", name.c_str());
+    return EX_OK;
+}
+
     sim::SimConfig c;
     c.seed = s.sim_seed;
     c.fps = s.sim_fps;
@@ -607,10 +627,12 @@ int runMain(int argc, const char* const* argv) {
         printError(config.error().message);
         return EX_CONFIG;
     }
+    if (auto group = checkSocketGroup(config->socket); !group) {
+        printError("socket.group: " + group.error().message);
+        return group.error().code == ErrorCode::kNotFound ? EX_CONFIG : EX_OSERR;
+    }
     if (parsed.cli.check_config) {
-        std::printf("%s: configuration OK\n",
-                    config->file.empty() ? "built-in defaults" : config->file.string().c_str());
-        return EX_OK;
+        return checkConfigurationAndReport(parsed.cli, default_file);
     }
     Daemon daemon(std::move(parsed.cli), std::move(*config));
     return daemon.run();

@@ -169,22 +169,54 @@ Locator documentLocator(const toml::table& root, std::string_view source);
 core::Error checkError(const Locator& where, const std::vector<std::string>& keys,
                        const std::string& what);
 
+// Every problem a check found, each with the key it is about (`section.key`,
+// or a section). Loading stops at the first problem; `scaled --check-config`
+// passes a ProblemList to the same checks, which then go on to the end.
+struct ProblemList {
+    std::vector<core::Error> errors;
+    std::vector<std::string> keys;
+
+    void add(core::Error e, std::string key);
+    // Whether a problem about `key` was found (a section counts for its keys).
+    [[nodiscard]] bool about(std::string_view key) const;
+};
+
+// One check's problems: fail() reports one and answers whether the check
+// must stop there (true without a ProblemList), result() is the first.
+class Checker {
+public:
+    Checker(const Locator& where, ProblemList* all) : where_(where), all_(all) {}
+    bool fail(const std::vector<std::string>& keys, const std::string& what);
+    bool fail(core::Error e, std::string key);
+    // A nested check's outcome (already in the ProblemList when there is one).
+    bool failed(const core::Result<bool>& nested);
+    [[nodiscard]] core::Result<bool> result() const;
+
+private:
+    const Locator& where_;
+    ProblemList* all_;
+    std::optional<core::Error> first_;
+};
+
 // The pipeline's cross-field checks, each reported at the later key of a pair.
-core::Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where);
+core::Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where,
+                                 ProblemList* all = nullptr);
 
 // Checks every section and key of `root` against `fields` and sets them
 // (unknown sections and keys, types and ranges; no cross-field checks). On
 // error the bound object may be partly set: callers bind a working copy.
+// With `all`, every problem is kept and the valid keys are still set.
 core::Result<bool> applyFields(const toml::table& root, std::string_view source,
                                const std::filesystem::path& base_dir,
-                               const std::vector<Field>& fields);
+                               const std::vector<Field>& fields, ProblemList* all = nullptr);
 
 // `section.key=value` assignments, each checked as applyFields does (paths
 // against the working directory; a bare word is a string). `set_by` records,
 // for each `section.key`, the assignment that set it (for a Locator).
 core::Result<bool> applyAssignments(const std::vector<std::string>& assignments,
                                     const std::vector<Field>& fields,
-                                    std::vector<std::pair<std::string, std::string>>& set_by);
+                                    std::vector<std::pair<std::string, std::string>>& set_by,
+                                    ProblemList* all = nullptr);
 
 // A Locator over assignments recorded by applyAssignments; keys not set by
 // them are attributed to `fallback`.

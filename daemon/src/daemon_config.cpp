@@ -3,12 +3,14 @@
 // line (CLI11; its exceptions stay in parseCommandLine).
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -203,84 +205,97 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
 }
 
 // Cross-field checks of the whole configuration.
-Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where) {
-    using config_detail::checkError;
-    if (auto ok = config_detail::checkPipeline(c.pipeline, where); !ok) {
-        return ok;
+Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where,
+                         config_detail::ProblemList* all = nullptr) {
+    config_detail::Checker check(where, all);
+    if (check.failed(config_detail::checkPipeline(c.pipeline, where, all))) {
+        return check.result();
     }
     const auto& s = c.source;
-    if (s.kind == SourceKind::kReplay && s.replay_path.empty()) {
-        return checkError(where, {"source.replay", "source.kind"},
-                          "required when source.kind = \"replay\" (a dataset directory or video "
-                          "file) (got \"\")");
+    if (s.kind == SourceKind::kReplay && s.replay_path.empty() &&
+        check.fail({"source.replay", "source.kind"},
+                   "required when source.kind = \"replay\" (a dataset directory or video "
+                   "file) (got \"\")")) {
+        return check.result();
     }
-    if (s.kind == SourceKind::kV4l2 && s.device.empty()) {
-        return checkError(where, {"source.device", "source.kind"},
-                          "required when source.kind = \"v4l2\" (e.g. \"/dev/video0\") (got \"\")");
+    if (s.kind == SourceKind::kV4l2 && s.device.empty() &&
+        check.fail({"source.device", "source.kind"},
+                   "required when source.kind = \"v4l2\" (e.g. \"/dev/video0\") (got \"\")")) {
+        return check.result();
     }
-    if (s.kind == SourceKind::kLibcamera && s.device.empty()) {
-        return checkError(where, {"source.device", "source.kind"},
-                          "required when source.kind = \"libcamera\" (a camera index such as "
-                          "\"0\" or a libcamera id) (got \"\")");
+    if (s.kind == SourceKind::kLibcamera && s.device.empty() &&
+        check.fail({"source.device", "source.kind"},
+                   "required when source.kind = \"libcamera\" (a camera index such as "
+                   "\"0\" or a libcamera id) (got \"\")")) {
+        return check.result();
     }
     const bool live = s.kind == SourceKind::kV4l2 || s.kind == SourceKind::kLibcamera;
     const auto& m = c.camera;
-    if (live && (m.fx_px <= 0 || m.fy_px <= 0 || m.cx_px <= 0 || m.cy_px <= 0)) {
-        return checkError(where, {"camera.fx_px", "source.kind"},
-                          std::string("a live source (source.kind = \"") + toString(s.kind) +
-                              "\") needs the camera's calibration: camera.fx_px, fy_px, cx_px "
-                              "and cy_px must all be > 0 (got fx_px = " +
-                              drivers::toml_detail::num(m.fx_px) + ")");
+    if (live && (m.fx_px <= 0 || m.fy_px <= 0 || m.cx_px <= 0 || m.cy_px <= 0) &&
+        check.fail({"camera.fx_px", "source.kind"},
+                   std::string("a live source (source.kind = \"") + toString(s.kind) +
+                       "\") needs the camera's calibration: camera.fx_px, fy_px, cx_px "
+                       "and cy_px must all be > 0 (got fx_px = " +
+                       drivers::toml_detail::num(m.fx_px) + ")")) {
+        return check.result();
     }
-    if (m.retry_max_s < m.retry_initial_s) {
-        return checkError(
-            where, {"camera.retry_max_s", "camera.retry_initial_s"},
+    if (m.retry_max_s < m.retry_initial_s &&
+        check.fail(
+            {"camera.retry_max_s", "camera.retry_initial_s"},
             "must be >= camera.retry_initial_s = " + drivers::toml_detail::num(m.retry_initial_s) +
-                " (got " + drivers::toml_detail::num(m.retry_max_s) + ")");
+                " (got " + drivers::toml_detail::num(m.retry_max_s) + ")")) {
+        return check.result();
     }
     const auto& g = c.gpio;
-    if (!g.chip.empty() && g.status_line < 0 && g.heartbeat_line < 0) {
-        return checkError(where, {"gpio.status_line", "gpio.chip"},
-                          "gpio.chip is set (\"" + g.chip +
-                              "\") but no line is: set gpio.status_line and/or "
-                              "gpio.heartbeat_line (got -1)");
+    if (!g.chip.empty() && g.status_line < 0 && g.heartbeat_line < 0 &&
+        check.fail({"gpio.status_line", "gpio.chip"},
+                   "gpio.chip is set (\"" + g.chip +
+                       "\") but no line is: set gpio.status_line and/or "
+                       "gpio.heartbeat_line (got -1)")) {
+        return check.result();
     }
-    if (g.status_line >= 0 && g.status_line == g.heartbeat_line) {
-        return checkError(where, {"gpio.heartbeat_line", "gpio.status_line"},
-                          "must differ from gpio.status_line (got " +
-                              std::to_string(g.heartbeat_line) + " for both)");
+    if (g.status_line >= 0 && g.status_line == g.heartbeat_line &&
+        check.fail({"gpio.heartbeat_line", "gpio.status_line"},
+                   "must differ from gpio.status_line (got " + std::to_string(g.heartbeat_line) +
+                       " for both)")) {
+        return check.result();
     }
-    if (g.chip.empty() && (g.status_line >= 0 || g.heartbeat_line >= 0)) {
-        return checkError(where, {"gpio.chip", "gpio.status_line", "gpio.heartbeat_line"},
-                          "required when gpio.status_line or gpio.heartbeat_line is set "
-                          "(a path, name or label) (got \"\")");
+    if (g.chip.empty() && (g.status_line >= 0 || g.heartbeat_line >= 0) &&
+        check.fail({"gpio.chip", "gpio.status_line", "gpio.heartbeat_line"},
+                   "required when gpio.status_line or gpio.heartbeat_line is set "
+                   "(a path, name or label) (got \"\")")) {
+        return check.result();
     }
-    if (auto bad = rotationProblem(c.imu.rotation_imu_to_camera)) {
-        return checkError(where, {"imu.rotation_imu_to_camera"}, *bad);
+    if (auto bad = rotationProblem(c.imu.rotation_imu_to_camera);
+        bad && check.fail({"imu.rotation_imu_to_camera"}, *bad)) {
+        return check.result();
     }
     const std::string socket_path = c.socket.path.string();
-    if (socket_path.empty() || socket_path.size() > kMaxSocketPathBytes) {
-        return checkError(where, {"socket.path"},
-                          "must be a path of 1 to " + std::to_string(kMaxSocketPathBytes) +
-                              " bytes (a Unix socket) (got \"" + socket_path + "\")");
+    if ((socket_path.empty() || socket_path.size() > kMaxSocketPathBytes) &&
+        check.fail({"socket.path"}, "must be a path of 1 to " +
+                                        std::to_string(kMaxSocketPathBytes) +
+                                        " bytes (a Unix socket) (got \"" + socket_path + "\")")) {
+        return check.result();
     }
-    if (c.socket.client_buffer_bytes < c.socket.max_request_bytes) {
-        return checkError(
-            where, {"socket.client_buffer_bytes", "socket.max_request_bytes"},
+    if (c.socket.client_buffer_bytes < c.socket.max_request_bytes &&
+        check.fail(
+            {"socket.client_buffer_bytes", "socket.max_request_bytes"},
             "must be >= socket.max_request_bytes = " + std::to_string(c.socket.max_request_bytes) +
-                " (got " + std::to_string(c.socket.client_buffer_bytes) + ")");
+                " (got " + std::to_string(c.socket.client_buffer_bytes) + ")")) {
+        return check.result();
     }
-    if (c.log.enabled && c.log.dir.empty()) {
-        return checkError(where, {"log.dir", "log.enabled"},
-                          "must not be empty when log.enabled = true (got \"\")");
+    if (c.log.enabled && c.log.dir.empty() &&
+        check.fail({"log.dir", "log.enabled"},
+                   "must not be empty when log.enabled = true (got \"\")")) {
+        return check.result();
     }
-    if (c.log.max_total_bytes < c.log.max_file_bytes) {
-        return checkError(
-            where, {"log.max_total_bytes", "log.max_file_bytes"},
-            "must be >= log.max_file_bytes = " + std::to_string(c.log.max_file_bytes) + " (got " +
-                std::to_string(c.log.max_total_bytes) + ")");
+    if (c.log.max_total_bytes < c.log.max_file_bytes &&
+        check.fail({"log.max_total_bytes", "log.max_file_bytes"},
+                   "must be >= log.max_file_bytes = " + std::to_string(c.log.max_file_bytes) +
+                       " (got " + std::to_string(c.log.max_total_bytes) + ")")) {
+        return check.result();
     }
-    return true;
+    return check.result();
 }
 
 std::filesystem::path fromCommandLine(const std::filesystem::path& p) {
@@ -439,7 +454,13 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
             "--source/--socket/--log-dir/--pacing. Every key, its "
             "default, unit and allowed range is documented in config/scaled.toml (installed as "
             "/etc/scaled/scaled.toml).\n"
-            "Exit codes: 0 success, 64 usage, 78 configuration error.");
+            "Exit codes (sysexits.h): 0 success; 64 usage; 66 an input that does not exist "
+            "(dataset, model, camera device); 69 a camera or model that is there but cannot be "
+            "used; 70 internal error; 71 the system refused a lookup; "
+            "73 cannot create the socket (path in use by a live daemon, directory missing or not "
+            "writable); 74 the source failed while running; 78 configuration error (also: an "
+            "unknown socket.group, a priors file that is missing or does not parse; --check-config "
+            "reports every such problem).");
         std::string config;
         std::string check_file;
         std::string source;
@@ -602,3 +623,142 @@ Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
 }
 
 }  // namespace scaled::daemon
+namespace {
+
+// Keeps the problems of `from` whose key has no problem in `into` yet (a key
+// with a wrong value is not also blamed for what follows from its default),
+// and no message twice.
+void mergeProblems(config_detail::ProblemList& into, const config_detail::ProblemList& from) {
+    for (std::size_t i = 0; i < from.errors.size(); ++i) {
+        const bool seen = std::any_of(into.errors.begin(), into.errors.end(), [&](const auto& e) {
+            return e.message == from.errors[i].message;
+        });
+        if (!seen && !into.about(from.keys[i])) {
+            into.add(from.errors[i], from.keys[i]);
+        }
+    }
+}
+
+}  // namespace
+
+CheckedConfig checkDaemonConfig(const CommandLine& cli,
+                                const std::filesystem::path& default_config_file) {
+    CheckedConfig out;
+    out.config = defaultDaemonConfig();
+    config_detail::ProblemList problems;
+    std::string source_name = "built-in defaults";
+    const auto finish = [&] {
+        // In file order (a TOML table iterates its keys by name), then the
+        // command line's in its order.
+        const auto line = [&](const core::Error& e) {
+            const std::string prefix = source_name + ":";
+            std::size_t n = 0;
+            if (e.message.rfind(prefix, 0) == 0) {
+                std::size_t i = prefix.size();
+                while (i < e.message.size() && e.message[i] >= '0' && e.message[i] <= '9') {
+                    n = n * 10 + static_cast<std::size_t>(e.message[i] - '0');
+                    ++i;
+                }
+                if (n > 0) {
+                    return n;
+                }
+            }
+            return std::numeric_limits<std::size_t>::max();
+        };
+        std::vector<std::size_t> order(problems.errors.size());
+        for (std::size_t i = 0; i < order.size(); ++i) {
+            order[i] = i;
+        }
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+            return line(problems.errors[a]) < line(problems.errors[b]);
+        });
+        for (const std::size_t i : order) {
+            out.errors.push_back(problems.errors[i]);
+            out.error_keys.push_back(problems.keys[i]);
+        }
+        return std::move(out);
+    };
+    std::filesystem::path file;
+    std::error_code ec;
+    if (cli.config) {
+        file = *cli.config;
+    } else if (!default_config_file.empty() && std::filesystem::exists(default_config_file, ec)) {
+        file = default_config_file;
+    }
+    // The document outlives this call inside `locate`.
+    auto root = std::make_shared<toml::table>();
+    if (!file.empty()) {
+        auto text = config_detail::readConfigFile(file);
+        if (!text) {
+            problems.add(text.error(), "");
+            out.locate = [file](const std::vector<std::string>&) { return file.string(); };
+            return finish();
+        }
+        auto parsed = drivers::toml_detail::parse(*text, file.string());
+        if (!parsed) {
+            problems.add(parsed.error(), "");
+            out.locate = [file](const std::vector<std::string>&) { return file.string(); };
+            return finish();
+        }
+        *root = std::move(*parsed);
+        source_name = file.string();
+        const auto absolute = fromCommandLine(file);
+        config_detail::applyFields(*root, source_name, absolute.parent_path(),
+                                   daemonFields(out.config), &problems);
+        config_detail::ProblemList cross;
+        static_cast<void>(
+            checkDaemon(out.config, config_detail::documentLocator(*root, source_name), &cross));
+        mergeProblems(problems, cross);
+        out.config.file = absolute;
+    }
+
+    // The command line, as loadDaemonConfig applies it.
+    std::vector<std::pair<std::string, std::string>> set_by;
+    config_detail::applyAssignments(cli.sets, daemonFields(out.config), set_by, &problems);
+    if (cli.source) {
+        if (auto ok = applySourceSpec(*cli.source, out.config.source); !ok) {
+            problems.add(ok.error(), "source.kind");
+        }
+        for (const char* key : {"source.kind", "source.replay", "source.device"}) {
+            set_by.emplace_back(key, "--source " + *cli.source);
+        }
+    }
+    if (cli.socket) {
+        out.config.socket.path = fromCommandLine(*cli.socket);
+        set_by.emplace_back("socket.path", "--socket " + cli.socket->string());
+    }
+    if (cli.log_dir) {
+        out.config.log.dir = fromCommandLine(*cli.log_dir);
+        set_by.emplace_back("log.dir", "--log-dir " + cli.log_dir->string());
+    }
+    if (cli.pacing) {
+        if (const auto mode = parsePacing(*cli.pacing)) {
+            out.config.source.pacing = *mode;
+        } else {
+            problems.add(makeError(ErrorCode::kInvalidArgument,
+                                   "--pacing " + *cli.pacing + ": expected realtime or fast"),
+                         "source.pacing");
+        }
+    }
+    const auto by_file = file.empty() ? config_detail::Locator([](const std::vector<std::string>&) {
+        return std::string("built-in defaults");
+    })
+                                      : config_detail::documentLocator(*root, source_name);
+    out.locate = [root, by_file, set_by](const std::vector<std::string>& keys) {
+        for (const auto& key : keys) {
+            for (auto it = set_by.rbegin(); it != set_by.rend(); ++it) {
+                if (it->first == key) {
+                    return it->second;
+                }
+            }
+        }
+        return by_file(keys);
+    };
+    if (!set_by.empty() || cli.pacing) {
+        config_detail::ProblemList cross;
+        static_cast<void>(checkDaemon(out.config, out.locate, &cross));
+        mergeProblems(problems, cross);
+    }
+    return finish();
+}
+

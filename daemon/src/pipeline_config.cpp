@@ -4,6 +4,7 @@
 // every other and then ignored, so `scale-eval --config config/scaled.toml`
 // works and a typo there is still an error.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -286,54 +287,103 @@ core::Error checkError(const Locator& where, const std::vector<std::string>& key
         where(keys) + ": " + (keys.empty() ? std::string() : keys.front()) + ": " + what);
 }
 
-Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where) {
-    const auto& g = c.estimator.posterior.grid;
-    if (!(g.d_max > g.d_min)) {
-        return checkError(where, {"estimator.grid_d_max", "estimator.grid_d_min"},
-                          "must be greater than estimator.grid_d_min = " + num(g.d_min) + " (got " +
-                              num(g.d_max) + ")");
+void ProblemList::add(core::Error e, std::string key) {
+    errors.push_back(std::move(e));
+    keys.push_back(std::move(key));
+}
+
+bool ProblemList::about(std::string_view key) const {
+    return std::any_of(keys.begin(), keys.end(), [&](const std::string& k) {
+        return k == key ||
+               (key.size() > k.size() && key.substr(0, k.size()) == k && key[k.size()] == '.');
+    });
+}
+
+bool Checker::fail(const std::vector<std::string>& keys, const std::string& what) {
+    return fail(checkError(where_, keys, what), keys.empty() ? std::string() : keys.front());
+}
+
+bool Checker::fail(core::Error e, std::string key) {
+    if (!first_) {
+        first_ = e;
     }
-    if (c.estimator.posterior.arithmetic == core::PosteriorArithmetic::kFixed &&
-        !(c.estimator.likelihood.min_sigma_m >= core::Scalar(1e-5))) {
-        // Below 10 um the fixed-point likelihood's Q32-metre residuals lose precision.
-        return checkError(where, {"estimator.min_sigma_m", "estimator.posterior_arithmetic"},
-                          "must be >= 1e-05 with estimator.posterior_arithmetic = \"fixed\" (got " +
-                              num(c.estimator.likelihood.min_sigma_m) + ")");
+    if (all_ == nullptr) {
+        return true;
     }
-    const auto& s = c.tracker.slam;
-    if (s.ransac_max_hypotheses < s.ransac_min_hypotheses) {
-        return checkError(where, {"tracker.ransac_max_hypotheses", "tracker.ransac_min_hypotheses"},
-                          "must be >= tracker.ransac_min_hypotheses = " +
-                              std::to_string(s.ransac_min_hypotheses) + " (got " +
-                              std::to_string(s.ransac_max_hypotheses) + ")");
+    all_->add(std::move(e), std::move(key));
+    return false;
+}
+
+bool Checker::failed(const core::Result<bool>& nested) {
+    if (nested) {
+        return false;
     }
-    if (c.tracker.patch_size % 2 == 0) {
-        return checkError(where, {"tracker.patch_size"},
-                          "must be odd (got " + std::to_string(c.tracker.patch_size) + ")");
+    if (!first_) {
+        first_ = nested.error();
     }
-    if (auto v = vision::validate(c.tracker); !v) {
-        return checkError(where, {"tracker"}, v.error().message);
-    }
-    const auto& o = c.estimator.objects;
-    if (!(o.epipolar_depth_max > o.epipolar_depth_min)) {
-        return checkError(
-            where, {"objects.epipolar_depth_max", "objects.epipolar_depth_min"},
-            "must be greater than objects.epipolar_depth_min = " + num(o.epipolar_depth_min) +
-                " (got " + num(o.epipolar_depth_max) + ")");
-    }
-    if (!(o.centre_rel_sigma > 0 || o.centre_sigma_px > 0)) {
-        return checkError(
-            where, {"objects.centre_rel_sigma", "objects.centre_sigma_px"},
-            "objects.centre_rel_sigma and objects.centre_sigma_px must not both be 0");
-    }
-    if (auto v = core::validate(o); !v) {
-        return checkError(where, {"objects"}, v.error().message);
+    return all_ == nullptr;
+}
+
+core::Result<bool> Checker::result() const {
+    if (first_) {
+        return *first_;
     }
     return true;
 }
 
+Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where, ProblemList* all) {
+    Checker check(where, all);
+    const auto& g = c.estimator.posterior.grid;
+    if (!(g.d_max > g.d_min) && check.fail({"estimator.grid_d_max", "estimator.grid_d_min"},
+                                           "must be greater than estimator.grid_d_min = " +
+                                               num(g.d_min) + " (got " + num(g.d_max) + ")")) {
+        return check.result();
+    }
+    // Below 10 um the fixed-point likelihood's Q32-metre residuals lose precision.
+    if (c.estimator.posterior.arithmetic == core::PosteriorArithmetic::kFixed &&
+        !(c.estimator.likelihood.min_sigma_m >= core::Scalar(1e-5)) &&
+        check.fail({"estimator.min_sigma_m", "estimator.posterior_arithmetic"},
+                   "must be >= 1e-05 with estimator.posterior_arithmetic = \"fixed\" (got " +
+                       num(c.estimator.likelihood.min_sigma_m) + ")")) {
+        return check.result();
+    }
+    const auto& s = c.tracker.slam;
+    if (s.ransac_max_hypotheses < s.ransac_min_hypotheses &&
+        check.fail({"tracker.ransac_max_hypotheses", "tracker.ransac_min_hypotheses"},
+                   "must be >= tracker.ransac_min_hypotheses = " +
+                       std::to_string(s.ransac_min_hypotheses) + " (got " +
+                       std::to_string(s.ransac_max_hypotheses) + ")")) {
+        return check.result();
+    }
+    if (c.tracker.patch_size % 2 == 0 &&
+        check.fail({"tracker.patch_size"},
+                   "must be odd (got " + std::to_string(c.tracker.patch_size) + ")")) {
+        return check.result();
+    }
+    if (auto v = vision::validate(c.tracker); !v && check.fail({"tracker"}, v.error().message)) {
+        return check.result();
+    }
+    const auto& o = c.estimator.objects;
+    if (!(o.epipolar_depth_max > o.epipolar_depth_min) &&
+        check.fail({"objects.epipolar_depth_max", "objects.epipolar_depth_min"},
+                   "must be greater than objects.epipolar_depth_min = " +
+                       num(o.epipolar_depth_min) + " (got " + num(o.epipolar_depth_max) + ")")) {
+        return check.result();
+    }
+    if (!(o.centre_rel_sigma > 0 || o.centre_sigma_px > 0) &&
+        check.fail({"objects.centre_rel_sigma", "objects.centre_sigma_px"},
+                   "objects.centre_rel_sigma and objects.centre_sigma_px must not both be 0")) {
+        return check.result();
+    }
+    if (auto v = core::validate(o); !v && check.fail({"objects"}, v.error().message)) {
+        return check.result();
+    }
+    return check.result();
+}
+
 Result<bool> applyFields(const toml::table& root, std::string_view source,
-                         const std::filesystem::path& base_dir, const std::vector<Field>& fields) {
+                         const std::filesystem::path& base_dir, const std::vector<Field>& fields,
+                         ProblemList* all) {
     std::vector<std::string> sections;
     for (const auto& f : fields) {
         if (sections.empty() || sections.back() != f.section) {
@@ -343,6 +393,8 @@ Result<bool> applyFields(const toml::table& root, std::string_view source,
     const auto error = [&](const toml::node* n, const std::string& key, const std::string& what) {
         return drivers::toml_detail::errorAt(ErrorCode::kInvalidArgument, source, n, key, what);
     };
+    const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
+    Checker check(nowhere, all);
     for (const auto& [sk, snode] : root) {
         const std::string section(sk.str());
         const auto* table = snode.as_table();
@@ -351,10 +403,19 @@ Result<bool> applyFields(const toml::table& root, std::string_view source,
             known = known || name == section;
         }
         if (!known) {
-            return error(&snode, section, "unknown section (allowed: " + join(sections) + ")");
+            if (check.fail(
+                    error(&snode, section, "unknown section (allowed: " + join(sections) + ")"),
+                    section)) {
+                return check.result();
+            }
+            continue;
         }
         if (table == nullptr) {
-            return error(&snode, section, "must be a table ([" + section + "])");
+            if (check.fail(error(&snode, section, "must be a table ([" + section + "])"),
+                           section)) {
+                return check.result();
+            }
+            continue;
         }
         for (const auto& [k, node] : *table) {
             const std::string key(k.str());
@@ -372,21 +433,30 @@ Result<bool> applyFields(const toml::table& root, std::string_view source,
             full += '.';
             full += key;
             if (field == nullptr) {
-                return error(&node, full,
-                             "unknown key (allowed in [" + section + "]: " + join(allowed) + ")");
+                if (check.fail(
+                        error(&node, full,
+                              "unknown key (allowed in [" + section + "]: " + join(allowed) + ")"),
+                        full)) {
+                    return check.result();
+                }
+                continue;
             }
-            if (auto problem = field->set(node, base_dir)) {
-                return error(&node, full, *problem);
+            if (auto problem = field->set(node, base_dir);
+                problem && check.fail(error(&node, full, *problem), full)) {
+                return check.result();
             }
         }
     }
-    return true;
+    return check.result();
 }
 
 Result<bool> applyAssignments(const std::vector<std::string>& assignments,
                               const std::vector<Field>& fields,
-                              std::vector<std::pair<std::string, std::string>>& set_by) {
+                              std::vector<std::pair<std::string, std::string>>& set_by,
+                              ProblemList* all) {
     using drivers::toml_detail::parse;
+    const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
+    Checker check(nowhere, all);
     std::error_code ec;
     const auto cwd = std::filesystem::current_path(ec);
     for (const auto& a : assignments) {
@@ -394,11 +464,19 @@ Result<bool> applyAssignments(const std::vector<std::string>& assignments,
         const auto dot = a.find('.');
         const std::string source = "--set " + a;
         if (eq == std::string::npos || dot == std::string::npos || dot > eq) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             source + ": expected section.key=value (e.g. estimator.robust=true)");
+            if (check.fail(
+                    makeError(ErrorCode::kInvalidArgument,
+                              source + ": expected section.key=value (e.g. estimator.robust=true)"),
+                    a)) {
+                return check.result();
+            }
+            continue;
         }
         const std::string section = a.substr(0, dot);
         const std::string key = a.substr(dot + 1, eq - dot - 1);
+        std::string full = section;
+        full += '.';
+        full += key;
         std::string value = a.substr(eq + 1);
         // A bare word that is not a TOML value is taken as a string.
         if (!parse("v = " + value, source)) {
@@ -412,8 +490,13 @@ Result<bool> applyAssignments(const std::vector<std::string>& assignments,
         text += '\n';
         auto root = parse(text, source);
         if (!root) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             source + ": not a valid assignment (" + root.error().message + ")");
+            if (check.fail(
+                    makeError(ErrorCode::kInvalidArgument,
+                              source + ": not a valid assignment (" + root.error().message + ")"),
+                    full)) {
+                return check.result();
+            }
+            continue;
         }
         if (auto ok = applyFields(*root, source, cwd, fields); !ok) {
             // The line number of the synthetic text means nothing to the user.
@@ -425,14 +508,14 @@ Result<bool> applyAssignments(const std::vector<std::string>& assignments,
                 shorter += msg.substr(prefix.size());
                 msg = std::move(shorter);
             }
-            return makeError(ok.error().code, msg);
+            if (check.fail(makeError(ok.error().code, msg), full)) {
+                return check.result();
+            }
+            continue;
         }
-        std::string full = section;
-        full += '.';
-        full += key;
         set_by.emplace_back(std::move(full), source);
     }
-    return true;
+    return check.result();
 }
 
 Locator assignmentLocator(std::vector<std::pair<std::string, std::string>> set_by,

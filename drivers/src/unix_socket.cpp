@@ -69,28 +69,6 @@ core::Result<Probe> probeSocketFile(const std::filesystem::path& path, const soc
     return osError(path, "cannot check the existing socket", err);
 }
 
-core::Result<gid_t> lookupGroup(const std::filesystem::path& path, const std::string& name) {
-    long size_hint = ::sysconf(_SC_GETGR_R_SIZE_MAX);
-    std::vector<char> buffer(size_hint > 0 ? static_cast<std::size_t>(size_hint) : 1024U);
-    group entry{};
-    group* found = nullptr;
-    for (;;) {
-        const int rc = ::getgrnam_r(name.c_str(), &entry, buffer.data(), buffer.size(), &found);
-        if (rc == ERANGE && buffer.size() < (1U << 20)) {
-            buffer.resize(buffer.size() * 2);
-            continue;
-        }
-        if (rc != 0) {
-            return osError(path, "cannot look up group '" + name + "'", rc);
-        }
-        break;
-    }
-    if (found == nullptr) {
-        return makeError(ErrorCode::kNotFound, path.string() + ": unknown group '" + name + "'");
-    }
-    return found->gr_gid;
-}
-
 bool setFlags(int fd) {
     const int fl = ::fcntl(fd, F_GETFL);
     const int fd_flags = ::fcntl(fd, F_GETFD);
@@ -136,6 +114,28 @@ bool parseInt(const char* text, long& out) {
 }
 
 }  // namespace
+
+core::Result<gid_t> lookupGroup(const std::filesystem::path& path, const std::string& name) {
+    long size_hint = ::sysconf(_SC_GETGR_R_SIZE_MAX);
+    std::vector<char> buffer(size_hint > 0 ? static_cast<std::size_t>(size_hint) : 1024U);
+    group entry{};
+    group* found = nullptr;
+    for (;;) {
+        const int rc = ::getgrnam_r(name.c_str(), &entry, buffer.data(), buffer.size(), &found);
+        if (rc == ERANGE && buffer.size() < (1U << 20)) {
+            buffer.resize(buffer.size() * 2);
+            continue;
+        }
+        if (rc != 0) {
+            return osError(path, "cannot look up group '" + name + "'", rc);
+        }
+        break;
+    }
+    if (found == nullptr) {
+        return makeError(ErrorCode::kNotFound, path.string() + ": unknown group '" + name + "'");
+    }
+    return found->gr_gid;
+}
 
 void UniqueFd::reset(int fd) {
     if (fd_ >= 0 && fd_ != fd) {

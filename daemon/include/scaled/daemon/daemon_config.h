@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -203,3 +204,19 @@ core::Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
                                             const std::filesystem::path& default_config_file);
 
 }  // namespace scaled::daemon
+// What `scaled --check-config` starts from: the configuration
+// loadDaemonConfig would build, with every problem of the file and the
+// command line instead of the first (all of them, each
+// `FILE:LINE: section.key: what (got VALUE)`). `error_keys[i]` is the key
+// errors[i] is about; `locate` gives where a key was set (`FILE:LINE`,
+// `--set ...`, or the file or "built-in defaults" when nothing set it), for
+// the checks of files and devices that follow (config_check.h).
+struct CheckedConfig {
+    DaemonConfig config;
+    std::vector<core::Error> errors;
+    std::vector<std::string> error_keys;
+    std::function<std::string(const std::vector<std::string>& keys)> locate;
+};
+CheckedConfig checkDaemonConfig(const CommandLine& cli,
+                                const std::filesystem::path& default_config_file);
+

@@ -74,6 +74,11 @@ struct ListeningSocket {
 //    error naming it) before listen(), so no client connects earlier.
 core::Result<ListeningSocket> listenUnix(const UnixListenOptions& options);
 
+// The id of group `name` (getgrnam_r); kNotFound "PATH: unknown group 'NAME'"
+// when there is none, kIo when the lookup itself failed. `path` names what the
+// group is for in the message.
+core::Result<gid_t> lookupGroup(const std::filesystem::path& path, const std::string& name);
+
 // Socket activation (the sd_listen_fds protocol, without libsystemd): when
 // LISTEN_PID is this process and LISTEN_FDS >= 1, adopts `first_fd` (3, or
 // another number in tests) after checking that it is a listening AF_UNIX
