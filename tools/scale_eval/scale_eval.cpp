@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -387,12 +388,16 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
 
     drivers::Frame frame;
     const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
+    std::optional<std::string> first_read_error;
     for (std::size_t i = options.first_frame; i < end; i += stride) {
         auto got = drivers::readSelected(source, options.selection, i, frame);
         if (!got) {
             // A frame that cannot be read is skipped (the reader moved past it);
             // the tracker sees a longer frame gap.
             ++r.unreadable_frames;
+            if (!first_read_error) {
+                first_read_error = got.error().message;
+            }
             continue;
         }
         if (!*got) {
@@ -626,7 +631,14 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
         }
     }
     if (r.frames == 0) {
-        return makeError(ErrorCode::kInvalidArgument, "no frame could be read");
+        std::string why = "no frame could be read";
+        if (first_read_error) {
+            why += " (" + std::to_string(r.unreadable_frames) +
+                   " unreadable; the first: " + *first_read_error + ")";
+        } else {
+            why += " (no frame in the selected range)";
+        }
+        return makeError(ErrorCode::kInvalidArgument, why);
     }
     r.ms_per_frame = (tracker_ms + detector_ms + estimator_ms) / static_cast<double>(r.frames);
     r.tracker_ms_per_frame = tracker_ms / static_cast<double>(r.frames);
