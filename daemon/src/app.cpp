@@ -26,6 +26,7 @@
 #include <scaled/daemon/status_lights.h>
 #include <scaled/daemon/version.h>
 #include <scaled/detector/dnn_detector.h>
+#include <scaled/detector/thread_priority.h>
 #include <scaled/drivers/libcamera_camera.h>
 #include <scaled/drivers/paced_source.h>
 #include <scaled/drivers/priors_toml.h>
@@ -70,7 +71,6 @@ int exitCodeFor(const Error& e, int fallback) {
     }
 }
 
-sim::SimConfig simConfig(const SourceConfig& s) {
 // --check-config: every problem on stderr, notes and the verdict on stdout.
 int checkConfigurationAndReport(const CommandLine& cli, const std::filesystem::path& default_file) {
     const ConfigCheckReport report = checkConfiguration(cli, default_file);
@@ -90,6 +90,7 @@ int checkConfigurationAndReport(const CommandLine& cli, const std::filesystem::p
     return EX_OK;
 }
 
+sim::SimConfig simConfig(const SourceConfig& s) {
     sim::SimConfig c;
     c.seed = s.sim_seed;
     c.fps = s.sim_fps;
@@ -339,6 +340,15 @@ int Daemon::run() {
 
     // 2c. The IMU. Without it the daemon runs on: one line says why.
     openImu();
+
+    // 2d. OpenCV's worker threads, made at the detector's priority before
+    //     anything runs a parallel OpenCV call (thread_priority.h).
+    if (auto workers = detector::startOpenCvWorkersAtNice(config_.pipeline.detector.nice);
+        !workers) {
+        printError("detector.nice: " + workers.error().message +
+                   " (running with OpenCV's workers at the daemon's priority)");
+        events_->onError("detector priority", workers.error().message);
+    }
 
     // 3. Source, detector, priors.
     PipelineParts parts;
@@ -622,6 +632,9 @@ int runMain(int argc, const char* const* argv) {
     }
     const std::filesystem::path default_file =
         std::filesystem::path(SCALED_SYSCONFDIR) / "scaled" / "scaled.toml";
+    if (parsed.cli.check_config) {
+        return checkConfigurationAndReport(parsed.cli, default_file);
+    }
     auto config = loadDaemonConfig(parsed.cli, default_file);
     if (!config) {
         printError(config.error().message);
@@ -630,9 +643,6 @@ int runMain(int argc, const char* const* argv) {
     if (auto group = checkSocketGroup(config->socket); !group) {
         printError("socket.group: " + group.error().message);
         return group.error().code == ErrorCode::kNotFound ? EX_CONFIG : EX_OSERR;
-    }
-    if (parsed.cli.check_config) {
-        return checkConfigurationAndReport(parsed.cli, default_file);
     }
     Daemon daemon(std::move(parsed.cli), std::move(*config));
     return daemon.run();

@@ -1,10 +1,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <pthread.h>
 #include <utility>
 
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pose.h>
+#include <scaled/detector/thread_priority.h>
 #include <scaled/drivers/imu/map_gravity.h>
 
 namespace scaled::daemon {
@@ -203,6 +205,10 @@ Result<bool> Pipeline::start() {
     detection_thread_ = std::thread([this] { detectionLoop(); });
     tracking_thread_ = std::thread([this] { trackingLoop(); });
     capture_thread_ = std::thread([this] { captureLoop(); });
+    // Names for top -H, ps -L and the tests (15 characters at most).
+    ::pthread_setname_np(detection_thread_.native_handle(), "scaled-detect");
+    ::pthread_setname_np(tracking_thread_.native_handle(), "scaled-track");
+    ::pthread_setname_np(capture_thread_.native_handle(), "scaled-capture");
     return true;
 }
 
@@ -790,6 +796,12 @@ bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t ep
 }
 
 void Pipeline::detectionLoop() {
+    // Below the tracker and the socket (thread_priority.h); the daemon made
+    // OpenCV's workers at this value before the pipeline started.
+    if (auto ok = detector::setThreadNice(config_.pipeline.detector.nice);
+        !ok && events_ != nullptr) {
+        events_->onError("detector priority", ok.error().message);
+    }
     DetectionJob job;
     if (!job.snapshot.reserve(config_.pipeline.tracker.slam.max_features)) {
         return;

@@ -18,6 +18,7 @@
 
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/pipeline_config.h>
+#include <scaled/detector/thread_priority.h>
 #include <scaled/drivers/toml_detail.h>
 
 #include "config_registry.h"
@@ -193,6 +194,7 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         real("detector", "nms_iou_threshold", &d.nms_iou_threshold, 0, 1, Bound::kOpen),
         stringList("detector", "classes", &d.classes),
         integer("detector", "threads", &d.threads, 0, 256),
+        integer("detector", "nice", &d.nice, detector::kMinNice, detector::kMaxNice),
         integer("detector", "max_detections", &d.max_detections, 1, 10000),
         // [detection]
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),

@@ -13,6 +13,7 @@
 #include <utility>
 
 #include <scaled/detector/dnn_detector.h>
+#include <scaled/detector/thread_priority.h>
 #include <scaled/detector/yolo_decode.h>
 
 namespace scaled::detector {
@@ -179,6 +180,10 @@ Result<bool> validate(const DetectorConfig& config) {
         return makeError(ErrorCode::kInvalidArgument,
                          fieldError("threads", std::to_string(config.threads),
                                     "must be in [0, 256] (0: OpenCV's default)"));
+    }
+    if (config.nice < kMinNice || config.nice > kMaxNice) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("nice", std::to_string(config.nice), "must be in [0, 19]"));
     }
     if (config.max_detections < 1 || config.max_detections > kMaxDetectionsLimit) {
         return makeError(ErrorCode::kInvalidArgument,

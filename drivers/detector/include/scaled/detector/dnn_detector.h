@@ -56,7 +56,8 @@ struct DetectorConfig {
     float nms_iou_threshold = 0.45F;     // boxes of one class overlapping more are merged, (0, 1]
     std::vector<std::string> classes;    // allow-list of class names; empty: every class
     int threads = 0;                     // OpenCV threads; 0 leaves OpenCV's setting alone
-    int max_detections = 100;            // per image, highest scores first, in [1, 10000]
+    int nice = 10;  // the daemon's detection threads' nice value, in [0, 19] (thread_priority.h)
+    int max_detections = 100;  // per image, highest scores first, in [1, 10000]
 };
 
 // Checks the ranges (not the files). The message names the field and value.
