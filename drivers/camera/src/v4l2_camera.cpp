@@ -13,6 +13,7 @@
 #include <fcntl.h>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <linux/videodev2.h>
 #include <memory>
 #include <mutex>
@@ -760,7 +761,7 @@ core::Result<bool> setFrameRate(int fd, const std::string& who, const CameraOpti
                                        static_cast<std::uint32_t>(neg.height_px));
     v4l2_fract want = fractionOf(opt.fps);
     if (!iv.discrete.empty()) {
-        double best = INFINITY;
+        double best = std::numeric_limits<double>::infinity();
         for (const v4l2_fract& f : iv.discrete) {
             const double d = std::fabs(fpsOf(f) - opt.fps);
             if (fpsOf(f) > 0 && d < best) {
