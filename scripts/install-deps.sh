@@ -21,6 +21,9 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev googletest
   # style checks
   clang-format clang-tidy
+  # libFuzzer targets (preset fuzz, tests/fuzz): clang and its runtimes
+  # (libclang-rt-dev: libFuzzer and the sanitizers, Debian 12 and 13)
+  clang libclang-rt-dev
   # plotting scripts in tools/
   python3 python3-matplotlib
   # real-kernel driver tests (tests/vm, ctest label vm): QEMU, a busybox initramfs,

@@ -1,0 +1,71 @@
+// The field log's reader (readFieldLogText, drivers/src/field_log.cpp) and
+// field-log's analysis of what it read (tools/field_log/field_log_report.cpp)
+// on any file content: every kept line is a JSON object, each line is
+// counted once, summary.json is valid JSON and every CSV row is one record
+// (a line break only inside a quoted field, RFC 4180).
+
+#include <cstddef>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <scaled/drivers/field_log.h>
+
+#include "field_log_report.h"
+#include "fuzz_support.h"
+
+using scaled::fuzz::check;
+
+namespace {
+
+// One CSV record: quotes balanced, line breaks only between quotes.
+bool isOneRecord(const std::string& row) {
+    bool quoted = false;
+    for (const char c : row) {
+        if (c == '"') {
+            quoted = !quoted;
+        } else if ((c == '\n' || c == '\r') && !quoted) {
+            return false;
+        }
+    }
+    return !quoted;
+}
+
+void checkRows(const std::vector<std::string>& rows, const char* what) {
+    for (const std::string& row : rows) {
+        check(isOneRecord(row), what);
+    }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    const std::string_view text = scaled::fuzz::asText(data, size);
+    scaled::drivers::FieldLogContents contents;
+    scaled::drivers::readFieldLogText(text, "log/scaled-fuzz.jsonl", contents);
+    check(contents.files.size() == 1, "one file read");
+    std::size_t newlines = 0;
+    for (const char c : text) {
+        newlines += c == '\n' ? 1 : 0;
+    }
+    check(contents.lines.size() + contents.partial_lines + contents.corrupt_lines <= newlines + 1,
+          "each line counted at most once");
+    check(contents.partial_lines <= 1, "only the last line of a file is partial");
+    for (const auto& line : contents.lines) {
+        check(scaled::drivers::isJsonObjectLine(line.text), "a kept line is a JSON object");
+        check(line.text.find('\n') == std::string::npos, "a kept line is one line");
+    }
+
+    const scaled::tools::FieldLogAnalysis a = scaled::tools::analyseFieldLog(contents, "log");
+    check(a.lines == contents.lines.size(), "the analysis counts the lines read");
+    check(nlohmann::json::accept(scaled::tools::toJson(a)), "summary.json is valid JSON");
+    (void)scaled::tools::toText(a);
+    checkRows(a.frame_rows, "frames.csv rows are one record");
+    checkRows(a.update_rows, "updates.csv rows are one record");
+    checkRows(a.observation_rows, "observations.csv rows are one record");
+    checkRows(a.object_rows, "objects.csv rows are one record");
+    checkRows(a.pose_rows, "poses.csv rows are one record");
+    return 0;
+}
