@@ -3,6 +3,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstddef>
+#include <cstdlib>
 #include <nlohmann/json.hpp>
 #include <span>
 
@@ -130,6 +131,103 @@ Request invalid(std::string cmd, std::string message) {
     r.cmd = std::move(cmd);
     r.error = std::move(message);
     return r;
+}
+
+// The length of the JSON number at the start of `s` (RFC 8259:
+// -?(0|[1-9][0-9]*)(.[0-9]+)?([eE][+-]?[0-9]+)?), 0 when none starts there.
+std::size_t jsonNumberLength(std::string_view s) {
+    std::size_t i = 0;
+    const auto digits = [&] {
+        const std::size_t start = i;
+        while (i < s.size() && s[i] >= '0' && s[i] <= '9') {
+            ++i;
+        }
+        return i - start;
+    };
+    if (i < s.size() && s[i] == '-') {
+        ++i;
+    }
+    if (i < s.size() && s[i] == '0') {
+        ++i;
+    } else if (digits() == 0) {
+        return 0;
+    }
+    if (i < s.size() && s[i] == '.') {
+        ++i;
+        if (digits() == 0) {
+            return 0;
+        }
+    }
+    if (i < s.size() && (s[i] == 'e' || s[i] == 'E')) {
+        ++i;
+        if (i < s.size() && (s[i] == '+' || s[i] == '-')) {
+            ++i;
+        }
+        if (digits() == 0) {
+            return 0;
+        }
+    }
+    return i;
+}
+
+// nlohmann::json refuses a number that overflows a double ("number
+// overflow", 1e400) as a parse error. Writes `line` to `out` with every such
+// number outside strings replaced by null, so the request is read and the
+// member's own check answers; false (and `out` untouched) when there is none.
+// Only run on a line that did not parse: the cost stays off the normal path.
+bool nullOverflowingNumbers(std::string_view line, std::string& out) {
+    bool changed = false;
+    bool in_string = false;
+    std::size_t copied = 0;
+    std::string token;
+    for (std::size_t i = 0; i < line.size();) {
+        const char c = line[i];
+        if (in_string) {
+            if (c == '\\') {
+                i += 2;
+                continue;
+            }
+            in_string = c != '"';
+            ++i;
+            continue;
+        }
+        if (c == '"') {
+            in_string = true;
+            ++i;
+            continue;
+        }
+        const std::size_t n =
+            (c == '-' || (c >= '0' && c <= '9')) ? jsonNumberLength(line.substr(i)) : 0;
+        if (n == 0) {
+            ++i;
+            continue;
+        }
+        token.assign(line.substr(i, n));
+        if (std::isinf(std::strtod(token.c_str(), nullptr))) {
+            out.append(line.substr(copied, i - copied));
+            out += "null";
+            copied = i + n;
+            changed = true;
+        }
+        i += n;
+    }
+    if (changed) {
+        out.append(line.substr(copied));
+    }
+    return changed;
+}
+
+// The length of the longest prefix of `s` of at most `max_bytes` bytes that
+// does not cut a UTF-8 sequence.
+std::size_t utf8Prefix(std::string_view s, std::size_t max_bytes) {
+    if (s.size() <= max_bytes) {
+        return s.size();
+    }
+    std::size_t n = max_bytes;
+    while (n > 0 && (static_cast<unsigned char>(s[n]) & 0xC0U) == 0x80U) {
+        --n;
+    }
+    return n;
 }
 
 }  // namespace
@@ -309,6 +407,14 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     appendJsonInt(out, clients.rejected);
     key(out, "detached");
     appendJsonInt(out, clients.detached);
+    key(out, "watchers");
+    appendJsonInt(out, clients.watchers);
+    key(out, "max_watchers");
+    appendJsonInt(out, clients.max_watchers);
+    key(out, "timed_out");
+    appendJsonInt(out, clients.timed_out);
+    key(out, "evicted");
+    appendJsonInt(out, clients.evicted);
     out += R"(},"log":{"state":)";
     appendJsonString(out, toString(log.state));
     key(out, "lines");
@@ -463,17 +569,32 @@ void appendError(std::string& out, std::string_view message, std::string_view cm
     out += R"({"class":"ERROR","message":)";
     appendJsonString(out, message);
     if (!cmd.empty()) {
+        const std::size_t n = utf8Prefix(cmd, kMaxEchoBytes);
         key(out, "cmd");
-        appendJsonString(out, cmd);
+        appendJsonString(out, cmd.substr(0, n));
+        if (n < cmd.size()) {
+            key(out, "truncated");
+            appendBool(out, true);
+        }
     }
     out += "}\n";
 }
 
 Request parseRequest(std::string_view line) {
     using nlohmann::json;
-    const json doc = json::parse(line.begin(), line.end(), nullptr, false);
+    // nlohmann::json stops at a NUL byte as at the end of the input.
+    if (line.find('\0') != std::string_view::npos) {
+        return invalid({}, "request contains a NUL byte");
+    }
+    json doc = json::parse(line.begin(), line.end(), nullptr, false);
     if (doc.is_discarded()) {
-        return invalid({}, "request is not valid JSON");
+        std::string nulled;
+        if (nullOverflowingNumbers(line, nulled)) {
+            doc = json::parse(nulled.begin(), nulled.end(), nullptr, false);
+        }
+        if (doc.is_discarded()) {
+            return invalid({}, "request is not valid JSON");
+        }
     }
     if (!doc.is_object()) {
         return invalid({}, "request must be a JSON object");
@@ -538,9 +659,10 @@ Request parseRequest(std::string_view line) {
         }
         r.command = Command::kSetGravity;
     } else {
-        return invalid(
-            r.cmd, "unknown command \"" + r.cmd +
-                       "\" (known: poll, watch, status, posterior, objects, pose, set_gravity)");
+        // The name is echoed once, in "cmd" (appendError caps it).
+        return invalid(r.cmd,
+                       "unknown command (known: poll, watch, status, posterior, objects, pose, "
+                       "set_gravity)");
     }
     return r;
 }

@@ -184,7 +184,12 @@ TEST(Protocol, StatusHasEveryMember) {
     log.bytes_written = 500;
     log.error = "No space left on device";
     std::string out;
-    appendStatus(out, s, log, ClientCounts{3, 16, 5, 1, 1});
+    ClientCounts clients{3, 18, 5, 1, 1};
+    clients.watchers = 2;
+    clients.max_watchers = 16;
+    clients.timed_out = 4;
+    clients.evicted = 6;
+    appendStatus(out, s, log, clients);
     const json j = parseLine(out);
     EXPECT_EQ(j["class"], "STATUS");
     EXPECT_EQ(j["source"], "replay:/data/rk");
@@ -200,8 +205,8 @@ TEST(Protocol, StatusHasEveryMember) {
     EXPECT_EQ(j["features"], json::parse(R"({"in_map":40,"tracked":25})"));
     EXPECT_EQ(j["scale_updates"], 7);
     EXPECT_EQ(j["epoch"], 1);
-    EXPECT_EQ(j["clients"], json::parse(R"({"connected":3,"max":16,"accepted":5,"rejected":1,
-        "detached":1})"));
+    EXPECT_EQ(j["clients"], json::parse(R"({"connected":3,"max":18,"accepted":5,"rejected":1,
+        "detached":1,"watchers":2,"max_watchers":16,"timed_out":4,"evicted":6})"));
     EXPECT_EQ(j["log"], json::parse(R"({"state":"fault","lines":5,"dropped":1,"bytes":500,
         "error":"No space left on device"})"));
 
@@ -442,6 +447,90 @@ TEST(Protocol, WatchAckError) {
               "{\"class\":\"ACK\",\"cmd\":\"set_gravity\"}\n"
               "{\"class\":\"ERROR\",\"message\":\"bad\"}\n"
               "{\"class\":\"ERROR\",\"message\":\"worse\",\"cmd\":\"watch\"}\n");
+}
+
+// An unknown command is echoed once, in "cmd", cut to 64 bytes (whole UTF-8
+// characters) and marked truncated: a 900 KB command gets a short line.
+TEST(Protocol, ErrorEchoesTheCommandOnceAndAtMost64Bytes) {
+    const std::string name = "fly" + std::string(900'000, 'x');
+    const Request r = parseRequest(R"({"cmd":")" + name + R"("})");
+    ASSERT_EQ(r.command, Command::kInvalid);
+    EXPECT_EQ(
+        r.error,
+        "unknown command (known: poll, watch, status, posterior, objects, pose, set_gravity)");
+    std::string out;
+    appendError(out, r.error, r.cmd);
+    EXPECT_LT(out.size(), 250U) << out.substr(0, 300);
+    json j = parseLine(out);
+    EXPECT_EQ(j["cmd"], name.substr(0, kMaxEchoBytes));
+    EXPECT_EQ(j["truncated"], true);
+    ASSERT_NE(out.find("flyx"), std::string::npos);
+    EXPECT_EQ(out.find("flyx"), out.rfind("flyx")) << "the command appears once: " << out;
+
+    // 64 bytes exactly: not cut, no "truncated".
+    out.clear();
+    appendError(out, "m", std::string(64, 'a'));
+    j = parseLine(out);
+    EXPECT_EQ(j["cmd"], std::string(64, 'a'));
+    EXPECT_FALSE(j.contains("truncated")) << out;
+    // A two-byte character across byte 64 is left out whole: 63 bytes remain.
+    std::string accents = "a";
+    for (int i = 0; i < 40; ++i) {
+        accents += "\xC3\xA9";  // é
+    }
+    out.clear();
+    appendError(out, "m", accents);
+    j = parseLine(out);
+    EXPECT_EQ(j["cmd"], accents.substr(0, 63));
+    EXPECT_EQ(j["truncated"], true);
+}
+
+// A NUL byte does not end the request: nlohmann::json would stop there and
+// answer `{"cmd":"poll"}\0garbage` as a poll.
+TEST(Protocol, NulByteAnywhereIsAnError) {
+    using namespace std::string_literals;
+    for (const std::string& line : {"{\"cmd\":\"poll\"}\0garbage"s, "{\"cmd\":\"po\0ll\"}"s,
+                                    "\0{\"cmd\":\"poll\"}"s, "{\"cmd\":\"poll\"}\0"s, "\0"s}) {
+        const Request r = parseRequest(line);
+        EXPECT_EQ(r.command, Command::kInvalid) << line.size();
+        EXPECT_EQ(r.error, "request contains a NUL byte") << line.size();
+        EXPECT_TRUE(r.cmd.empty());
+    }
+}
+
+// A number too large for a double is valid JSON that nlohmann::json refuses
+// ("number overflow"): the member's own check answers, not "not valid JSON".
+TEST(Protocol, NumbersBeyondADoubleGetTheMembersMessage) {
+    const char* gravity = "\"down\" must be an array of 3 finite numbers, not all zero";
+    for (const std::string& down : {std::string("[1e400,0,1]"), std::string("[0,-1.5E+999,1]"),
+                                    "[0,0,1" + std::string(400, '0') + "]"}) {
+        const Request r = parseRequest(R"({"cmd":"set_gravity","down":)" + down + "}");
+        EXPECT_EQ(r.command, Command::kInvalid) << down;
+        EXPECT_EQ(r.error, gravity) << down;
+        EXPECT_EQ(r.cmd, "set_gravity") << down;
+    }
+    // The member's position in the object does not matter.
+    Request r = parseRequest(R"({"down":[1e400,0,1],"cmd":"set_gravity"})");
+    EXPECT_EQ(r.error, gravity);
+    // Other members: as if null.
+    r = parseRequest(R"({"cmd":"watch","enable":1e999})");
+    EXPECT_EQ(r.error, "\"enable\" must be true or false");
+    r = parseRequest(R"({"cmd":"poll","extra":[1e999,{"a":-2e400}]})");
+    EXPECT_EQ(r.command, Command::kPoll) << r.error;
+    // Inside strings nothing changes, escaped quotes included.
+    r = parseRequest(R"({"cmd":"1e999"})");
+    EXPECT_EQ(r.cmd, "1e999");
+    r = parseRequest(R"({"cmd":"poll","note":"a \"1e999\" b"})");
+    EXPECT_EQ(r.command, Command::kPoll) << r.error;
+    // An underflow is 0, as before; invalid JSON stays invalid.
+    r = parseRequest(R"({"cmd":"set_gravity","down":[1e-400,0,2]})");
+    ASSERT_EQ(r.command, Command::kSetGravity) << r.error;
+    EXPECT_EQ(r.down[2], 1.0);
+    for (const char* bad :
+         {R"({"cmd":"poll",1e999})", R"({"cmd":"poll","x":+1e999})", R"({"cmd":"poll","x":01e999})",
+          R"({"cmd":"poll","x":-})", R"({"cmd":"poll","x":1e999)"}) {
+        EXPECT_EQ(parseRequest(bad).error, "request is not valid JSON") << bad;
+    }
 }
 
 // --- POSE (proto_minor 4) -------------------------------------------------------
@@ -701,8 +790,7 @@ TEST(Protocol, RejectsBadRequests) {
         {"{}", "request has no \"cmd\"", ""},
         {"{\"cmd\":3}", "\"cmd\" must be a string", ""},
         {"{\"cmd\":\"fly\"}",
-         "unknown command \"fly\" (known: poll, watch, status, posterior, objects, pose, "
-         "set_gravity)",
+         "unknown command (known: poll, watch, status, posterior, objects, pose, set_gravity)",
          "fly"},
         {"{\"cmd\":\"watch\",\"enable\":1}", "\"enable\" must be true or false", "watch"},
         {"{\"cmd\":\"watch\",\"pose\":\"yes\"}", "\"pose\" must be true or false", "watch"},
@@ -716,7 +804,8 @@ TEST(Protocol, RejectsBadRequests) {
          "\"down\" must be an array of 3 finite numbers, not all zero", "set_gravity"},
         {"{\"cmd\":\"set_gravity\",\"down\":[0,\"1\",0]}",
          "\"down\" must be an array of 3 finite numbers, not all zero", "set_gravity"},
-        {"{\"cmd\":\"set_gravity\",\"down\":[0,1e999,0]}", "request is not valid JSON", ""},
+        {"{\"cmd\":\"set_gravity\",\"down\":[0,1e999,0]}",
+         "\"down\" must be an array of 3 finite numbers, not all zero", "set_gravity"},
     };
     for (const Case& c : cases) {
         const Request r = parseRequest(c.line);
@@ -788,7 +877,14 @@ TEST(ProtocolSamples, Write) {
     appendPose(out, samplePose(), sampleReport());
     appendAck(out, "set_gravity");
     appendError(out, "request is not valid JSON");
-    appendError(out, "unknown command \"x\"", "x");
+    appendError(out, "unknown command (known: poll)", "x");
+    appendError(out, "unknown command (known: poll)", std::string(100, 'y'));
+    ClientCounts counts{2, 18, 3, 1, 0};
+    counts.watchers = 1;
+    counts.max_watchers = 16;
+    counts.timed_out = 1;
+    counts.evicted = 1;
+    appendStatus(out, PipelineStatus{}, LogStatus{}, counts);
     std::ofstream file(path);
     file << out;
     EXPECT_TRUE(file.good()) << path;

@@ -9,6 +9,7 @@
 // or disappears; new fields, classes and commands only bump proto_minor.
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -23,13 +24,24 @@ inline constexpr int kProtoMajor = 1;
 // 1: STATUS.camera; 2: STATUS.timing; 3: OBJECTS; 4: POSE (pose, watch "pose")
 inline constexpr int kProtoMinor = 4;
 
+// The most bytes of a client's text (its "cmd") an ERROR echoes; a longer
+// one is cut at a UTF-8 character boundary and marked "truncated":true.
+inline constexpr std::size_t kMaxEchoBytes = 64;
+
 // The service's own client counters, for STATUS.
 struct ClientCounts {
     int connected = 0;
-    int max = 0;
+    int max = 0;  // connections accepted at once: socket.max_clients + reserved_query_slots
     std::uint64_t accepted = 0;
     std::uint64_t rejected = 0;
     std::uint64_t detached = 0;
+    // Additive (issue 22): watchers now and their limit (socket.max_clients),
+    // connections closed for an incomplete request (request_timeout_s) and
+    // idle ones closed to make room for a new client.
+    int watchers = 0;
+    int max_watchers = 0;
+    std::uint64_t timed_out = 0;
+    std::uint64_t evicted = 0;
 };
 
 // {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":4}
@@ -66,7 +78,8 @@ void appendPoseMembers(std::string& out, const PoseReport& pose, const MetricPos
 // {"class":"WATCH","enable":true,"pose":false}
 void appendWatch(std::string& out, bool enable, bool pose);
 void appendAck(std::string& out, std::string_view cmd);
-// ERROR; `cmd` is included when non-empty.
+// ERROR; `cmd` is included when non-empty, cut to its first kMaxEchoBytes
+// bytes (whole UTF-8 characters) with "truncated":true when longer.
 void appendError(std::string& out, std::string_view message, std::string_view cmd = {});
 
 // appendJsonString, appendJsonNumber: <scaled/daemon/json_write.h>.
@@ -95,7 +108,10 @@ struct Request {
 };
 
 // Parses one request line (without its newline). Unknown extra members are
-// ignored (clients may be newer than the server).
+// ignored (clients may be newer than the server). A NUL byte anywhere is an
+// error (not the end of the request); a number too large for a double
+// (1e400) is read as not finite: for set_gravity's "down" the set_gravity
+// error, for another member as if it were null.
 Request parseRequest(std::string_view line);
 
 }  // namespace scaled::daemon
