@@ -43,6 +43,10 @@ TEST(DaemonConfig, Defaults) {
     EXPECT_EQ(c.socket.path, std::filesystem::path("/run/scaled/scaled.sock"));
     EXPECT_EQ(c.socket.mode, 0660U);
     EXPECT_DOUBLE_EQ(c.socket.pose_rate_hz, 30.0);
+    EXPECT_EQ(c.socket.max_clients, 16);
+    EXPECT_EQ(c.socket.reserved_query_slots, 2);
+    EXPECT_DOUBLE_EQ(c.socket.request_timeout_s, 5.0);
+    EXPECT_DOUBLE_EQ(c.socket.stall_timeout_s, 10.0);
     EXPECT_DOUBLE_EQ(c.log.pose_rate_hz, 10.0);
     EXPECT_EQ(c.log.dir, std::filesystem::path("/var/log/scaled"));
     EXPECT_EQ(c.pipeline.detector.model_path,
@@ -115,8 +119,11 @@ TEST(DaemonConfig, KeysAreThePipelinesAndTheDaemons) {
                           "socket.mode",
                           "socket.group",
                           "socket.max_clients",
+                          "socket.reserved_query_slots",
                           "socket.max_request_bytes",
+                          "socket.request_timeout_s",
                           "socket.client_buffer_bytes",
+                          "socket.stall_timeout_s",
                           "socket.pose_rate_hz",
                           "log.enabled",
                           "log.dir",
@@ -168,6 +175,9 @@ path = "run/s.sock"
 mode = 0o640
 group = "scaled"
 max_clients = 1024
+reserved_query_slots = 0
+request_timeout_s = 0.25
+stall_timeout_s = 3600
 pose_rate_hz = 12.5
 [log]
 enabled = false
@@ -193,6 +203,9 @@ period_s = 0.5
     EXPECT_EQ(c.socket.mode, 0640U);
     EXPECT_EQ(c.socket.group, "scaled");
     EXPECT_EQ(c.socket.max_clients, 1024);
+    EXPECT_EQ(c.socket.reserved_query_slots, 0);
+    EXPECT_DOUBLE_EQ(c.socket.request_timeout_s, 0.25);
+    EXPECT_DOUBLE_EQ(c.socket.stall_timeout_s, 3600.0);
     EXPECT_DOUBLE_EQ(c.socket.pose_rate_hz, 12.5);
     EXPECT_FALSE(c.log.enabled);
     EXPECT_TRUE(c.log.dir.empty());
@@ -283,6 +296,22 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
         {"[socket]\ngroup = false\n", "2: socket.group: must be a string (got false)"},
         {"[socket]\npose_rate_hz = -1\n",
          "2: socket.pose_rate_hz: must be a number in [0, 1000] (got -1)"},
+        {"[socket]\nreserved_query_slots = -1\n",
+         "2: socket.reserved_query_slots: must be an integer in [0, 1024] (got -1)"},
+        {"[socket]\nreserved_query_slots = 1025\n",
+         "2: socket.reserved_query_slots: must be an integer in [0, 1024] (got 1025)"},
+        {"[socket]\nreserved_query_slots = 1.5\n",
+         "2: socket.reserved_query_slots: must be an integer in [0, 1024] (got 1.5)"},
+        {"[socket]\nrequest_timeout_s = 0\n",
+         "2: socket.request_timeout_s: must be a number in (0, 3600] (got 0)"},
+        {"[socket]\nrequest_timeout_s = 3601\n",
+         "2: socket.request_timeout_s: must be a number in (0, 3600] (got 3601)"},
+        {"[socket]\n\nrequest_timeout_s = nan\n",
+         "3: socket.request_timeout_s: must be a number in (0, 3600] (got nan)"},
+        {"[socket]\nstall_timeout_s = -0.5\n",
+         "2: socket.stall_timeout_s: must be a number in (0, 3600] (got -0.5)"},
+        {"[socket]\nstall_timeout_s = \"10\"\n",
+         "2: socket.stall_timeout_s: must be a number in (0, 3600] (got \"10\")"},
         {"[socket]\npose_rate_hz = \"fast\"\n",
          "2: socket.pose_rate_hz: must be a number in [0, 1000] (got \"fast\")"},
         {"[log]\npose_rate_hz = 1001\n",

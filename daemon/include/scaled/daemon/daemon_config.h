@@ -106,11 +106,18 @@ const char* toString(ImuMode mode);
 // [socket]
 struct SocketConfig {
     std::filesystem::path path = "/run/scaled/scaled.sock";
-    unsigned mode = 0660;                      // file mode of the socket
-    std::string group;                         // owning group; empty: the process's group
-    int max_clients = 16;                      // the next one gets an ERROR and is closed
-    std::size_t max_request_bytes = 4096;      // a longer line is an ERROR (and discarded)
-    std::size_t client_buffer_bytes = 262144;  // unsent output per client before it is detached
+    unsigned mode = 0660;  // file mode of the socket
+    std::string group;     // owning group; empty: the process's group
+    int max_clients = 16;  // watchers at most; with reserved_query_slots, connections at once
+    // Connections accepted beyond max_clients, kept for clients that do not
+    // watch (a status or poll still gets in when max_clients watch).
+    int reserved_query_slots = 2;
+    std::size_t max_request_bytes = 4096;  // a longer line is an ERROR (and discarded)
+    double request_timeout_s = 5;          // an incomplete request line this old: ERROR, closed
+    // Unsent output per client: reading from it pauses above 1/2 of this and
+    // resumes at 1/4; SCALE/POSE lines that would exceed it detach the client.
+    std::size_t client_buffer_bytes = 262144;
+    double stall_timeout_s = 10;  // output waiting and none of it read this long: detached
     double pose_rate_hz = 30;  // POSE lines to watchers per second of frame time (0: every frame)
 };
 
