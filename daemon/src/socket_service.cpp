@@ -1,11 +1,16 @@
 #include <algorithm>
 #include <cerrno>
+#include <charconv>
+#include <climits>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <linux/sockios.h>
 #include <poll.h>
 #include <pthread.h>
 #include <string_view>
 #include <sys/eventfd.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <system_error>
 #include <unistd.h>
@@ -26,6 +31,8 @@ constexpr int kReadRounds = 4;
 // after accept() failed (EMFILE, ...) the listening socket rests a while.
 constexpr int kNoWakeFdPollMs = 20;
 constexpr int kAcceptBackoffMs = 100;
+constexpr std::int64_t kNoDeadline = std::numeric_limits<std::int64_t>::max();
+constexpr std::int64_t kNsPerMs = 1'000'000;
 
 bool sameReport(const ScaleReport& a, const ScaleReport& b) {
     return a.has_scale == b.has_scale && a.scale == b.scale && a.mean == b.mean &&
@@ -40,34 +47,70 @@ bool isBlank(std::string_view line) {
                        [](char c) { return c == ' ' || c == '\t' || c == '\r'; });
 }
 
+std::int64_t secondsToNs(double s) {
+    return static_cast<std::int64_t>(std::llround(s * 1e9));
+}
+
+// The shortest text of `v` that reads back the same ("5", "0.2").
+std::string shortest(double v) {
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return {buf, r.ptr};
+}
+
+// Bytes the peer has not read yet from the socket's queue (SIOCOUTQ); 0 when
+// the kernel does not say.
+int unreadBytes(int fd) {
+    int n = 0;
+    return ::ioctl(fd, SIOCOUTQ, &n) == 0 ? n : 0;
+}
+
 }  // namespace
 
 struct SocketService::Loop {
     struct Client {
         drivers::UniqueFd fd;
-        std::string in;           // the incomplete request line
+        std::string in;           // received, not handled yet: in[in_off, size)
+        std::size_t in_off = 0;   // (complete lines first, then an incomplete one)
         bool discarding = false;  // skipping the rest of an oversize line
         std::string out;          // unsent output: out[out_off, size)
         std::size_t out_off = 0;
         bool watching = false;       // SCALE stream
         bool watching_pose = false;  // POSE stream
+        bool paused = false;         // not reading: output above the high-water mark
+        bool eof = false;            // the client closed its sending side
+        bool closing = false;        // close once the output is sent (timed out)
         bool dead = false;
+        std::int64_t line_since_ns = 0;   // an incomplete line waits since (0: none)
+        std::int64_t stall_since_ns = 0;  // output waits, none read since (0: none)
+        int stall_unread_bytes = 0;       // the kernel's unread bytes then
+        std::int64_t active_ns = 0;       // the last bytes received (or the connect)
         [[nodiscard]] std::size_t pending() const { return out.size() - out_off; }
+        [[nodiscard]] bool reading() const { return !paused && !eof && !closing && !dead; }
+        [[nodiscard]] bool watcher() const { return watching || watching_pose; }
+        [[nodiscard]] std::string_view input() const { return std::string_view(in).substr(in_off); }
     };
 
     explicit Loop(SocketService& s)
-        : svc(s), read_buffer(kReadChunk), pose_limiter(s.config_.pose_rate_hz) {
+        : svc(s),
+          pose_limiter(s.config_.pose_rate_hz),
+          high_water(s.config_.client_buffer_bytes / 2),
+          low_water(s.config_.client_buffer_bytes / 4),
+          request_timeout_ns(secondsToNs(s.config_.request_timeout_s)),
+          stall_timeout_ns(secondsToNs(s.config_.stall_timeout_s)),
+          max_connections(s.config_.max_clients + s.config_.reserved_query_slots),
+          timeout_message("request incomplete after " + shortest(s.config_.request_timeout_s) +
+                          " s (closing)") {
         reply.reserve(1 << 16);
         scale_line.reserve(1024);
         pose_line.reserve(2048);
-        clients.reserve(static_cast<std::size_t>(std::max(s.config_.max_clients, 1)) + 1);
+        clients.reserve(static_cast<std::size_t>(std::max(max_connections, 1)) + 2);
         fds.reserve(clients.capacity() + 3);
     }
 
     SocketService& svc;
     std::vector<std::unique_ptr<Client>> clients;
     std::vector<pollfd> fds;
-    std::vector<char> read_buffer;
     std::string reply;       // every reply is built here
     std::string scale_line;  // the SCALE for the watchers, built once per publish
     ScaleReport latest;      // the report the watchers saw last
@@ -79,20 +122,32 @@ struct SocketService::Loop {
     PosteriorSnapshot posterior;
     ObjectsSnapshot objects;  // the hub's table, copied for an OBJECTS reply
     bool accept_paused = false;
+    const std::size_t high_water;  // stop reading a client above this much unsent output
+    const std::size_t low_water;   // read it again at this much
+    const std::int64_t request_timeout_ns;
+    const std::int64_t stall_timeout_ns;
+    const int max_connections;
+    const std::string timeout_message;
 
     void run();
+    [[nodiscard]] int pollTimeoutMs(int base_ms, std::int64_t now) const;
+    void checkDeadlines(std::int64_t now);
     void refreshScale();
     void refreshPose();
     void acceptAll();
+    bool evictIdle(std::int64_t now);
     void readClient(Client& c);
-    void consume(Client& c, const char* data, std::size_t n);
+    void processInput(Client& c);
     void handleLine(Client& c, std::string_view line);
-    void queue(Client& c, std::string_view msg);
+    void queue(Client& c, std::string_view msg, bool stream);
     void flush(Client& c);
+    void afterOutput(Client& c);
     std::size_t sendSome(Client& c, std::string_view data);
+    void startStall(Client& c, std::int64_t now);
     void close(Client& c);
     void detach(Client& c);
     void error(Client& c, std::string_view message, std::string_view cmd);
+    [[nodiscard]] int watchers() const;
 };
 
 void SocketService::Loop::run() {
@@ -114,13 +169,16 @@ void SocketService::Loop::run() {
         const std::size_t first_client = fds.size();
         const std::size_t polled_clients = clients.size();
         for (const auto& c : clients) {
-            const auto events = static_cast<short>(POLLIN | (c->pending() > 0 ? POLLOUT : 0));
+            // No POLLIN while paused: the client's requests wait in the kernel.
+            const auto events =
+                static_cast<short>((c->reading() ? POLLIN : 0) | (c->pending() > 0 ? POLLOUT : 0));
             fds.push_back({c->fd.get(), events, 0});
         }
         int timeout_ms = wake_fd >= 0 ? -1 : kNoWakeFdPollMs;
         if (accept_paused) {
             timeout_ms = kAcceptBackoffMs;
         }
+        timeout_ms = pollTimeoutMs(timeout_ms, monotonicNowNs());
         const int n = ::poll(fds.data(), fds.size(), timeout_ms);
         if (n < 0 && errno != EINTR) {
             // EINVAL/ENOMEM: nothing sensible to do but try again shortly.
@@ -142,13 +200,18 @@ void SocketService::Loop::run() {
             if (c.dead || re == 0) {
                 continue;
             }
-            if ((re & (POLLIN | POLLHUP | POLLERR)) != 0) {
+            const bool hangup = (re & (POLLHUP | POLLERR)) != 0;
+            if (c.pending() > 0 && ((re & POLLOUT) != 0 || hangup)) {
+                flush(c);  // a peer that is gone fails here (EPIPE) and is closed
+            }
+            if (c.reading() && ((re & POLLIN) != 0 || hangup)) {
                 readClient(c);
             }
-            if (!c.dead && (re & POLLOUT) != 0) {
-                flush(c);
+            if (!c.dead && hangup && !c.reading() && c.pending() == 0) {
+                close(c);  // nothing left to read or to send: do not spin on POLLHUP
             }
         }
+        checkDeadlines(monotonicNowNs());
         if (!accept_was_paused && (fds[listen_idx].revents & POLLIN) != 0) {
             acceptAll();
         }
@@ -159,6 +222,60 @@ void SocketService::Loop::run() {
     }
     clients.clear();
     svc.connected_.store(0);
+}
+
+// `base_ms` (-1: none), shortened to the nearest client deadline: an
+// incomplete request line (while the client is read) or output waiting to be
+// read. Rounded up, so the loop wakes at or after the deadline, never spins.
+int SocketService::Loop::pollTimeoutMs(int base_ms, std::int64_t now) const {
+    std::int64_t deadline = kNoDeadline;
+    for (const auto& c : clients) {
+        if (c->dead) {
+            continue;
+        }
+        if (c->reading() && c->line_since_ns != 0) {
+            deadline = std::min(deadline, c->line_since_ns + request_timeout_ns);
+        }
+        if (c->pending() > 0 && c->stall_since_ns != 0) {
+            deadline = std::min(deadline, c->stall_since_ns + stall_timeout_ns);
+        }
+    }
+    if (deadline == kNoDeadline) {
+        return base_ms;
+    }
+    const std::int64_t wait_ns = std::max<std::int64_t>(deadline - now, 0);
+    const std::int64_t wait_ms =
+        std::min<std::int64_t>((wait_ns + kNsPerMs - 1) / kNsPerMs, INT_MAX);
+    return base_ms < 0 ? static_cast<int>(wait_ms) : std::min(base_ms, static_cast<int>(wait_ms));
+}
+
+void SocketService::Loop::checkDeadlines(std::int64_t now) {
+    for (auto& cp : clients) {
+        Client& c = *cp;
+        if (!c.dead && c.reading() && c.line_since_ns != 0 &&
+            now - c.line_since_ns >= request_timeout_ns) {
+            svc.timed_out_.fetch_add(1);
+            c.closing = true;
+            c.in.clear();
+            c.in_off = 0;
+            c.line_since_ns = 0;
+            error(c, timeout_message, {});
+            afterOutput(c);
+        }
+        if (!c.dead && c.pending() > 0 && c.stall_since_ns != 0 &&
+            now - c.stall_since_ns >= stall_timeout_ns) {
+            // POLLOUT comes only once the peer has read most of the kernel's
+            // buffer; a slow reader shows up here as fewer unread bytes.
+            const int unread = unreadBytes(c.fd.get());
+            if (unread < c.stall_unread_bytes) {
+                c.stall_since_ns = now;
+                c.stall_unread_bytes = unread;
+            } else {
+                svc.stalled_.fetch_add(1);
+                detach(c);
+            }
+        }
+    }
 }
 
 void SocketService::Loop::refreshScale() {
@@ -180,7 +297,7 @@ void SocketService::Loop::refreshScale() {
             if (scale_line.empty()) {
                 appendScale(scale_line, latest, monotonicNowNs());
             }
-            queue(*c, scale_line);
+            queue(*c, scale_line, true);
         }
     }
 }
@@ -208,7 +325,7 @@ void SocketService::Loop::refreshPose() {
     svc.poses_streamed_.fetch_add(1);
     for (auto& c : clients) {
         if (c->watching_pose && !c->dead) {
-            queue(*c, pose_line);
+            queue(*c, pose_line, true);
         }
     }
 }
@@ -223,7 +340,8 @@ void SocketService::Loop::acceptAll() {
         if (!accepted->isValid()) {
             return;
         }
-        if (svc.connected_.load() >= svc.config_.max_clients) {
+        const std::int64_t now = monotonicNowNs();
+        if (svc.connected_.load() >= max_connections && !evictIdle(now)) {
             reply.clear();
             appendError(reply, "too many clients (" + std::to_string(svc.connected_.load()) +
                                    " connected)");
@@ -235,34 +353,65 @@ void SocketService::Loop::acceptAll() {
         }
         auto client = std::make_unique<Client>();
         client->fd = std::move(*accepted);
+        client->active_ns = now;
         svc.accepted_.fetch_add(1);
         svc.connected_.fetch_add(1);
         reply.clear();
         appendVersion(reply, svc.release_);
-        queue(*client, reply);
+        queue(*client, reply, false);
         clients.push_back(std::move(client));
     }
 }
 
+// Every connection is taken: closes the connection that is not a watcher,
+// has nothing to read or send and has been idle longest, if that is at least
+// request_timeout_s. False when there is none.
+bool SocketService::Loop::evictIdle(std::int64_t now) {
+    Client* oldest = nullptr;
+    for (auto& c : clients) {
+        if (c->dead || c->closing || c->watcher() || c->discarding || c->pending() > 0 ||
+            !c->input().empty() || now - c->active_ns < request_timeout_ns) {
+            continue;
+        }
+        if (oldest == nullptr || c->active_ns < oldest->active_ns) {
+            oldest = c.get();
+        }
+    }
+    if (oldest == nullptr) {
+        return false;
+    }
+    error(*oldest, "idle connection closed: the server is full", {});
+    svc.evicted_.fetch_add(1);
+    close(*oldest);
+    return true;
+}
+
 void SocketService::Loop::readClient(Client& c) {
-    for (int round = 0; round < kReadRounds && !c.dead; ++round) {
-        const ssize_t n = ::recv(c.fd.get(), read_buffer.data(), read_buffer.size(), 0);
+    for (int round = 0; round < kReadRounds && c.reading(); ++round) {
+        // Only an incomplete line is left over here (processInput handles
+        // every complete one unless the client is paused): move it to the front.
+        if (c.in_off > 0) {
+            c.in.erase(0, c.in_off);
+            c.in_off = 0;
+        }
+        const std::size_t old_size = c.in.size();
+        c.in.resize(old_size + kReadChunk);
+        const ssize_t n = ::recv(c.fd.get(), c.in.data() + old_size, kReadChunk, 0);
+        c.in.resize(old_size + static_cast<std::size_t>(std::max<ssize_t>(n, 0)));
         if (n > 0) {
-            consume(c, read_buffer.data(), static_cast<std::size_t>(n));
-            if (static_cast<std::size_t>(n) < read_buffer.size()) {
+            c.active_ns = monotonicNowNs();
+            processInput(c);
+            if (static_cast<std::size_t>(n) < kReadChunk) {
                 return;
             }
             continue;
         }
         if (n == 0) {
-            // EOF: a last request without its newline still counts
-            // (`printf '{"cmd":"poll"}' | socat - UNIX:...`); answer, then close.
-            if (!c.discarding && !c.in.empty()) {
-                const std::string line = std::move(c.in);
-                c.in.clear();
-                handleLine(c, line);
-            }
-            close(c);
+            // EOF: what is left is still answered, a last request without its
+            // newline too (`printf '{"cmd":"poll"}' | socat - UNIX:...`); the
+            // connection closes once the replies are sent.
+            c.eof = true;
+            processInput(c);
             return;
         }
         if (errno == EINTR) {
@@ -275,47 +424,78 @@ void SocketService::Loop::readClient(Client& c) {
     }
 }
 
-void SocketService::Loop::consume(Client& c, const char* data, std::size_t n) {
+// Handles the complete lines in c.in while the client's unsent output is at
+// most the high-water mark; after EOF also the last line without a newline.
+// A line's limit (max_request_bytes) is without its "\n" or "\r\n".
+void SocketService::Loop::processInput(Client& c) {
     const std::size_t limit = svc.config_.max_request_bytes;
-    const char* p = data;
-    const char* const end = data + n;
-    while (p < end && !c.dead) {
-        const auto* nl =
-            static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(end - p)));
-        const char* chunk_end = nl != nullptr ? nl : end;
-        const auto chunk = static_cast<std::size_t>(chunk_end - p);
-        if (c.discarding) {
-            if (nl == nullptr) {
-                return;
+    while (!c.dead && !c.closing && !c.paused) {
+        const std::string_view rest = c.input();
+        if (rest.empty()) {
+            break;
+        }
+        const auto* nl = static_cast<const char*>(std::memchr(rest.data(), '\n', rest.size()));
+        if (nl == nullptr) {
+            if (c.discarding) {
+                c.in_off = c.in.size();  // the oversize line goes on
+            } else if (c.eof) {
+                std::string_view line = rest;
+                if (!line.empty() && line.back() == '\r') {
+                    line.remove_suffix(1);
+                }
+                c.in_off = c.in.size();
+                if (line.size() > limit) {
+                    svc.requests_.fetch_add(1);
+                    error(c, "request longer than " + std::to_string(limit) + " bytes (discarded)",
+                          {});
+                } else {
+                    handleLine(c, line);
+                }
+            } else if (rest.size() > limit + 1 ||
+                       (rest.size() == limit + 1 && rest.back() != '\r')) {
+                // Too long already, whatever ends it (a "\r" may still be
+                // the first half of its "\r\n").
+                svc.requests_.fetch_add(1);
+                error(c, "request longer than " + std::to_string(limit) + " bytes (discarded)", {});
+                c.discarding = true;
+                c.in_off = c.in.size();
             }
+            break;
+        }
+        const auto length = static_cast<std::size_t>(nl - rest.data());
+        c.in_off += length + 1;
+        c.line_since_ns = 0;
+        if (c.discarding) {
             c.discarding = false;
-            p = nl + 1;
             continue;
         }
-        if (c.in.size() + chunk > limit) {
+        std::string_view line = rest.substr(0, length);
+        if (!line.empty() && line.back() == '\r') {
+            line.remove_suffix(1);
+        }
+        if (line.size() > limit) {
             svc.requests_.fetch_add(1);
             error(c, "request longer than " + std::to_string(limit) + " bytes (discarded)", {});
-            c.in.clear();
-            if (nl == nullptr) {
-                c.discarding = true;
-                return;
-            }
-            p = nl + 1;
             continue;
         }
-        if (nl == nullptr) {
-            c.in.append(p, chunk);
-            return;
-        }
-        if (c.in.empty()) {
-            handleLine(c, std::string_view(p, chunk));
-        } else {
-            c.in.append(p, chunk);
-            handleLine(c, c.in);
-            c.in.clear();
-        }
-        p = nl + 1;
+        handleLine(c, line);
     }
+    if (c.dead) {
+        return;
+    }
+    if (c.in_off == c.in.size()) {
+        c.in.clear();
+        c.in_off = 0;
+    }
+    // An incomplete line (or the rest of an oversize one: what is left while
+    // the client is read) is on the clock; a paused client's clock starts
+    // again when it is read again.
+    if (!c.reading() || (!c.discarding && c.input().empty())) {
+        c.line_since_ns = 0;
+    } else if (c.line_since_ns == 0) {
+        c.line_since_ns = monotonicNowNs();
+    }
+    afterOutput(c);
 }
 
 void SocketService::Loop::handleLine(Client& c, std::string_view line) {
@@ -333,6 +513,13 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
             appendScale(reply, svc.hub_.scale(), monotonicNowNs());
             break;
         case Command::kWatch:
+            if ((req.enable || req.pose) && !c.watcher() && watchers() >= svc.config_.max_clients) {
+                // The reserved connections stay for clients that only ask.
+                svc.watch_refused_.fetch_add(1);
+                error(c, "too many watchers (" + std::to_string(watchers()) + " watching)",
+                      req.cmd);
+                return;
+            }
             c.watching = req.enable;
             c.watching_pose = req.pose;
             appendWatch(reply, req.enable, req.pose);
@@ -347,9 +534,16 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
             appendPose(reply, svc.hub_.pose(), svc.hub_.scale());
             break;
         case Command::kStatus: {
-            const ClientCounts counts{svc.connected_.load(), svc.config_.max_clients,
-                                      svc.accepted_.load(), svc.rejected_.load(),
-                                      svc.detached_.load()};
+            ClientCounts counts;
+            counts.connected = svc.connected_.load();
+            counts.max = max_connections;
+            counts.accepted = svc.accepted_.load();
+            counts.rejected = svc.rejected_.load();
+            counts.detached = svc.detached_.load();
+            counts.watchers = watchers();
+            counts.max_watchers = svc.config_.max_clients;
+            counts.timed_out = svc.timed_out_.load();
+            counts.evicted = svc.evicted_.load();
             appendStatus(reply, svc.hub_.status(), svc.hub_.logStatus(), counts);
             break;
         }
@@ -375,17 +569,26 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
             appendAck(reply, req.cmd);
             break;
     }
-    queue(c, reply);
+    queue(c, reply, false);
 }
 
 void SocketService::Loop::error(Client& c, std::string_view message, std::string_view cmd) {
     svc.errors_.fetch_add(1);
     reply.clear();
     appendError(reply, message, cmd);
-    queue(c, reply);
+    queue(c, reply, false);
 }
 
-void SocketService::Loop::queue(Client& c, std::string_view msg) {
+int SocketService::Loop::watchers() const {
+    return static_cast<int>(std::count_if(clients.begin(), clients.end(),
+                                          [](const auto& c) { return !c->dead && c->watcher(); }));
+}
+
+// Replies (stream = false) are always queued: the client's reading pauses
+// above the high-water mark, so they stay within about half the buffer plus
+// one line's replies. A SCALE/POSE line (stream = true) that would take the
+// unsent output above client_buffer_bytes detaches the client.
+void SocketService::Loop::queue(Client& c, std::string_view msg, bool stream) {
     if (c.dead) {
         return;
     }
@@ -400,8 +603,9 @@ void SocketService::Loop::queue(Client& c, std::string_view msg) {
         }
         c.out.clear();
         c.out_off = 0;
+        startStall(c, monotonicNowNs());
     }
-    if (c.pending() + msg.size() > svc.config_.client_buffer_bytes) {
+    if (stream && c.pending() + msg.size() > svc.config_.client_buffer_bytes) {
         detach(c);
         return;
     }
@@ -410,6 +614,9 @@ void SocketService::Loop::queue(Client& c, std::string_view msg) {
         c.out_off = 0;
     }
     c.out.append(msg);
+    if (c.pending() > high_water) {
+        c.paused = true;
+    }
 }
 
 void SocketService::Loop::flush(Client& c) {
@@ -421,6 +628,28 @@ void SocketService::Loop::flush(Client& c) {
     if (c.out_off == c.out.size()) {
         c.out.clear();
         c.out_off = 0;
+    }
+    if (sent > 0) {
+        c.stall_since_ns = 0;
+        if (c.pending() > 0) {
+            startStall(c, monotonicNowNs());  // the client reads: a new clock
+        }
+    }
+    if (c.paused && c.pending() <= low_water) {
+        c.paused = false;
+        processInput(c);  // the requests read before the pause, then afterOutput()
+        return;
+    }
+    afterOutput(c);
+}
+
+// Closes a client that has finished (EOF or timed out) once its output is sent.
+void SocketService::Loop::afterOutput(Client& c) {
+    if (c.dead || c.pending() > 0) {
+        return;
+    }
+    if (c.closing || (c.eof && c.input().empty())) {
+        close(c);
     }
 }
 
@@ -445,15 +674,22 @@ std::size_t SocketService::Loop::sendSome(Client& c, std::string_view data) {
     return sent;
 }
 
+void SocketService::Loop::startStall(Client& c, std::int64_t now) {
+    if (c.stall_since_ns == 0) {
+        c.stall_since_ns = now;
+        c.stall_unread_bytes = unreadBytes(c.fd.get());
+    }
+}
+
 void SocketService::Loop::close(Client& c) {
     if (c.dead) {
         return;
     }
     c.dead = true;
+    svc.connected_.fetch_sub(1);  // before the peer can see its EOF
     c.fd.reset();
     c.out.clear();
     c.out_off = 0;
-    svc.connected_.fetch_sub(1);
 }
 
 void SocketService::Loop::detach(Client& c) {
@@ -487,6 +723,22 @@ core::Result<std::unique_ptr<SocketService>> SocketService::create(const SocketC
         return makeError(ErrorCode::kInvalidArgument,
                          "socket: max_clients, max_request_bytes and client_buffer_bytes must "
                          "be positive");
+    }
+    if (config.reserved_query_slots < 0 ||
+        config.reserved_query_slots > std::numeric_limits<int>::max() - config.max_clients) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "socket: reserved_query_slots must be >= 0 (got " +
+                             std::to_string(config.reserved_query_slots) + ")");
+    }
+    // Up to an hour (the configuration's range), so deadlines stay far from overflow.
+    constexpr double kMaxTimeoutS = 3600;
+    for (const auto& [name, value] : {std::pair{"request_timeout_s", config.request_timeout_s},
+                                      std::pair{"stall_timeout_s", config.stall_timeout_s}}) {
+        if (!(value > 0 && value <= kMaxTimeoutS)) {
+            return makeError(ErrorCode::kInvalidArgument, std::string("socket: ") + name +
+                                                              " must be in (0, 3600] (got " +
+                                                              std::to_string(value) + ")");
+        }
     }
     if (!(config.pose_rate_hz >= 0) || !std::isfinite(config.pose_rate_hz)) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -553,8 +805,19 @@ void SocketService::run() {
 }
 
 SocketServiceStats SocketService::stats() const {
-    return {connected_.load(), accepted_.load(), rejected_.load(),      detached_.load(),
-            requests_.load(),  errors_.load(),   poses_streamed_.load()};
+    SocketServiceStats st;
+    st.connected = connected_.load();
+    st.accepted = accepted_.load();
+    st.rejected = rejected_.load();
+    st.detached = detached_.load();
+    st.stalled = stalled_.load();
+    st.timed_out = timed_out_.load();
+    st.evicted = evicted_.load();
+    st.watch_refused = watch_refused_.load();
+    st.requests = requests_.load();
+    st.errors = errors_.load();
+    st.poses_streamed = poses_streamed_.load();
+    return st;
 }
 
 }  // namespace scaled::daemon

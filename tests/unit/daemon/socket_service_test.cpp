@@ -3,6 +3,7 @@
 // buffer), the socket file's life (stale, live, mode, group, removal) and
 // socket activation. Clients wait with poll() and a timeout, never sleep.
 
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -10,14 +11,17 @@
 #include <filesystem>
 #include <fstream>
 #include <grp.h>
+#include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <poll.h>
 #include <string>
+#include <string_view>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
+#include <thread>
 #include <unistd.h>
 #include <vector>
 
@@ -469,7 +473,11 @@ TEST_F(SocketServiceTest, StatusAndPosterior) {
     EXPECT_EQ(s["fps"], 30);
     EXPECT_EQ(s["frames"]["tracked"], 43);
     EXPECT_EQ(s["clients"]["connected"], 1);
-    EXPECT_EQ(s["clients"]["max"], 16);
+    EXPECT_EQ(s["clients"]["max"], 18);  // max_clients 16 + reserved_query_slots 2
+    EXPECT_EQ(s["clients"]["max_watchers"], 16);
+    EXPECT_EQ(s["clients"]["watchers"], 0);
+    EXPECT_EQ(s["clients"]["timed_out"], 0);
+    EXPECT_EQ(s["clients"]["evicted"], 0);
     EXPECT_EQ(s["clients"]["accepted"], 1);
     EXPECT_EQ(s["log"]["state"], "ok");
     EXPECT_EQ(s["log"]["lines"], 9);
@@ -607,19 +615,21 @@ TEST_F(SocketServiceTest, RequestWithoutNewlineBeforeEofIsAnswered) {
 TEST_F(SocketServiceTest, TheClientOverTheLimitIsRejected) {
     auto svc = startService();
     ASSERT_TRUE(svc);
+    // max_clients (16) + reserved_query_slots (2) connections.
     std::vector<std::unique_ptr<TestClient>> clients;
-    clients.reserve(16);
-    for (int i = 0; i < 16; ++i) {
+    clients.reserve(18);
+    for (int i = 0; i < 18; ++i) {
         clients.push_back(connect());
     }
     TestClient extra(config_.path);
     EXPECT_EQ(extra.readJson(),
-              json::parse(R"j({"class":"ERROR","message":"too many clients (16 connected)"})j"));
+              json::parse(R"j({"class":"ERROR","message":"too many clients (18 connected)"})j"));
     EXPECT_TRUE(extra.waitEof());
     SocketServiceStats st = svc->stats();
-    EXPECT_EQ(st.connected, 16);
-    EXPECT_EQ(st.accepted, 16U);
+    EXPECT_EQ(st.connected, 18);
+    EXPECT_EQ(st.accepted, 18U);
     EXPECT_EQ(st.rejected, 1U);
+    EXPECT_EQ(st.evicted, 0U);  // none idle for request_timeout_s (5 s)
     // The others still work; once one leaves, a new client is accepted.
     EXPECT_EQ(clients[3]->request(R"({"cmd":"poll"})")["class"], "SCALE");
     clients[0]->close();
@@ -655,6 +665,7 @@ TEST_F(SocketServiceTest, AClientThatNeverReadsIsDetached) {
         ASSERT_EQ(j["frame_id"], f);
     }
     EXPECT_EQ(svc->stats().detached, 1U);
+    EXPECT_EQ(svc->stats().stalled, 0U);  // the stream overflowed its buffer, no waiting
     EXPECT_EQ(svc->stats().connected, 1);
     // The reader keeps receiving.
     r.frame_id = f;
@@ -662,6 +673,346 @@ TEST_F(SocketServiceTest, AClientThatNeverReadsIsDetached) {
     EXPECT_EQ(reader->readJson()["frame_id"], f);
     // The stalled one finds its data so far, then EOF.
     EXPECT_TRUE(stalled->waitEof());
+}
+
+// --- issue 22: flow control, timeouts, reserved slots, hostile requests --------
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// `{"cmd":"poll","pad":"xx..."}` of exactly `bytes` bytes.
+std::string paddedPoll(std::size_t bytes) {
+    const std::string head = R"({"cmd":"poll","pad":")";
+    return head + std::string(bytes - head.size() - 2, 'x') + "\"}";
+}
+
+std::string repeated(std::string_view line, int n) {
+    std::string out;
+    out.reserve(line.size() * static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+        out += line;
+    }
+    return out;
+}
+
+// Requests sent in one burst before reading: the server stops reading while
+// the replies wait (flow control) instead of detaching the client when they
+// outgrow client_buffer_bytes (1000 STATUS are about 1.3 MB, 5000 SCALE 1.5 MB).
+TEST_F(SocketServiceTest, APipelinedBurstIsAnsweredInFull) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    hub_.publishScale(reportAt(510));
+    auto c = connect();
+    ASSERT_TRUE(c->send(repeated("{\"cmd\":\"status\"}\n", 1000)));
+    for (int i = 0; i < 1000; ++i) {
+        const json j = c->readJson();
+        ASSERT_EQ(j.value("class", ""), "STATUS") << i;
+    }
+    ASSERT_TRUE(c->send(repeated("{\"cmd\":\"poll\"}\n", 5000)));
+    for (int i = 0; i < 5000; ++i) {
+        const auto line = c->readLine();
+        ASSERT_TRUE(line.has_value()) << i;
+        ASSERT_EQ(line->rfind(R"({"class":"SCALE",)", 0), 0U) << i << ": " << *line;
+    }
+    const SocketServiceStats st = svc->stats();
+    EXPECT_EQ(st.requests, 6000U);
+    EXPECT_EQ(st.detached, 0U);
+    EXPECT_EQ(st.connected, 1);
+}
+
+// The load test: one thread writes 100,000 polls as fast as the socket takes
+// them while the test reads; every one is answered, nobody is detached. Runs
+// with the default buffer and with the smallest one (4096 bytes: reading
+// pauses at 2 KiB of unsent replies, about 7 SCALE lines). 60 s is a failure.
+TEST_F(SocketServiceTest, HundredThousandPipelinedPollsWhileReadingAreAllAnswered) {
+    constexpr int kPolls = 100'000;
+    constexpr int kPerWrite = 1000;
+    for (const std::size_t buffer_bytes : {std::size_t{262144}, std::size_t{4096}}) {
+        SCOPED_TRACE(buffer_bytes);
+        config_.client_buffer_bytes = buffer_bytes;
+        auto svc = startService();
+        ASSERT_TRUE(svc);
+        hub_.publishScale(reportAt(1));
+        auto c = connect();
+        const auto t0 = std::chrono::steady_clock::now();
+        bool write_failed = false;
+        std::thread writer([fd = c->fd(), &write_failed] {
+            const std::string chunk = repeated("{\"cmd\":\"poll\"}\n", kPerWrite);
+            for (int i = 0; i < kPolls / kPerWrite; ++i) {
+                std::string_view rest = chunk;
+                while (!rest.empty()) {
+                    const ssize_t n = ::send(fd, rest.data(), rest.size(), MSG_NOSIGNAL);
+                    if (n <= 0) {
+                        write_failed = true;  // the test gave up and shut the socket
+                        return;
+                    }
+                    rest.remove_prefix(static_cast<std::size_t>(n));
+                }
+            }
+        });
+        const auto deadline = t0 + std::chrono::seconds(60);
+        std::vector<char> buf(1 << 16);
+        std::string partial;
+        int replies = 0;
+        int bad = 0;
+        bool eof = false;
+        while (replies < kPolls && !eof) {
+            const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+                deadline - std::chrono::steady_clock::now());
+            pollfd p{c->fd(), POLLIN, 0};
+            if (left.count() <= 0 || ::poll(&p, 1, static_cast<int>(left.count())) <= 0) {
+                break;
+            }
+            const ssize_t n = ::recv(c->fd(), buf.data(), buf.size(), 0);
+            if (n <= 0) {
+                eof = true;
+                break;
+            }
+            partial.append(buf.data(), static_cast<std::size_t>(n));
+            std::size_t from = 0;
+            for (std::size_t nl = partial.find('\n'); nl != std::string::npos;
+                 nl = partial.find('\n', from)) {
+                bad += partial.compare(from, 17, R"({"class":"SCALE",)") == 0 ? 0 : 1;
+                ++replies;
+                from = nl + 1;
+            }
+            partial.erase(0, from);
+        }
+        const double elapsed_s = secondsSince(t0);
+        ::shutdown(c->fd(), SHUT_RDWR);  // releases the writer if the server stopped reading
+        writer.join();
+        EXPECT_FALSE(eof) << "the server closed the connection after " << replies << " replies";
+        EXPECT_FALSE(write_failed);
+        EXPECT_EQ(replies, kPolls) << "in " << elapsed_s << " s";
+        EXPECT_EQ(bad, 0);
+        const SocketServiceStats st = svc->stats();
+        EXPECT_EQ(st.requests, static_cast<std::uint64_t>(kPolls));
+        EXPECT_EQ(st.detached, 0U);
+        EXPECT_EQ(st.errors, 0U);
+        std::cout << "[ info     ] " << kPolls << " pipelined polls, client_buffer_bytes "
+                  << buffer_bytes << ": " << elapsed_s << " s\n";
+        svc->stop();
+    }
+}
+
+// A client that sends requests and then reads nothing is not held forever by
+// flow control: after stall_timeout_s without reading it is detached (not
+// before), and the other clients are served meanwhile.
+TEST_F(SocketServiceTest, AClientThatStopsReadingIsDetachedAfterTheStallTimeout) {
+    config_.client_buffer_bytes = 16384;
+    config_.stall_timeout_s = 0.3;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    auto other = connect();
+    const auto t0 = std::chrono::steady_clock::now();
+    ASSERT_TRUE(c->send(repeated("{\"cmd\":\"status\"}\n", 3000)));
+    EXPECT_EQ(other->request(R"({"cmd":"poll"})")["class"], "SCALE");
+    // Wait for the server to hang up, reading nothing.
+    pollfd p{c->fd(), 0, 0};
+    ASSERT_EQ(::poll(&p, 1, kTimeoutMs), 1);
+    EXPECT_NE(p.revents & POLLHUP, 0);
+    EXPECT_GE(secondsSince(t0), 0.3);
+    SocketServiceStats st = svc->stats();
+    EXPECT_EQ(st.stalled, 1U);
+    EXPECT_EQ(st.detached, 1U);
+    EXPECT_EQ(st.connected, 1);
+    // What it was sent are whole STATUS lines (and maybe the start of one).
+    int lines = 0;
+    while (const auto line = c->readLine()) {
+        EXPECT_EQ(line->rfind(R"({"class":"STATUS",)", 0), 0U) << *line;
+        ++lines;
+    }
+    EXPECT_GT(lines, 0);
+    EXPECT_LT(lines, 3000);
+    EXPECT_EQ(other->request(R"({"cmd":"status"})")["clients"]["detached"], 1);
+}
+
+// max_clients (16) watchers, and a 17th and 18th client still get their
+// queries answered (socket.reserved_query_slots = 2); those cannot watch.
+TEST_F(SocketServiceTest, TheReservedSlotsAnswerQueriesWhenMaxClientsWatch) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    hub_.publishScale(reportAt(3));
+    std::vector<std::unique_ptr<TestClient>> watchers;
+    watchers.reserve(16);
+    for (int i = 0; i < 16; ++i) {
+        watchers.push_back(connect());
+        ASSERT_EQ(watchers.back()->request(R"({"cmd":"watch"})")["class"], "WATCH");
+        ASSERT_EQ(watchers.back()->readJson()["class"], "SCALE");
+    }
+    auto query = connect();
+    json st = query->request(R"({"cmd":"status"})");
+    ASSERT_EQ(st["class"], "STATUS");
+    EXPECT_EQ(st["clients"]["connected"], 17);
+    EXPECT_EQ(st["clients"]["watchers"], 16);
+    EXPECT_EQ(st["clients"]["max_watchers"], 16);
+    EXPECT_EQ(st["clients"]["max"], 18);
+    EXPECT_EQ(query->request(R"({"cmd":"watch","enable":false,"pose":true})"),
+              json::parse(R"j({"class":"ERROR","message":"too many watchers (16 watching)",
+                  "cmd":"watch"})j"));
+    EXPECT_EQ(query->request(R"({"cmd":"poll"})")["frame_id"], 3);
+    // Asking for no stream is not watching.
+    EXPECT_EQ(query->request(R"({"cmd":"watch","enable":false})")["class"], "WATCH");
+    auto second = connect();
+    EXPECT_EQ(second->request(R"({"cmd":"status"})")["clients"]["connected"], 18);
+    TestClient extra(config_.path);
+    EXPECT_EQ(extra.readJson(),
+              json::parse(R"j({"class":"ERROR","message":"too many clients (18 connected)"})j"));
+    EXPECT_TRUE(extra.waitEof());
+    // A watcher may change its streams; one that stops frees its slot.
+    EXPECT_EQ(watchers[0]->request(R"({"cmd":"watch","enable":false,"pose":true})"),
+              json::parse(R"({"class":"WATCH","enable":false,"pose":true})"));
+    EXPECT_EQ(watchers[1]->request(R"({"cmd":"watch","enable":false})")["class"], "WATCH");
+    EXPECT_EQ(query->request(R"({"cmd":"watch"})")["class"], "WATCH");
+    EXPECT_EQ(query->readJson()["class"], "SCALE");
+    EXPECT_EQ(svc->stats().watch_refused, 1U);
+}
+
+// Connections holding half a request are sent an ERROR and closed after
+// request_timeout_s (not before); then the next client is served.
+TEST_F(SocketServiceTest, HalfWrittenRequestsAreClosedAfterTheRequestTimeout) {
+    config_.request_timeout_s = 0.2;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    std::vector<std::unique_ptr<TestClient>> clients;
+    clients.reserve(18);
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int i = 0; i < 18; ++i) {  // every connection max_clients + reserved allow
+        clients.push_back(connect());
+        ASSERT_TRUE(clients.back()->send(R"({"cmd":"po)"));
+    }
+    for (auto& c : clients) {
+        EXPECT_EQ(c->readJson(), json::parse(R"j({"class":"ERROR",
+            "message":"request incomplete after 0.2 s (closing)"})j"));
+        EXPECT_TRUE(c->waitEof());
+    }
+    EXPECT_GE(secondsSince(t0), 0.2);
+    SocketServiceStats st = svc->stats();
+    EXPECT_EQ(st.timed_out, 18U);
+    EXPECT_EQ(st.connected, 0);
+    EXPECT_EQ(st.detached, 0U);
+    auto next = connect();
+    EXPECT_EQ(next->request(R"({"cmd":"status"})")["clients"]["timed_out"], 18);
+    // A line completed in time is answered.
+    ASSERT_TRUE(next->send(R"({"cmd":"po)"));
+    EXPECT_EQ(next->request(R"(ll"})")["class"], "SCALE");
+    // An oversize line gets its ERROR; its rest is on the clock too.
+    ASSERT_TRUE(next->send(std::string(5000, ' ')));
+    EXPECT_EQ(next->readJson()["message"], "request longer than 4096 bytes (discarded)");
+    EXPECT_EQ(next->readJson()["message"], "request incomplete after 0.2 s (closing)");
+    EXPECT_TRUE(next->waitEof());
+}
+
+// When every connection is taken, a new client replaces the non-watching
+// connection that has been idle longest (at least request_timeout_s).
+// Watchers are never replaced.
+TEST_F(SocketServiceTest, AnIdleConnectionMakesRoomWhenTheServerIsFull) {
+    config_.max_clients = 2;
+    config_.reserved_query_slots = 0;
+    config_.request_timeout_s = 0.3;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    hub_.publishScale(reportAt(1));
+    auto idle = connect();
+    auto watcher = connect();
+    ASSERT_EQ(watcher->request(R"({"cmd":"watch"})")["class"], "WATCH");
+    ASSERT_EQ(watcher->readJson()["class"], "SCALE");
+    // An idle connection is left alone while there is room...
+    EXPECT_TRUE(idle->silent(400));
+    // ...and closed when a new client needs its slot.
+    auto fresh = connect();
+    EXPECT_EQ(idle->readJson(), json::parse(R"({"class":"ERROR",
+        "message":"idle connection closed: the server is full"})"));
+    EXPECT_TRUE(idle->waitEof());
+    ASSERT_EQ(fresh->request(R"({"cmd":"watch"})")["class"], "WATCH");
+    ASSERT_EQ(fresh->readJson()["class"], "SCALE");
+    TestClient extra(config_.path);
+    EXPECT_EQ(extra.readJson(),
+              json::parse(R"j({"class":"ERROR","message":"too many clients (2 connected)"})j"));
+    EXPECT_TRUE(extra.waitEof());
+    hub_.publishScale(reportAt(2));
+    EXPECT_EQ(watcher->readJson()["frame_id"], 2);
+    EXPECT_EQ(fresh->readJson()["frame_id"], 2);
+    const SocketServiceStats st = svc->stats();
+    EXPECT_EQ(st.evicted, 1U);
+    EXPECT_EQ(st.rejected, 1U);
+}
+
+// The service checks the keys it is given (daemon_config.cpp checks the file).
+TEST_F(SocketServiceTest, CreateRefusesBadLimits) {
+    SocketConfig bad = config_;
+    bad.request_timeout_s = 0;
+    auto r = SocketService::create(bad, hub_, "0.1.0");
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message, "socket: request_timeout_s must be in (0, 3600] (got 0.000000)");
+    bad = config_;
+    bad.stall_timeout_s = std::nan("");
+    r = SocketService::create(bad, hub_, "0.1.0");
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message.rfind("socket: stall_timeout_s must be in (0, 3600]", 0), 0U);
+    bad = config_;
+    bad.reserved_query_slots = -1;
+    r = SocketService::create(bad, hub_, "0.1.0");
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message, "socket: reserved_query_slots must be >= 0 (got -1)");
+    EXPECT_FALSE(fs::exists(fs::symlink_status(config_.path)));
+}
+
+// max_request_bytes counts the line without its terminator, "\n" or "\r\n",
+// also when the two arrive apart.
+TEST_F(SocketServiceTest, TheRequestLimitCountsTheLineWithoutCrLf) {
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    ASSERT_EQ(config_.max_request_bytes, 4096U);
+    auto c = connect();
+    const std::string exact = paddedPoll(4096);
+    EXPECT_EQ(c->request(exact + "\r")["class"], "SCALE");
+    EXPECT_EQ(c->request(exact)["class"], "SCALE");
+    ASSERT_TRUE(c->send(exact + "\r"));
+    EXPECT_EQ(c->request("")["class"], "SCALE");
+    const std::string too_long = "request longer than 4096 bytes (discarded)";
+    EXPECT_EQ(c->request(paddedPoll(4097))["message"], too_long);
+    EXPECT_EQ(c->request(paddedPoll(4097) + "\r")["message"], too_long);
+    // A "\r" that turns out not to end the line counts.
+    ASSERT_TRUE(c->send(exact + "\r"));
+    EXPECT_EQ(c->request("x")["message"], too_long);
+    EXPECT_EQ(c->request(R"({"cmd":"poll"})")["class"], "SCALE");
+    EXPECT_EQ(svc->stats().errors, 3U);
+    // The last request before EOF, with its "\r".
+    auto last = connect();
+    ASSERT_TRUE(last->send(exact + "\r"));
+    ASSERT_EQ(::shutdown(last->fd(), SHUT_WR), 0);
+    EXPECT_EQ(last->readJson()["class"], "SCALE");
+    EXPECT_TRUE(last->waitEof());
+}
+
+// A NUL byte is an ERROR (it does not end the request), a number beyond a
+// double gets set_gravity's message, and an unknown command of 900 KB an
+// ERROR line of a few hundred bytes.
+TEST_F(SocketServiceTest, HostileRequestsGetShortErrors) {
+    config_.max_request_bytes = 1 << 20;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    ASSERT_TRUE(c->send(std::string("{\"cmd\":\"poll\"}\0garbage\n", 23)));
+    EXPECT_EQ(c->readJson(),
+              json::parse(R"({"class":"ERROR","message":"request contains a NUL byte"})"));
+    EXPECT_EQ(c->request(R"({"cmd":"set_gravity","down":[1e400,0,1]})"),
+              json::parse(R"({"class":"ERROR","cmd":"set_gravity",
+                  "message":"\"down\" must be an array of 3 finite numbers, not all zero"})"));
+    EXPECT_FALSE(hub_.takeGravityRequest().has_value());
+    const std::string name = "fly" + std::string(900'000, 'z');
+    ASSERT_TRUE(c->send(R"({"cmd":")" + name + "\"}\n"));
+    const auto line = c->readLine();
+    ASSERT_TRUE(line.has_value());
+    EXPECT_LT(line->size(), 250U);
+    const json e = json::parse(*line, nullptr, false);
+    EXPECT_EQ(e["cmd"], name.substr(0, 64));
+    EXPECT_EQ(e["truncated"], true);
+    EXPECT_EQ(c->request(R"({"cmd":"poll"})")["class"], "SCALE");
+    EXPECT_EQ(svc->stats().detached, 0U);
 }
 
 TEST_F(SocketServiceTest, ClosedClientsAreCleanedUp) {

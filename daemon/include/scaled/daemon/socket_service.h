@@ -4,12 +4,23 @@
 //
 // One thread runs a poll() loop over the listening socket, the clients, the
 // hub's wake eventfd and a stop eventfd. Every client socket is non-blocking
-// and has its own output buffer; a client whose unsent output would exceed
-// SocketConfig::client_buffer_bytes is detached (closed and counted), so a
-// watcher that never reads never stalls the loop or the pipeline. Replies are
-// built in one reused buffer; a SCALE for the watchers is built once per
-// publish and written to each of them; so is a POSE for the pose watchers
-// (thinned by PoseRateLimiter to SocketConfig::pose_rate_hz).
+// and has its own input and output buffers. Flow control: while more than
+// half of SocketConfig::client_buffer_bytes of a client's output is unsent,
+// the loop stops reading its requests (no POLLIN) and reads again once it is
+// down to a quarter, so the replies to a pipelining client never outgrow its
+// buffer and never get it detached. A client is detached (closed and
+// counted) only when a SCALE/POSE line for it would take its unsent output
+// above client_buffer_bytes, or when its output has waited stall_timeout_s
+// with none of it read: a watcher that never reads never stalls the loop or
+// the pipeline. A request line left incomplete for request_timeout_s (while
+// the loop reads) gets an ERROR and the connection is closed. Connections
+// are accepted up to max_clients + reserved_query_slots, watchers at most
+// max_clients; when all are taken, a new client may replace the non-watching
+// connection idle longest (at least request_timeout_s). poll()'s timeout is
+// the nearest of these deadlines. Replies are built in one reused buffer; a
+// SCALE for the watchers is built once per publish and written to each of
+// them; so is a POSE for the pose watchers (thinned by PoseRateLimiter to
+// SocketConfig::pose_rate_hz).
 //
 // The listening socket is made in create() (or inherited through systemd
 // socket activation, LISTEN_FDS), so configuration errors appear before the
@@ -31,10 +42,17 @@
 namespace scaled::daemon {
 
 struct SocketServiceStats {
-    int connected = 0;                 // clients connected now
-    std::uint64_t accepted = 0;        // connections accepted since start
-    std::uint64_t rejected = 0;        // refused because max_clients were connected
-    std::uint64_t detached = 0;        // closed because their output buffer overflowed
+    int connected = 0;           // clients connected now
+    std::uint64_t accepted = 0;  // connections accepted since start
+    // Refused because max_clients + reserved_query_slots were connected.
+    std::uint64_t rejected = 0;
+    // Closed because they did not read their output: a SCALE/POSE line would
+    // have overflowed client_buffer_bytes, or `stalled`.
+    std::uint64_t detached = 0;
+    std::uint64_t stalled = 0;         // of `detached`: output unread for stall_timeout_s
+    std::uint64_t timed_out = 0;       // closed: a request incomplete for request_timeout_s
+    std::uint64_t evicted = 0;         // idle, closed to make room for a new client
+    std::uint64_t watch_refused = 0;   // `watch` refused: max_clients were watching
     std::uint64_t requests = 0;        // request lines handled (blank lines not counted)
     std::uint64_t errors = 0;          // ERROR replies sent
     std::uint64_t poses_streamed = 0;  // POSE lines built for the pose watchers
@@ -85,6 +103,10 @@ private:
     std::atomic<std::uint64_t> accepted_{0};
     std::atomic<std::uint64_t> rejected_{0};
     std::atomic<std::uint64_t> detached_{0};
+    std::atomic<std::uint64_t> stalled_{0};
+    std::atomic<std::uint64_t> timed_out_{0};
+    std::atomic<std::uint64_t> evicted_{0};
+    std::atomic<std::uint64_t> watch_refused_{0};
     std::atomic<std::uint64_t> requests_{0};
     std::atomic<std::uint64_t> errors_{0};
     std::atomic<std::uint64_t> poses_streamed_{0};
