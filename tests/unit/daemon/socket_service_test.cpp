@@ -18,6 +18,7 @@
 #include <poll.h>
 #include <string>
 #include <string_view>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -290,7 +291,7 @@ TEST_F(SocketServiceTest, PoseAnswersTheLatestPoseWithTheScale) {
     EXPECT_TRUE(p["position"].is_null());
 
     // A pose before a scale: map units only.
-    hub_.publishPose(poseAt(5, 5 * 33'333'333));
+    hub_.publishPose(poseAt(5, std::int64_t{5} * 33'333'333));
     p = c->request(R"({"cmd":"pose"})");
     EXPECT_EQ(p["frame_id"], 5);
     EXPECT_EQ(p["position_map"], json::parse("[0.05,0,2]"));
@@ -341,7 +342,7 @@ TEST_F(SocketServiceTest, WatchWithPoseStreamsPosesAndNonBooleanPoseIsAnError) {
     EXPECT_EQ(c->readJson()["frame_id"], 20);  // the latest POSE
     hub_.publishScale(reportAt(21));
     EXPECT_EQ(c->readJson()["class"], "SCALE");
-    hub_.publishPose(poseAt(21, 21 * 33'333'333));
+    hub_.publishPose(poseAt(21, std::int64_t{21} * 33'333'333));
     p = c->readJson();
     EXPECT_EQ(p["class"], "POSE");
     EXPECT_EQ(p["scale"].get<double>(), reportAt(21).scale);
@@ -349,7 +350,7 @@ TEST_F(SocketServiceTest, WatchWithPoseStreamsPosesAndNonBooleanPoseIsAnError) {
     // publish is the STATUS reply.
     EXPECT_EQ(c->request(R"({"cmd":"watch","enable":false})"),
               json::parse(R"({"class":"WATCH","enable":false,"pose":false})"));
-    hub_.publishPose(poseAt(22, 22 * 33'333'333));
+    hub_.publishPose(poseAt(22, std::int64_t{22} * 33'333'333));
     EXPECT_EQ(c->request(R"({"cmd":"status"})")["class"], "STATUS");
     EXPECT_EQ(svc->stats().poses_streamed, 20U);  // frames 2..21
 }
@@ -827,6 +828,40 @@ TEST_F(SocketServiceTest, AClientThatStopsReadingIsDetachedAfterTheStallTimeout)
     EXPECT_GT(lines, 0);
     EXPECT_LT(lines, 3000);
     EXPECT_EQ(other->request(R"({"cmd":"status"})")["clients"]["detached"], 1);
+}
+
+double processCpuSeconds() {
+    rusage u{};
+    ::getrusage(RUSAGE_SELF, &u);
+    const auto seconds = [](const timeval& t) {
+        return static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_usec);
+    };
+    return seconds(u.ru_utime) + seconds(u.ru_stime);
+}
+
+// A client the server stopped reading (its replies wait) costs the loop
+// nothing while it waits (no POLLIN asked, nothing to spin on), and one that
+// then closes with its replies unread is removed.
+TEST_F(SocketServiceTest, APausedClientCostsNothingAndIsRemovedWhenItCloses) {
+    config_.client_buffer_bytes = 16384;
+    auto svc = startService();
+    ASSERT_TRUE(svc);
+    auto c = connect();
+    auto other = connect();
+    ASSERT_TRUE(c->send(repeated("{\"cmd\":\"status\"}\n", 3000)));
+    // Answered after c's burst was read up to the pause.
+    EXPECT_EQ(other->request(R"({"cmd":"status"})")["class"], "STATUS");
+    const double cpu0 = processCpuSeconds();
+    EXPECT_TRUE(other->silent(300));
+    EXPECT_LT(processCpuSeconds() - cpu0, 0.03);  // a spinning loop: up to 0.3 s
+    EXPECT_EQ(svc->stats().connected, 2);
+    c->close();
+    int connected = -1;
+    for (int i = 0; i < 1000 && connected != 1; ++i) {
+        connected = other->request(R"({"cmd":"status"})")["clients"]["connected"].get<int>();
+    }
+    EXPECT_EQ(connected, 1);
+    EXPECT_LT(svc->stats().requests, 3000U);  // the rest of the burst was never read
 }
 
 // max_clients (16) watchers, and a 17th and 18th client still get their
