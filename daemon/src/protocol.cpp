@@ -409,8 +409,8 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     appendJsonInt(out, clients.detached);
     key(out, "watchers");
     appendJsonInt(out, clients.watchers);
-    key(out, "max_watchers");
-    appendJsonInt(out, clients.max_watchers);
+    key(out, "reserved");
+    appendJsonInt(out, clients.reserved);
     key(out, "timed_out");
     appendJsonInt(out, clients.timed_out);
     key(out, "evicted");

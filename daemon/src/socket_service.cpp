@@ -340,8 +340,15 @@ void SocketService::Loop::acceptAll() {
         if (!accepted->isValid()) {
             return;
         }
+        // Up to max_clients connections, and beyond that while fewer than
+        // reserved_query_slots of them are not watchers (so a query gets in
+        // when the watchers take max_clients); else an idle one makes room.
         const std::int64_t now = monotonicNowNs();
-        if (svc.connected_.load() >= max_connections && !evictIdle(now)) {
+        const int connected = svc.connected_.load();
+        const bool room = connected < svc.config_.max_clients ||
+                          (connected - watchers() < svc.config_.reserved_query_slots &&
+                           connected < max_connections);
+        if (!room && !evictIdle(now)) {
             reply.clear();
             appendError(reply, "too many clients (" + std::to_string(svc.connected_.load()) +
                                    " connected)");
@@ -363,7 +370,7 @@ void SocketService::Loop::acceptAll() {
     }
 }
 
-// Every connection is taken: closes the connection that is not a watcher,
+// There is no room: closes the connection that is not a watcher,
 // has nothing to read or send and has been idle longest, if that is at least
 // request_timeout_s. False when there is none.
 bool SocketService::Loop::evictIdle(std::int64_t now) {
@@ -536,12 +543,12 @@ void SocketService::Loop::handleLine(Client& c, std::string_view line) {
         case Command::kStatus: {
             ClientCounts counts;
             counts.connected = svc.connected_.load();
-            counts.max = max_connections;
+            counts.max = svc.config_.max_clients;
             counts.accepted = svc.accepted_.load();
             counts.rejected = svc.rejected_.load();
             counts.detached = svc.detached_.load();
             counts.watchers = watchers();
-            counts.max_watchers = svc.config_.max_clients;
+            counts.reserved = svc.config_.reserved_query_slots;
             counts.timed_out = svc.timed_out_.load();
             counts.evicted = svc.evicted_.load();
             appendStatus(reply, svc.hub_.status(), svc.hub_.logStatus(), counts);

@@ -184,9 +184,9 @@ TEST(Protocol, StatusHasEveryMember) {
     log.bytes_written = 500;
     log.error = "No space left on device";
     std::string out;
-    ClientCounts clients{3, 18, 5, 1, 1};
+    ClientCounts clients{3, 16, 5, 1, 1};
     clients.watchers = 2;
-    clients.max_watchers = 16;
+    clients.reserved = 2;
     clients.timed_out = 4;
     clients.evicted = 6;
     appendStatus(out, s, log, clients);
@@ -205,8 +205,8 @@ TEST(Protocol, StatusHasEveryMember) {
     EXPECT_EQ(j["features"], json::parse(R"({"in_map":40,"tracked":25})"));
     EXPECT_EQ(j["scale_updates"], 7);
     EXPECT_EQ(j["epoch"], 1);
-    EXPECT_EQ(j["clients"], json::parse(R"({"connected":3,"max":18,"accepted":5,"rejected":1,
-        "detached":1,"watchers":2,"max_watchers":16,"timed_out":4,"evicted":6})"));
+    EXPECT_EQ(j["clients"], json::parse(R"({"connected":3,"max":16,"accepted":5,"rejected":1,
+        "detached":1,"watchers":2,"reserved":2,"timed_out":4,"evicted":6})"));
     EXPECT_EQ(j["log"], json::parse(R"({"state":"fault","lines":5,"dropped":1,"bytes":500,
         "error":"No space left on device"})"));
 
@@ -879,9 +879,9 @@ TEST(ProtocolSamples, Write) {
     appendError(out, "request is not valid JSON");
     appendError(out, "unknown command (known: poll)", "x");
     appendError(out, "unknown command (known: poll)", std::string(100, 'y'));
-    ClientCounts counts{2, 18, 3, 1, 0};
-    counts.watchers = 1;
-    counts.max_watchers = 16;
+    ClientCounts counts{17, 16, 30, 1, 0};
+    counts.watchers = 16;
+    counts.reserved = 2;
     counts.timed_out = 1;
     counts.evicted = 1;
     appendStatus(out, PipelineStatus{}, LogStatus{}, counts);

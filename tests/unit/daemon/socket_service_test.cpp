@@ -474,8 +474,8 @@ TEST_F(SocketServiceTest, StatusAndPosterior) {
     EXPECT_EQ(s["fps"], 30);
     EXPECT_EQ(s["frames"]["tracked"], 43);
     EXPECT_EQ(s["clients"]["connected"], 1);
-    EXPECT_EQ(s["clients"]["max"], 18);  // max_clients 16 + reserved_query_slots 2
-    EXPECT_EQ(s["clients"]["max_watchers"], 16);
+    EXPECT_EQ(s["clients"]["max"], 16);
+    EXPECT_EQ(s["clients"]["reserved"], 2);
     EXPECT_EQ(s["clients"]["watchers"], 0);
     EXPECT_EQ(s["clients"]["timed_out"], 0);
     EXPECT_EQ(s["clients"]["evicted"], 0);
@@ -616,19 +616,19 @@ TEST_F(SocketServiceTest, RequestWithoutNewlineBeforeEofIsAnswered) {
 TEST_F(SocketServiceTest, TheClientOverTheLimitIsRejected) {
     auto svc = startService();
     ASSERT_TRUE(svc);
-    // max_clients (16) + reserved_query_slots (2) connections.
+    // max_clients (16) that do not watch: the reserved slots are not for them.
     std::vector<std::unique_ptr<TestClient>> clients;
-    clients.reserve(18);
-    for (int i = 0; i < 18; ++i) {
+    clients.reserve(16);
+    for (int i = 0; i < 16; ++i) {
         clients.push_back(connect());
     }
     TestClient extra(config_.path);
     EXPECT_EQ(extra.readJson(),
-              json::parse(R"j({"class":"ERROR","message":"too many clients (18 connected)"})j"));
+              json::parse(R"j({"class":"ERROR","message":"too many clients (16 connected)"})j"));
     EXPECT_TRUE(extra.waitEof());
     SocketServiceStats st = svc->stats();
-    EXPECT_EQ(st.connected, 18);
-    EXPECT_EQ(st.accepted, 18U);
+    EXPECT_EQ(st.connected, 16);
+    EXPECT_EQ(st.accepted, 16U);
     EXPECT_EQ(st.rejected, 1U);
     EXPECT_EQ(st.evicted, 0U);  // none idle for request_timeout_s (5 s)
     // The others still work; once one leaves, a new client is accepted.
@@ -882,8 +882,8 @@ TEST_F(SocketServiceTest, TheReservedSlotsAnswerQueriesWhenMaxClientsWatch) {
     ASSERT_EQ(st["class"], "STATUS");
     EXPECT_EQ(st["clients"]["connected"], 17);
     EXPECT_EQ(st["clients"]["watchers"], 16);
-    EXPECT_EQ(st["clients"]["max_watchers"], 16);
-    EXPECT_EQ(st["clients"]["max"], 18);
+    EXPECT_EQ(st["clients"]["max"], 16);
+    EXPECT_EQ(st["clients"]["reserved"], 2);
     EXPECT_EQ(query->request(R"({"cmd":"watch","enable":false,"pose":true})"),
               json::parse(R"j({"class":"ERROR","message":"too many watchers (16 watching)",
                   "cmd":"watch"})j"));
@@ -912,9 +912,9 @@ TEST_F(SocketServiceTest, HalfWrittenRequestsAreClosedAfterTheRequestTimeout) {
     auto svc = startService();
     ASSERT_TRUE(svc);
     std::vector<std::unique_ptr<TestClient>> clients;
-    clients.reserve(18);
+    clients.reserve(16);
     const auto t0 = std::chrono::steady_clock::now();
-    for (int i = 0; i < 18; ++i) {  // every connection max_clients + reserved allow
+    for (int i = 0; i < 16; ++i) {  // max_clients: every connection a non-watcher gets
         clients.push_back(connect());
         ASSERT_TRUE(clients.back()->send(R"({"cmd":"po)"));
     }
@@ -925,11 +925,11 @@ TEST_F(SocketServiceTest, HalfWrittenRequestsAreClosedAfterTheRequestTimeout) {
     }
     EXPECT_GE(secondsSince(t0), 0.2);
     SocketServiceStats st = svc->stats();
-    EXPECT_EQ(st.timed_out, 18U);
+    EXPECT_EQ(st.timed_out, 16U);
     EXPECT_EQ(st.connected, 0);
     EXPECT_EQ(st.detached, 0U);
     auto next = connect();
-    EXPECT_EQ(next->request(R"({"cmd":"status"})")["clients"]["timed_out"], 18);
+    EXPECT_EQ(next->request(R"({"cmd":"status"})")["clients"]["timed_out"], 16);
     // A line completed in time is answered.
     ASSERT_TRUE(next->send(R"({"cmd":"po)"));
     EXPECT_EQ(next->request(R"(ll"})")["class"], "SCALE");

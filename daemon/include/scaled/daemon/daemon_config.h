@@ -108,9 +108,10 @@ struct SocketConfig {
     std::filesystem::path path = "/run/scaled/scaled.sock";
     unsigned mode = 0660;  // file mode of the socket
     std::string group;     // owning group; empty: the process's group
-    int max_clients = 16;  // watchers at most; with reserved_query_slots, connections at once
-    // Connections accepted beyond max_clients, kept for clients that do not
-    // watch (a status or poll still gets in when max_clients watch).
+    int max_clients = 16;  // connections at once, and watchers at most
+    // Beyond max_clients a connection is still accepted while fewer than this
+    // many connected clients do not watch (a status or poll gets in when
+    // max_clients watch).
     int reserved_query_slots = 2;
     std::size_t max_request_bytes = 4096;  // a longer line is an ERROR (and discarded)
     double request_timeout_s = 5;          // an incomplete request line this old: ERROR, closed

@@ -31,15 +31,16 @@ inline constexpr std::size_t kMaxEchoBytes = 64;
 // The service's own client counters, for STATUS.
 struct ClientCounts {
     int connected = 0;
-    int max = 0;  // connections accepted at once: socket.max_clients + reserved_query_slots
+    int max = 0;  // socket.max_clients
     std::uint64_t accepted = 0;
     std::uint64_t rejected = 0;
     std::uint64_t detached = 0;
-    // Additive (issue 22): watchers now and their limit (socket.max_clients),
-    // connections closed for an incomplete request (request_timeout_s) and
-    // idle ones closed to make room for a new client.
+    // Additive (issue 22): watchers now (at most `max`), the connections
+    // beyond `max` kept for clients that do not watch
+    // (socket.reserved_query_slots), connections closed for an incomplete
+    // request (request_timeout_s) and idle ones closed to make room.
     int watchers = 0;
-    int max_watchers = 0;
+    int reserved = 0;
     std::uint64_t timed_out = 0;
     std::uint64_t evicted = 0;
 };

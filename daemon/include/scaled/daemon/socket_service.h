@@ -14,13 +14,15 @@
 // with none of it read: a watcher that never reads never stalls the loop or
 // the pipeline. A request line left incomplete for request_timeout_s (while
 // the loop reads) gets an ERROR and the connection is closed. Connections
-// are accepted up to max_clients + reserved_query_slots, watchers at most
-// max_clients; when all are taken, a new client may replace the non-watching
-// connection idle longest (at least request_timeout_s). poll()'s timeout is
-// the nearest of these deadlines. Replies are built in one reused buffer; a
-// SCALE for the watchers is built once per publish and written to each of
-// them; so is a POSE for the pose watchers (thinned by PoseRateLimiter to
-// SocketConfig::pose_rate_hz).
+// are accepted up to max_clients, and beyond that (up to max_clients +
+// reserved_query_slots) while fewer than reserved_query_slots connections
+// are not watchers; watchers are at most max_clients. So a query gets in
+// whatever the watchers do. When there is no room, a new client may replace
+// the non-watching connection idle longest (at least request_timeout_s).
+// poll()'s timeout is the nearest of these deadlines. Replies are built in
+// one reused buffer; a SCALE for the watchers is built once per publish and
+// written to each of them; so is a POSE for the pose watchers (thinned by
+// PoseRateLimiter to SocketConfig::pose_rate_hz).
 //
 // The listening socket is made in create() (or inherited through systemd
 // socket activation, LISTEN_FDS), so configuration errors appear before the
@@ -44,7 +46,7 @@ namespace scaled::daemon {
 struct SocketServiceStats {
     int connected = 0;           // clients connected now
     std::uint64_t accepted = 0;  // connections accepted since start
-    // Refused because max_clients + reserved_query_slots were connected.
+    // Refused: no room (SocketService's comment above) and none idle.
     std::uint64_t rejected = 0;
     // Closed because they did not read their output: a SCALE/POSE line would
     // have overflowed client_buffer_bytes, or `stalled`.
