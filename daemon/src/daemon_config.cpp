@@ -625,7 +625,6 @@ Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
     return work;
 }
 
-}  // namespace scaled::daemon
 namespace {
 
 // Keeps the problems of `from` whose key has no problem in `into` yet (a key
@@ -765,3 +764,4 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
     return finish();
 }
 
+}  // namespace scaled::daemon

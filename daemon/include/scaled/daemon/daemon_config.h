@@ -211,7 +211,6 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv);
 core::Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
                                             const std::filesystem::path& default_config_file);
 
-}  // namespace scaled::daemon
 // What `scaled --check-config` starts from: the configuration
 // loadDaemonConfig would build, with every problem of the file and the
 // command line instead of the first (all of them, each
@@ -228,3 +227,4 @@ struct CheckedConfig {
 CheckedConfig checkDaemonConfig(const CommandLine& cli,
                                 const std::filesystem::path& default_config_file);
 
+}  // namespace scaled::daemon
