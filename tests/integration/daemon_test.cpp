@@ -416,7 +416,10 @@ TEST_F(DaemonTest, SeventeenthClientIsRejectedAndAFreedSlotReused) {
 // 6. A client that never reads is detached; a watcher is unaffected, nothing
 // is dropped and the pipeline keeps ~30 fps (the daemon's own counters).
 TEST_F(DaemonTest, NonReadingClientIsDetachedWithoutStallingThePipeline) {
-    ASSERT_TRUE(startSim({"--pacing", "realtime", "--set", "socket.client_buffer_bytes=65536"}));
+    // stall_timeout_s: detached by its stream filling the buffer or after 1 s
+    // with nothing read, whichever comes first (the default 10 s only slows the test).
+    ASSERT_TRUE(startSim({"--pacing", "realtime", "--set", "socket.client_buffer_bytes=65536",
+                          "--set", "socket.stall_timeout_s=1"}));
     Client watcher = client();
     ASSERT_TRUE(enableWatch(watcher, true));
     Client ctl = client();

@@ -524,10 +524,14 @@ core::Result<std::string> formatStatus(std::string_view line) {
     o << "scale          updates " << show(j, {"scale_updates"}) << "  epoch " << show(j, {"epoch"})
       << '\n';
     formatTiming(j, o);
+    // max: socket.max_clients; reserved: further connections kept for queries
+    // (a daemon before issue 22 has neither reserved nor the counters after it).
     o << "clients        connected " << show(j, {"clients", "connected"}) << "/"
-      << show(j, {"clients", "max"}) << "  accepted " << show(j, {"clients", "accepted"})
+      << show(j, {"clients", "max"}) << "+" << show(j, {"clients", "reserved"}) << "  watchers "
+      << show(j, {"clients", "watchers"}) << "  accepted " << show(j, {"clients", "accepted"})
       << "  rejected " << show(j, {"clients", "rejected"}) << "  detached "
-      << show(j, {"clients", "detached"}) << '\n';
+      << show(j, {"clients", "detached"}) << "  timed out " << show(j, {"clients", "timed_out"})
+      << "  evicted " << show(j, {"clients", "evicted"}) << '\n';
     o << "log            " << show(j, {"log", "state"}) << "  lines " << show(j, {"log", "lines"})
       << "  dropped " << show(j, {"log", "dropped"}) << "  bytes " << show(j, {"log", "bytes"});
     const json* log_error = at(j, {"log", "error"});

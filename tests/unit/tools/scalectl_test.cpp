@@ -50,7 +50,8 @@ constexpr const char* kStatus =
     R"("frames":{"captured":375,"tracked":370,"dropped":1},)"
     R"("detector":{"runs":37,"skipped":2,"latency_ms":{"last":41.2,"mean":39.8,"max":77.0}},)"
     R"("tracking_ms_mean":8.4,"features":{"in_map":31,"tracked":22},"scale_updates":55,)"
-    R"("epoch":1,"clients":{"connected":2,"max":16,"accepted":5,"rejected":0,"detached":1},)"
+    R"("epoch":1,"clients":{"connected":2,"max":16,"accepted":5,"rejected":0,"detached":1,)"
+    R"("watchers":1,"reserved":2,"timed_out":3,"evicted":0},)"
     R"("log":{"state":"writing","lines":410,"dropped":0,"bytes":91234,"error":""}})";
 constexpr const char* kPosterior =
     R"({"class":"POSTERIOR","epoch":1,"frame_id":510,"observations":137,)"
@@ -197,7 +198,10 @@ TEST(ScalectlFormat, StatusSummary) {
               std::string::npos)
         << *text;
     EXPECT_NE(text->find("latency last 41.2 ms  mean 39.8 ms  max 77.0 ms"), std::string::npos);
-    EXPECT_NE(text->find("connected 2/16  accepted 5  rejected 0  detached 1"), std::string::npos);
+    EXPECT_NE(text->find("connected 2/16+2  watchers 1  accepted 5  rejected 0  detached 1  "
+                         "timed out 3  evicted 0"),
+              std::string::npos)
+        << *text;
     EXPECT_NE(text->find("log            writing  lines 410"), std::string::npos);
     EXPECT_EQ(text->find("error:"), std::string::npos);  // an empty error is not shown
     EXPECT_EQ(text->back(), '\n');
