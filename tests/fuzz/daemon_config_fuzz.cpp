@@ -1,6 +1,8 @@
 // The daemon's configuration loader (applyDaemonToml, daemon_config.cpp) on
 // any text: an error leaves the configuration unchanged (as documented), and
 // a configuration it accepts, written back with toToml, reads back the same.
+// toToml costs several times the parse, so the unchanged-on-error check runs
+// on one input in 8 (chosen by the input's bytes: a crash reproduces).
 
 #include <cstddef>
 #include <cstdint>
@@ -24,12 +26,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
     DaemonConfig config = defaultDaemonConfig();
     const auto applied = applyDaemonToml(text, "fuzz.toml", kBase, config);
-    const std::string written = toToml(config);
     if (!applied) {
         check(!applied.error().message.empty(), "an error has a message");
-        check(written == kDefaultToml, "on error the configuration is unchanged");
+        std::uint32_t hash = 2166136261U;  // FNV-1a
+        for (std::size_t i = 0; i < size; ++i) {
+            hash = (hash ^ data[i]) * 16777619U;
+        }
+        if (hash % 8 == 0) {
+            check(toToml(config) == kDefaultToml, "on error the configuration is unchanged");
+        }
         return 0;
     }
+    const std::string written = toToml(config);
     DaemonConfig again = defaultDaemonConfig();
     const auto reread = applyDaemonToml(written, "written.toml", kBase, again);
     check(reread.ok(), "toToml's output of an accepted configuration is accepted");

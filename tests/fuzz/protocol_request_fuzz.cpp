@@ -1,6 +1,6 @@
 // The socket protocol's request parser (daemon: parseRequest, protocol.cpp) on
 // any bytes a client may send as one line, and the ERROR reply that echoes
-// the client's "cmd" back (docs/protocol.md).
+// the client's "cmd" back, whole or cut (docs/protocol.md).
 
 #include <cmath>
 #include <cstddef>
@@ -39,9 +39,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const auto doc = nlohmann::json::parse(out.begin(), out.end() - 1, nullptr, false);
     check(!doc.is_discarded() && doc.is_object(), "ERROR is a JSON object");
     if (!r.cmd.empty()) {
+        // A long "cmd" is echoed cut to a UTF-8 prefix, with "truncated":true.
         const auto cmd = doc.find("cmd");
-        check(cmd != doc.end() && cmd->is_string() && cmd->get<std::string>() == r.cmd,
-              "ERROR echoes \"cmd\" exactly");
+        check(cmd != doc.end() && cmd->is_string(), "ERROR echoes \"cmd\"");
+        const auto& echoed = cmd->get_ref<const std::string&>();
+        const auto truncated = doc.find("truncated");
+        if (truncated != doc.end()) {
+            check(*truncated == true, "\"truncated\" is true when present");
+            check(echoed.size() < r.cmd.size() && scaled::fuzz::startsWith(r.cmd, echoed),
+                  "a truncated echo is a prefix of \"cmd\"");
+        } else {
+            check(echoed == r.cmd, "ERROR echoes \"cmd\" exactly");
+        }
     }
     return 0;
 }
