@@ -34,12 +34,21 @@ using drivers::toml_detail::show;
 namespace config_detail {
 
 std::string tomlQuote(const std::string& s) {
+    static constexpr char kHex[] = "0123456789ABCDEF";
     std::string out = "\"";
     for (const char c : s) {
+        const auto u = static_cast<unsigned char>(c);
         if (c == '"' || c == '\\') {
             out += '\\';
+            out += c;
+        } else if (u < 0x20 || u == 0x7f) {
+            // A TOML basic string holds no raw control character (fuzz_daemon_config).
+            out += "\\u00";
+            out += kHex[u >> 4U];
+            out += kHex[u & 0xfU];
+        } else {
+            out += c;
         }
-        out += c;
     }
     return out + "\"";
 }

@@ -503,6 +503,26 @@ TEST(DaemonConfig, ToTomlRoundTrips) {
               static_cast<std::size_t>(std::count(text.begin(), text.end(), '=')));
 }
 
+// Found by fuzz_daemon_config (tests/fuzz/regressions/daemon_config): a string
+// value with a control character (a "\r" escape in the file) was written back
+// raw, which TOML does not allow, so toToml's output did not read back.
+TEST(DaemonConfig, ToTomlEscapesControlCharacters) {
+    DaemonConfig a = defaultDaemonConfig();
+    auto r = applyDaemonToml("[socket]\ngroup = \"a\\rb\\u0001c\\u007fd\\te\\\\f\\\"g\"\n", "in",
+                             "/", a);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    ASSERT_EQ(a.socket.group, std::string("a\rb\x01"
+                                          "c\x7f"
+                                          "d\te\\f\"g"));
+    const std::string text = toToml(a);
+    EXPECT_NE(text.find(R"(group = "a\u000Db\u0001c\u007Fd\u0009e\\f\"g")"), std::string::npos)
+        << text;
+    DaemonConfig b = defaultDaemonConfig();
+    auto again = applyDaemonToml(text, "dump", "/", b);
+    ASSERT_TRUE(again.ok()) << again.error().message << "\n" << text;
+    EXPECT_EQ(b.socket.group, a.socket.group);
+    EXPECT_EQ(toToml(b), text);
+}
 TEST(DaemonConfig, SourceSpecs) {
     SourceConfig s;
     ASSERT_TRUE(applySourceSpec("replay:/data/rk", s).ok());
