@@ -925,11 +925,13 @@ void Pipeline::detectionLoop() {
 
 void Pipeline::publishStatus(bool force) {
     const std::int64_t now = monotonicNowNs();
+    // Under the lock: the tracking thread and, at the end, the detection
+    // thread both publish (ThreadSanitizer, preset tsan).
+    const std::lock_guard lock(report_mutex_);
     if (!force && now - last_status_publish_ns_ < kStatusPeriodNs) {
         return;
     }
     const double window_s = static_cast<double>(now - fps_window_start_ns_) * 1e-9;
-    const std::lock_guard lock(report_mutex_);
     if (window_s >= 1.0 || force) {
         if (window_s > 0) {
             status_.fps = static_cast<double>(fps_window_frames_) / window_s;
