@@ -107,22 +107,17 @@ private:
     std::vector<PoseCall> poses_;
 };
 
-// A detector that runs the sim detector only when the test lets it: it
-// stands for a slow network, to show that tracking goes on meanwhile.
-class GatedDetector final : public detector::ObjectDetector {
+// The gate of a GatedDetector. Shared by the detector and the test: a reload
+// destroys the detector on the detection thread, possibly before the test
+// opens the gate again (ThreadSanitizer saw the test touch a freed gate).
+class Gate {
 public:
-    explicit GatedDetector(std::unique_ptr<detector::ObjectDetector> inner)
-        : inner_(std::move(inner)) {}
-    core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                              detector::DetectionResult& out) override {
+    // Waits until the gate is open (counts the call first).
+    void pass() {
         std::unique_lock lock(mutex_);
         ++entered_;
         changed_.notify_all();
         changed_.wait(lock, [&] { return open_; });
-        return inner_->detect(image, frame_id, t_ns, out);
-    }
-    [[nodiscard]] std::span<const std::string> classNames() const override {
-        return inner_->classNames();
     }
     void open() {
         const std::lock_guard lock(mutex_);
@@ -141,11 +136,31 @@ public:
     }
 
 private:
-    std::unique_ptr<detector::ObjectDetector> inner_;
     std::mutex mutex_;
     std::condition_variable changed_;
     bool open_ = false;
     int entered_ = 0;
+};
+
+// A detector that runs the sim detector only when the test lets it: it
+// stands for a slow network, to show that tracking goes on meanwhile.
+class GatedDetector final : public detector::ObjectDetector {
+public:
+    explicit GatedDetector(std::unique_ptr<detector::ObjectDetector> inner)
+        : inner_(std::move(inner)) {}
+    core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                              detector::DetectionResult& out) override {
+        gate_->pass();
+        return inner_->detect(image, frame_id, t_ns, out);
+    }
+    [[nodiscard]] std::span<const std::string> classNames() const override {
+        return inner_->classNames();
+    }
+    [[nodiscard]] std::shared_ptr<Gate> gate() const { return gate_; }
+
+private:
+    std::unique_ptr<detector::ObjectDetector> inner_;
+    std::shared_ptr<Gate> gate_ = std::make_shared<Gate>();
 };
 
 sim::SimConfig simConfig(double duration_s) {
@@ -615,7 +630,7 @@ TEST(Pipeline, ASlowDetectorNeverBlocksTracking) {
     ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
     PipelineParts pp = parts(5.0, false);  // 150 frames, not lossless
     auto gated = std::make_unique<GatedDetector>(std::move(pp.detector));
-    GatedDetector* gate = gated.get();
+    const std::shared_ptr<Gate> gate = gated->gate();
     pp.detector = std::move(gated);
     // Not lossless: the unpaced source fills the ring faster than tracking
     // and drops its oldest frames, so count tracked + dropped.
@@ -661,7 +676,7 @@ TEST(Pipeline, ReloadKeepsThePosterior) {
     Recorder rec;
     PipelineParts pp = parts(kObservedRunS, true);  // 450 frames
     auto gated = std::make_unique<GatedDetector>(std::move(pp.detector));
-    GatedDetector* gate = gated.get();
+    const std::shared_ptr<Gate> gate = gated->gate();
     pp.detector = std::move(gated);
     auto p = Pipeline::create(c, std::move(pp), hub, &rec);
     ASSERT_TRUE(p.ok()) << p.error().message;
