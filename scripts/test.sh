@@ -3,10 +3,15 @@
 # asan preset (AddressSanitizer + UndefinedBehaviorSanitizer), then, on an x86-64
 # host, core and its tests cross-built for aarch64 with the float scalar and run
 # under qemu-user (preset aarch64-float, about 5 min; the double one, aarch64,
-# is left to `scripts/test.sh aarch64` to keep CI within its time: docs/arm.md).
+# is left to `scripts/test.sh aarch64` to keep CI within its time: docs/arm.md),
+# then the daemon's tests under ThreadSanitizer (preset tsan) and the libFuzzer
+# targets, each fuzzing for SCALED_FUZZ_SECONDS (default 30; preset fuzz,
+# clang). tsan and fuzz build only the targets their build presets name
+# (docs/fuzzing.md).
 #   scripts/test.sh              # all those presets
 #   scripts/test.sh release      # only the presets named
-# In CI (CI=true) warnings are errors.
+#   SCALED_FUZZ_SECONDS=300 scripts/test.sh fuzz
+# In CI (CI=true) warnings are errors. Each preset's time is printed at its end.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,6 +21,7 @@ presets=("$@")
 if ((${#presets[@]} == 0)); then
   presets=(release asan)
   [[ $(uname -m) == x86_64 ]] && presets+=(aarch64-float)
+  presets+=(tsan fuzz)
 fi
 
 werror=OFF
@@ -24,8 +30,12 @@ werror=OFF
 jobs=$(nproc)
 for preset in "${presets[@]}"; do
   echo "=== preset ${preset}"
-  cmake --preset "${preset}" -DSCALED_WERROR="${werror}" >/dev/null
+  start=${SECONDS}
+  extra=()
+  [[ ${preset} == fuzz ]] && extra+=(-DSCALED_FUZZ_SECONDS="${SCALED_FUZZ_SECONDS:-30}")
+  cmake --preset "${preset}" -DSCALED_WERROR="${werror}" "${extra[@]}" >/dev/null
   cmake --build --preset "${preset}" -j "${jobs}"
   ctest --preset "${preset}" -j "${jobs}"
+  echo "=== preset ${preset}: $((SECONDS - start)) s"
 done
 ln -sfn release/bin build/bin 2>/dev/null || true
