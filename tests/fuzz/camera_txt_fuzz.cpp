@@ -14,6 +14,7 @@
 using scaled::fuzz::check;
 using scaled::fuzz::isFinite;
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const auto k =
         scaled::drivers::parseTumCameraFile(scaled::fuzz::asText(data, size), "d/camera.txt");

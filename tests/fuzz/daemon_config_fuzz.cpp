@@ -19,6 +19,7 @@ using scaled::daemon::DaemonConfig;
 using scaled::daemon::defaultDaemonConfig;
 using scaled::fuzz::check;
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     static const std::string kDefaultToml = toToml(defaultDaemonConfig());
     static const std::filesystem::path kBase = "/nonexistent/fuzz";

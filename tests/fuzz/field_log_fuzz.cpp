@@ -41,6 +41,7 @@ void checkRows(const std::vector<std::string>& rows, const char* what) {
 
 }  // namespace
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
     scaled::drivers::FieldLogContents contents;

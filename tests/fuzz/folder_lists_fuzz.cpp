@@ -18,6 +18,7 @@
 using scaled::drivers::naturalLess;
 using scaled::fuzz::check;
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
 

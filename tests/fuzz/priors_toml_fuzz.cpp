@@ -15,6 +15,7 @@
 using scaled::fuzz::check;
 using scaled::fuzz::isFinite;
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const auto table = scaled::drivers::parsePriors(scaled::fuzz::asText(data, size), "fuzz.toml");
     if (!table) {

@@ -16,6 +16,7 @@
 using scaled::daemon::Command;
 using scaled::fuzz::check;
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view line = scaled::fuzz::asText(data, size);
     const scaled::daemon::Request r = scaled::daemon::parseRequest(line);

@@ -36,6 +36,7 @@ void checkError(const T& result, std::string_view file) {
 
 }  // namespace
 
+// NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
 
