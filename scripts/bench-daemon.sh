@@ -14,7 +14,9 @@
 # Environment: SCALED_SHARED_DIR (default ../shared; redkitchen is skipped with
 # a message when the data or the model is absent), WATCHERS (16),
 # POLL_INTERVAL_MS (20), BENCH_OUT (JSON summaries, default BUILD_DIR/bench-daemon),
-# POSE=1 (the watchers also stream POSE lines, socket.pose_rate_hz = 30).
+# POSE=1 (the watchers also stream POSE lines, socket.pose_rate_hz = 30),
+# EXTRA_SET="section.key=value ..." (more --set options for both runs, e.g.
+# EXTRA_SET=detector.nice=0 for the detector at the daemon's own priority).
 # Prints the machine, each run's markdown table row and per-stage timing table
 # (STATUS.timing: predict, search, match, update, map, tracking, detect_*,
 # scale_*; docs/benchmarks.md "Per-stage timing"), and the JSON file names.
@@ -35,6 +37,10 @@ pose=()
 if [[ ${POSE:-0} == 1 ]]; then
     pose=(--pose)
 fi
+extra=()
+for assignment in ${EXTRA_SET:-}; do
+    extra+=(--set "$assignment")
+done
 out=${BENCH_OUT:-$build/bench-daemon}
 mkdir -p "$out"
 priors="$PWD/config/priors.toml"
@@ -63,11 +69,11 @@ if [[ -d $data && -f $model ]]; then
     run redkitchen --source "replay:$(realpath "$data")" --pacing realtime \
         --set "detector.model=$(realpath "$model")" --set detection.every_frames=10 \
         --set detector.input_size_px=416 --set source.at_end=stay \
-        --set "estimator.priors=$priors" --no-tty || failed=1
+        --set "estimator.priors=$priors" "${extra[@]}" --no-tty || failed=1
 else
     echo "# redkitchen: skipped ($data or $model not found; set SCALED_SHARED_DIR)" >&2
 fi
 
 run sim --source sim --set source.max_frames=900 --set source.at_end=stay \
-    --set "estimator.priors=$priors" --no-tty || failed=1
+    --set "estimator.priors=$priors" "${extra[@]}" --no-tty || failed=1
 exit $failed
