@@ -5,7 +5,7 @@
 # under qemu-user (preset aarch64-float, about 5 min; the double one, aarch64,
 # is left to `scripts/test.sh aarch64` to keep CI within its time: docs/arm.md),
 # then the daemon's tests under ThreadSanitizer (preset tsan) and the libFuzzer
-# targets, each fuzzing for SCALED_FUZZ_SECONDS (default 30; preset fuzz,
+# targets, each fuzzing for SCALED_FUZZ_SECONDS (default 20; preset fuzz,
 # clang). tsan and fuzz build only the targets their build presets name
 # (docs/fuzzing.md).
 #   scripts/test.sh              # all those presets
@@ -32,7 +32,7 @@ for preset in "${presets[@]}"; do
   echo "=== preset ${preset}"
   start=${SECONDS}
   extra=()
-  [[ ${preset} == fuzz ]] && extra+=(-DSCALED_FUZZ_SECONDS="${SCALED_FUZZ_SECONDS:-30}")
+  [[ ${preset} == fuzz ]] && extra+=(-DSCALED_FUZZ_SECONDS="${SCALED_FUZZ_SECONDS:-20}")
   cmake --preset "${preset}" -DSCALED_WERROR="${werror}" "${extra[@]}" >/dev/null
   cmake --build --preset "${preset}" -j "${jobs}"
   ctest --preset "${preset}" -j "${jobs}"
