@@ -15,6 +15,8 @@
 #include <scaled/drivers/priors_toml.h>
 #include <scaled/drivers/unix_socket.h>
 
+#include "config_registry.h"
+
 namespace scaled::daemon {
 namespace {
 
@@ -34,13 +36,8 @@ public:
         : checked_(checked), report_(report) {}
 
     [[nodiscard]] bool refused(std::string_view key) const {
-        for (const auto& k : checked_.error_keys) {
-            if (k == key ||
-                (key.size() > k.size() && key.substr(0, k.size()) == k && key[k.size()] == '.')) {
-                return true;
-            }
-        }
-        return false;
+        return std::any_of(checked_.error_keys.begin(), checked_.error_keys.end(),
+                           [&](const std::string& k) { return config_detail::keyCovers(k, key); });
     }
     void error(const std::string& key, const std::string& what, const std::string& got) {
         report_.errors.push_back(checked_.locate({key}) + ": " + key + ": " + what + " (got " +

@@ -169,6 +169,10 @@ Locator documentLocator(const toml::table& root, std::string_view source);
 core::Error checkError(const Locator& where, const std::vector<std::string>& keys,
                        const std::string& what);
 
+// Whether a problem about `problem_key` (`section.key`, or a section) is about
+// `key`: the same key, or a key of that section.
+bool keyCovers(std::string_view problem_key, std::string_view key);
+
 // Every problem a check found, each with the key it is about (`section.key`,
 // or a section). Loading stops at the first problem; `scaled --check-config`
 // passes a ProblemList to the same checks, which then go on to the end.

@@ -571,16 +571,63 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
     }
 }
 
+namespace {
+
+// The file loadDaemonConfig reads: --config, else the default file when it exists.
+std::filesystem::path configFileFor(const CommandLine& cli,
+                                    const std::filesystem::path& default_config_file) {
+    std::error_code ec;
+    if (cli.config) {
+        return *cli.config;
+    }
+    if (!default_config_file.empty() && std::filesystem::exists(default_config_file, ec)) {
+        return default_config_file;
+    }
+    return {};
+}
+
+// --source, --socket, --log-dir and --pacing onto `config`, each recorded in
+// `set_by` for a Locator. Without `all` the first problem ends it.
+Result<bool> applyDedicatedOptions(const CommandLine& cli, DaemonConfig& config,
+                                   std::vector<std::pair<std::string, std::string>>& set_by,
+                                   config_detail::ProblemList* all) {
+    const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
+    config_detail::Checker check(nowhere, all);
+    if (cli.source) {
+        if (auto ok = applySourceSpec(*cli.source, config.source);
+            !ok && check.fail(ok.error(), "source.kind")) {
+            return check.result();
+        }
+        for (const char* key : {"source.kind", "source.replay", "source.device"}) {
+            set_by.emplace_back(key, "--source " + *cli.source);
+        }
+    }
+    if (cli.socket) {
+        config.socket.path = fromCommandLine(*cli.socket);
+        set_by.emplace_back("socket.path", "--socket " + cli.socket->string());
+    }
+    if (cli.log_dir) {
+        config.log.dir = fromCommandLine(*cli.log_dir);
+        set_by.emplace_back("log.dir", "--log-dir " + cli.log_dir->string());
+    }
+    if (cli.pacing) {
+        if (const auto mode = parsePacing(*cli.pacing)) {
+            config.source.pacing = *mode;
+        } else if (check.fail(makeError(ErrorCode::kInvalidArgument,
+                                        "--pacing " + *cli.pacing + ": expected realtime or fast"),
+                              "source.pacing")) {
+            return check.result();
+        }
+    }
+    return check.result();
+}
+
+}  // namespace
+
 Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
                                       const std::filesystem::path& default_config_file) {
     DaemonConfig config = defaultDaemonConfig();
-    std::filesystem::path file;
-    std::error_code ec;
-    if (cli.config) {
-        file = *cli.config;
-    } else if (!default_config_file.empty() && std::filesystem::exists(default_config_file, ec)) {
-        file = default_config_file;
-    }
+    const std::filesystem::path file = configFileFor(cli, default_config_file);
     if (!file.empty()) {
         if (auto ok = applyDaemonFile(file, config); !ok) {
             return ok.error();
@@ -593,29 +640,8 @@ Result<DaemonConfig> loadDaemonConfig(const CommandLine& cli,
     if (auto ok = config_detail::applyAssignments(cli.sets, daemonFields(work), set_by); !ok) {
         return ok.error();
     }
-    if (cli.source) {
-        if (auto ok = applySourceSpec(*cli.source, work.source); !ok) {
-            return ok.error();
-        }
-        for (const char* key : {"source.kind", "source.replay", "source.device"}) {
-            set_by.emplace_back(key, "--source " + *cli.source);
-        }
-    }
-    if (cli.socket) {
-        work.socket.path = fromCommandLine(*cli.socket);
-        set_by.emplace_back("socket.path", "--socket " + cli.socket->string());
-    }
-    if (cli.log_dir) {
-        work.log.dir = fromCommandLine(*cli.log_dir);
-        set_by.emplace_back("log.dir", "--log-dir " + cli.log_dir->string());
-    }
-    if (cli.pacing) {
-        const auto mode = parsePacing(*cli.pacing);
-        if (!mode) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             "--pacing " + *cli.pacing + ": expected realtime or fast");
-        }
-        work.source.pacing = *mode;
+    if (auto ok = applyDedicatedOptions(cli, work, set_by, nullptr); !ok) {
+        return ok.error();
     }
     if (auto ok =
             checkDaemon(work, config_detail::assignmentLocator(std::move(set_by), "command line"));
@@ -680,13 +706,7 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
         }
         return std::move(out);
     };
-    std::filesystem::path file;
-    std::error_code ec;
-    if (cli.config) {
-        file = *cli.config;
-    } else if (!default_config_file.empty() && std::filesystem::exists(default_config_file, ec)) {
-        file = default_config_file;
-    }
+    const std::filesystem::path file = configFileFor(cli, default_config_file);
     // The document outlives this call inside `locate`.
     auto root = std::make_shared<toml::table>();
     if (!file.empty()) {
@@ -717,31 +737,7 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
     // The command line, as loadDaemonConfig applies it.
     std::vector<std::pair<std::string, std::string>> set_by;
     config_detail::applyAssignments(cli.sets, daemonFields(out.config), set_by, &problems);
-    if (cli.source) {
-        if (auto ok = applySourceSpec(*cli.source, out.config.source); !ok) {
-            problems.add(ok.error(), "source.kind");
-        }
-        for (const char* key : {"source.kind", "source.replay", "source.device"}) {
-            set_by.emplace_back(key, "--source " + *cli.source);
-        }
-    }
-    if (cli.socket) {
-        out.config.socket.path = fromCommandLine(*cli.socket);
-        set_by.emplace_back("socket.path", "--socket " + cli.socket->string());
-    }
-    if (cli.log_dir) {
-        out.config.log.dir = fromCommandLine(*cli.log_dir);
-        set_by.emplace_back("log.dir", "--log-dir " + cli.log_dir->string());
-    }
-    if (cli.pacing) {
-        if (const auto mode = parsePacing(*cli.pacing)) {
-            out.config.source.pacing = *mode;
-        } else {
-            problems.add(makeError(ErrorCode::kInvalidArgument,
-                                   "--pacing " + *cli.pacing + ": expected realtime or fast"),
-                         "source.pacing");
-        }
-    }
+    static_cast<void>(applyDedicatedOptions(cli, out.config, set_by, &problems));
     const auto by_file = file.empty() ? config_detail::Locator([](const std::vector<std::string>&) {
         return std::string("built-in defaults");
     })

@@ -303,11 +303,15 @@ void ProblemList::add(core::Error e, std::string key) {
     keys.push_back(std::move(key));
 }
 
+bool keyCovers(std::string_view problem_key, std::string_view key) {
+    const std::string_view k = problem_key;
+    return k == key ||
+           (key.size() > k.size() && key.substr(0, k.size()) == k && key[k.size()] == '.');
+}
+
 bool ProblemList::about(std::string_view key) const {
-    return std::any_of(keys.begin(), keys.end(), [&](const std::string& k) {
-        return k == key ||
-               (key.size() > k.size() && key.substr(0, k.size()) == k && key[k.size()] == '.');
-    });
+    return std::any_of(keys.begin(), keys.end(),
+                       [&](const std::string& k) { return keyCovers(k, key); });
 }
 
 bool Checker::fail(const std::vector<std::string>& keys, const std::string& what) {
