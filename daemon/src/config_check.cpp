@@ -145,7 +145,7 @@ void checkSource(Reporter& r) {
                        "\" is a card name: it is looked up when the camera opens");
                 return;
             }
-            struct stat st {};
+            struct stat st = {};
             if (::stat(s.device.c_str(), &st) != 0) {
                 r.error("source.device", "cannot open the camera: " + errnoMessage(errno),
                         "\"" + s.device + "\"");

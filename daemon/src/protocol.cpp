@@ -85,7 +85,8 @@ double safeNorm(const std::array<double, 3>& v) {
 // STATUS.timing: the stages in the order clients print them.
 struct NamedStage {
     const char* name;
-    StageTiming PipelineTiming::*stage;
+    using Stage = StageTiming PipelineTiming::*;
+    Stage stage;
 };
 constexpr std::array<NamedStage, 11> kStages{{
     {"predict", &PipelineTiming::predict},

@@ -243,7 +243,7 @@ Result<bool> FieldLogWriter::openNext() {
     if (fd < 0) {
         return setFault(next.path, "cannot open", errno);
     }
-    struct stat st {};
+    struct stat st = {};
     if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)) {
         next.bytes = static_cast<std::uint64_t>(st.st_size);
     }

@@ -155,7 +155,7 @@ core::Result<ListeningSocket> listenUnix(const UnixListenOptions& options) {
     }
     const std::filesystem::path parent =
         path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-    struct stat st {};
+    struct stat st = {};
     if (::stat(parent.c_str(), &st) != 0) {
         return osError(path, "directory " + parent.string(), errno);
     }
@@ -232,7 +232,7 @@ core::Result<ListeningSocket> adoptListeningSocket(int fd) {
     out.fd.reset(fd);
     out.activated = true;
     const std::string name = "inherited socket (fd " + std::to_string(fd) + ")";
-    struct stat st {};
+    struct stat st = {};
     if (::fstat(fd, &st) != 0) {
         return osError(name, "not usable", errno);
     }
@@ -283,7 +283,7 @@ bool removeSocketFile(const ListeningSocket& socket) {
     if (socket.activated || !socket.created_file || socket.path.empty()) {
         return false;
     }
-    struct stat st {};
+    struct stat st = {};
     if (::lstat(socket.path.c_str(), &st) != 0 || !S_ISSOCK(st.st_mode) ||
         st.st_dev != socket.file_dev || st.st_ino != socket.file_ino) {
         return false;  // gone, or somebody else's file now

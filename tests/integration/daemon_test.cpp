@@ -245,7 +245,7 @@ TEST_F(DaemonTest, VersionOnConnectThenPollGivesScale) {
     ASSERT_TRUE(s.has_value()) << "no reply to poll";
     EXPECT_TRUE(checkScaleLine(*s));
 
-    struct stat st {};
+    struct stat st = {};
     ASSERT_EQ(::stat(paths().socket.c_str(), &st), 0);
     EXPECT_TRUE(S_ISSOCK(st.st_mode));
     EXPECT_EQ(st.st_mode & 0777U, 0660U) << std::oct << (st.st_mode & 0777U);

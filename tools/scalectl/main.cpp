@@ -43,7 +43,7 @@ int installInterruptPipe() {
         return -1;
     }
     g_interrupt_write_fd = fds[1];
-    struct sigaction action {};
+    struct sigaction action = {};
     action.sa_handler = onInterrupt;
     sigemptyset(&action.sa_mask);
     action.sa_flags = 0;  // no SA_RESTART: poll() returns at once

@@ -404,8 +404,9 @@ ExtentResult measureVerticalExtent(const PinholeRadialCamera& camera, const Came
 
     Scalar var_box = 0;
     const Scalar h_px = std::min(eps_cbrt * std::max(Scalar(1), box.x_max_px), kMaxPixelStep);
-    for (Scalar BoundingBox::*edge : {&BoundingBox::x_min_px, &BoundingBox::y_min_px,
-                                      &BoundingBox::x_max_px, &BoundingBox::y_max_px}) {
+    using Edge = Scalar BoundingBox::*;
+    for (Edge edge : {&BoundingBox::x_min_px, &BoundingBox::y_min_px, &BoundingBox::x_max_px,
+                      &BoundingBox::y_max_px}) {
         BoundingBox b_plus = box;
         BoundingBox b_minus = box;
         b_plus.*edge += h_px;

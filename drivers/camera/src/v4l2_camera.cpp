@@ -877,7 +877,7 @@ core::Result<bool> startStreaming(CaptureStream& s, const std::string& who,
 // Opens `path`, negotiates format, size and rate, maps the buffers and starts
 // streaming. `reopening`: a missing node is kUnavailable (it may come back).
 core::Result<Opened> openStream(const std::string& path, const CameraOptions& opt, bool reopening) {
-    struct stat st {};
+    struct stat st = {};
     if (::stat(path.c_str(), &st) != 0) {
         return openError(path, errno, reopening);
     }
@@ -1181,7 +1181,7 @@ private:
 
     core::Error timedOut() {
         // A vanished node explains the silence better than a timeout.
-        struct stat st {};
+        struct stat st = {};
         if (::stat(neg_.path.c_str(), &st) != 0 && errno == ENOENT) {
             return lose("device lost (the device node is gone)");
         }

@@ -230,8 +230,8 @@ TEST_F(ImuServiceTest, ThePipelineStartsItsMapWithTheAccelerometersVertical) {
     auto pipeline = Pipeline::create(c, std::move(p), hub, nullptr);
     ASSERT_TRUE(pipeline) << pipeline.error().message;
     ASSERT_TRUE((*pipeline)->start());
-    ASSERT_TRUE(test::waitUntil(
-        hub, [&] { return (*pipeline)->finished(); }, std::chrono::seconds(120)));
+    const auto finished = [&] { return (*pipeline)->finished(); };
+    ASSERT_TRUE(test::waitUntil(hub, finished, std::chrono::seconds(120)));
     (*pipeline)->stop();
     (*imu)->stop();
 

@@ -193,8 +193,8 @@ TEST(LivePipeline, ALostCameraIsAFaultUntilItIsBackThenANewEpoch) {
     ASSERT_TRUE(waitUntil(
         hub, [&] { return hub.scale().state == DaemonState::kFault; }, std::chrono::seconds(120)));
     ASSERT_TRUE(rig.camera->waitReopenCalls(3, std::chrono::seconds(60)));
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return hub.status().camera_lost; }, std::chrono::seconds(10)));
+    const auto camera_lost = [&] { return hub.status().camera_lost; };
+    ASSERT_TRUE(waitUntil(hub, camera_lost, std::chrono::seconds(10)));
     // The latest reason is shown while it is missing; each reason is logged
     // once, not at every attempt.
     ASSERT_TRUE(waitUntil(

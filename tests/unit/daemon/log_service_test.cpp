@@ -162,7 +162,7 @@ TEST(LogService, DisabledIsOffAndWritesNothing) {
 
 TEST(LogService, ADirectoryThatCannotBeCreatedIsAFaultNotAFailure) {
     TempDir tmp("log_service");
-    { std::ofstream(tmp.path() / "plain") << "x"; }
+    std::ofstream(tmp.path() / "plain") << "x";  // closed at the end of the statement
     const fs::path dir = tmp.path() / "plain" / "logs";
     ReportHub hub(16);
     testing::internal::CaptureStderr();

@@ -40,6 +40,12 @@ namespace {
 
 using test::waitUntil;
 
+// Waits until the pipeline has run its source to the end.
+bool waitFinished(ReportHub& hub, const Pipeline& pipeline, std::chrono::seconds timeout) {
+    const auto finished = [&] { return pipeline.finished(); };
+    return waitUntil(hub, finished, timeout);
+}
+
 // Every published SCALE report, in order (ReportHub keeps only the latest).
 class Recorder final : public PipelineEvents {
 public:
@@ -214,8 +220,7 @@ TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
     auto p = Pipeline::create(c, parts(kObservedRunS, true), hub, &rec);  // 450 frames
     ASSERT_TRUE(p.ok()) << p.error().message;
     ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
     (*p)->stop();
     EXPECT_FALSE((*p)->failure().has_value());
 
@@ -388,8 +393,7 @@ TEST(Pipeline, StatusReportsStageTimes) {
     auto p = Pipeline::create(c, parts(3.0, true), hub, nullptr);  // 90 frames
     ASSERT_TRUE(p.ok()) << p.error().message;
     ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
     (*p)->stop();
     ASSERT_FALSE((*p)->failure().has_value());
 
@@ -455,8 +459,7 @@ TEST(Pipeline, PaperModelPublishesAnEmptyObjectTable) {
     auto p = Pipeline::create(c, parts(2.0, true), hub, &rec);  // 60 frames
     ASSERT_TRUE(p.ok()) << p.error().message;
     ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
     (*p)->stop();
     ASSERT_FALSE((*p)->failure().has_value());
 
@@ -498,8 +501,7 @@ TEST(Pipeline, PublishesTheObjectTable) {
     EXPECT_EQ(before.model, core::EstimatorModel::kObject);  // known before the first update
     EXPECT_TRUE(before.objects.empty());
     ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
     (*p)->stop();
     ASSERT_FALSE((*p)->failure().has_value());
     ASSERT_EQ(hub.status().epoch, 1U);
@@ -586,8 +588,8 @@ TEST(Pipeline, LoopStartsANewEpochAndClearsTheScale) {
         hub, [&] { return hub.status().source_finished && hub.status().frames_tracked == 530; },
         std::chrono::seconds(300)));
     // Let the detector drain: the last frame handed to it is 520.
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return hub.scale().frame_id >= 520; }, std::chrono::seconds(60)));
+    const auto drained = [&] { return hub.scale().frame_id >= 520; };
+    ASSERT_TRUE(waitUntil(hub, drained, std::chrono::seconds(60)));
     (*p)->stop();
 
     EXPECT_EQ(hub.status().epoch, 2U);
@@ -651,8 +653,7 @@ TEST(Pipeline, ASlowDetectorNeverBlocksTracking) {
     EXPECT_GT(held.detections_skipped, 0U);
     EXPECT_FALSE(hub.scale().has_scale);
     gate->open();
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(60)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(60)));
     (*p)->stop();
     const PipelineStatus st = hub.status();
     // The one held run plus the latest frame left in the mailbox.
@@ -703,8 +704,7 @@ TEST(Pipeline, ReloadKeepsThePosterior) {
     every5.every_frames = 5;
     (*p)->reload(std::move(*priors), std::move(*det), every5);
     gate->open();
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(300)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
     (*p)->stop();
 
     const ScaleReport after = hub.scale();
@@ -782,8 +782,7 @@ TEST(Pipeline, AReplayedGyroLogFeedsTheGyroPrior) {
     auto pipeline = Pipeline::create(c, std::move(p), hub, nullptr);
     ASSERT_TRUE(pipeline.ok()) << pipeline.error().message;
     ASSERT_TRUE((*pipeline)->start().ok());
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*pipeline)->finished(); }, std::chrono::seconds(120)));
+    ASSERT_TRUE(waitFinished(hub, **pipeline, std::chrono::seconds(120)));
     (*pipeline)->stop();
     ASSERT_FALSE((*pipeline)->failure().has_value());
 
@@ -809,8 +808,7 @@ TEST(Pipeline, WithoutAGyroStatusHasNoGyro) {
     auto p = Pipeline::create(c, parts(0.5, true), hub, nullptr);
     ASSERT_TRUE(p.ok()) << p.error().message;
     ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitUntil(
-        hub, [&] { return (*p)->finished(); }, std::chrono::seconds(120)));
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(120)));
     (*p)->stop();
     const PipelineStatus st = hub.status();
     EXPECT_FALSE(st.gyro.present);

@@ -1123,7 +1123,7 @@ TEST_F(SocketServiceTest, ModeIgnoresTheUmask) {
     auto a = SocketService::create(config_, hub_, "0.1.0");
     ::umask(old);
     ASSERT_TRUE(a.ok()) << a.error().message;
-    struct stat st {};
+    struct stat st = {};
     ASSERT_EQ(::stat(config_.path.c_str(), &st), 0);
     EXPECT_TRUE(S_ISSOCK(st.st_mode));
     EXPECT_EQ(st.st_mode & 07777U, 0660U);
@@ -1153,7 +1153,7 @@ TEST_F(SocketServiceTest, GroupIsAppliedOrNamedWhenUnknown) {
     config_.group = own->gr_name;
     auto good = SocketService::create(config_, hub_, "0.1.0");
     ASSERT_TRUE(good.ok()) << good.error().message;
-    struct stat st {};
+    struct stat st = {};
     ASSERT_EQ(::stat(config_.path.c_str(), &st), 0);
     EXPECT_EQ(st.st_gid, ::getegid());
 }

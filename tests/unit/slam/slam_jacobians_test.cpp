@@ -43,8 +43,8 @@ TEST(SlamQuaternion, RotateJacobians) {
     Mat34 J;
     for (const Vec4& q0 : {someQuat(), Vec4(1, 0, 0, 0), Vec4(0.9, 0.1, -0.3, 0.2)}) {
         rotate(q0, a, &J);
-        expectJacobianNear<3, 4>(
-            "dRa/dq", J, [&](const Vec4& q) { return rotate(q, a); }, q0);
+        const auto rotated = [&](const Vec4& q) { return rotate(q, a); };
+        expectJacobianNear<3, 4>("dRa/dq", J, rotated, q0);
         rotateInverse(q0, a, &J);
         expectJacobianNear<3, 4>(
             "dR^Ta/dq", J, [&](const Vec4& q) { return rotateInverse(q, a); }, q0);
@@ -195,8 +195,8 @@ TEST(SlamFeature, XyzConversionJacobianAndLinearity) {
     y << 0.1, -0.2, 0.05, 0.3, -0.1, 0.5;
     Mat36 J;
     inverseDepthToXyz(y, &J);
-    expectJacobianNear<3, 6>(
-        "dp/dy", J, [](const Vec6& s) { return inverseDepthToXyz(s); }, y);
+    const auto xyz = [](const Vec6& s) { return inverseDepthToXyz(s); };
+    expectJacobianNear<3, 6>("dp/dy", J, xyz, y);
     // A point seen along its first ray with a large depth uncertainty is far
     // from linear; the same point with a small uncertainty seen from the side
     // is linear.
