@@ -153,6 +153,15 @@ core::Error openError(const std::string& spec, const std::string& path, int err)
     const std::string who =
         spec == path ? "GPIO chip " + path : "GPIO chip '" + spec + "' (" + path + ")";
     if (err == ENOENT) {
+        // libgpiod 2 checks a character device against sysfs
+        // (/sys/dev/char/MAJ:MIN/subsystem) and passes on ENOENT when sysfs
+        // does not know it (no /sys in a container or chroot): the path
+        // exists, so the chip is not missing, the file is not one.
+        std::error_code ec;
+        if (std::filesystem::exists(path, ec)) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             who + ": not a GPIO chip (sysfs does not list it as a GPIO device)");
+        }
         return makeError(ErrorCode::kNotFound, who + ": no such chip; " + chipsText(probeAll()));
     }
     if (isPermissionError(err)) {
