@@ -118,9 +118,10 @@ void YoloDecoder::addDarknet(const float* rows, std::size_t row_count, int width
 
 void YoloDecoder::finish(std::span<const std::string> names, float score_threshold,
                          float nms_iou_threshold, int max_detections, DetectionResult& out) {
-    // Class-aware NMS in one NMSBoxes call (OpenCV 4.6 has no NMSBoxesBatched):
-    // each class's boxes move to their own strip of the plane, far enough
-    // apart that boxes of different classes cannot overlap.
+    // Class-aware NMS in one NMSBoxes call: each class's boxes move to their
+    // own strip of the plane, far enough apart that boxes of different classes
+    // cannot overlap. Not NMSBoxesBatched (OpenCV 4.7+), whose offset ignores
+    // negative coordinates (docs/detector.md).
     double extent = 1;
     for (const cv::Rect2d& b : boxes_) {
         extent = std::max({extent, std::abs(b.x), std::abs(b.y), std::abs(b.x + b.width),

@@ -4,6 +4,8 @@
 
 #include <cmath>
 #include <limits>
+#include <opencv2/core/version.hpp>
+#include <opencv2/dnn.hpp>
 #include <string>
 #include <vector>
 
@@ -182,6 +184,58 @@ TEST(ClassAwareNms, BoxesAreClippedToTheImageAndOutsideOnesDropped) {
     EXPECT_NEAR(b.x_max_px, 10 + 30, 1e-4);
     EXPECT_EQ(b.y_max_px, 99);
 }
+
+// Boxes that stick out past the top-left corner (negative coordinates, as
+// YOLO boxes of objects cut by the image border do before clipping) must not
+// meet the boxes of another class in the plane the class offset makes.
+// Class 0 (cup) reaches the bottom-right corner of a square image; class 1
+// (chair) sticks out of the top-left one, 45 px left and above.
+TEST(ClassAwareNms, BoxesOutsideTheTopLeftDoNotSuppressAnotherClass) {
+    std::vector<float> t(2 * kCols, 0.0F);
+    setRow(t, 0,
+           {0.96875F, 0.96875F, 0.0625F, 0.0625F, 0.9F, 0.9F, 0, 0});  // cup (600,600)-(640,640)
+    setRow(
+        t, 1,
+        {-0.0390625F, -0.0390625F, 0.0625F, 0.0625F, 0.8F, 0, 0.8F, 0});  // chair (-45,-45)-(-5,-5)
+    YoloDecoder decoder(allowAll(), 2);
+    decoder.addDarknet(t.data(), 2, 640, 640, 0.3F);
+    ASSERT_EQ(decoder.candidateCount(), 2U);
+    DetectionResult r = resultFor(640, 640);
+    decoder.finish(kNames, 0.3F, 0.45F, 100, r);
+    // The chair lies wholly outside the image, so clipping drops it; what
+    // counts is that it did not suppress the cup, nor the cup it.
+    ASSERT_EQ(r.detections.size(), 1U);
+    EXPECT_EQ(r.detections[0].class_name, "cup");
+
+    // Moved 10 px into the image, the chair is kept as well.
+    setRow(t, 1,
+           {-0.0234375F, -0.0234375F, 0.0625F, 0.0625F, 0.8F, 0, 0.8F, 0});  // (-35,-35)-(5,5)
+    decoder.clear();
+    decoder.addDarknet(t.data(), 2, 640, 640, 0.3F);
+    DetectionResult both = resultFor(640, 640);
+    decoder.finish(kNames, 0.3F, 0.45F, 100, both);
+    ASSERT_EQ(both.detections.size(), 2U);
+    EXPECT_EQ(both.detections[1].class_name, "chair");
+}
+
+#if CV_VERSION_MAJOR > 4 || (CV_VERSION_MAJOR == 4 && CV_VERSION_MINOR >= 7)
+// Why the decoder keeps its own class offset on OpenCV 4.7 and later, which
+// offer cv::dnn::NMSBoxesBatched (docs/detector.md): that function offsets
+// class k by k * (largest coordinate + 1) on both axes, which separates the
+// classes only when no coordinate is negative. With the boxes of the test
+// above it merges the chair (class 1) into the cup (class 0). When a future
+// OpenCV fixes this the expectation fails, and the decoder can switch.
+TEST(ClassAwareNms, OpenCvsNmsBoxesBatchedMergesClassesPastTheTopLeft) {
+    const std::vector<cv::Rect2d> boxes = {{600, 600, 40, 40}, {-35, -35, 40, 40}};
+    const std::vector<float> scores = {0.9F, 0.8F};
+    const std::vector<int> class_ids = {0, 1};
+    std::vector<int> keep;
+    cv::dnn::NMSBoxesBatched(boxes, scores, class_ids, 0.3F, 0.45F, keep);
+    EXPECT_EQ(keep.size(), 1U) << "OpenCV " << CV_VERSION
+                               << " keeps both classes now: NMSBoxesBatched could replace "
+                                  "YoloDecoder's own class offset";
+}
+#endif
 
 TEST(YoloDecoder, ClearForgetsTheLastImage) {
     std::vector<float> t(kCols, 0.0F);

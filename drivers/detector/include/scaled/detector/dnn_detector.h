@@ -15,8 +15,8 @@
 //             the image, objectness, class scores already times objectness.
 //
 // Non-maximum suppression is per class (boxes of different classes never
-// suppress each other): OpenCV 4.6 has no NMSBoxesBatched, so boxes are
-// offset by class before one NMSBoxes call.
+// suppress each other): boxes are offset by class before one NMSBoxes call
+// (yolo_decode.h).
 //
 // create() loads the model, checks that it outputs one score per class name,
 // and runs one warm-up forward pass at the configured size. Every failure is
