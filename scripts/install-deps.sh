@@ -1,21 +1,27 @@
 #!/usr/bin/env bash
 # Installs every Debian package scaled needs to build, test and run its tools.
 # Idempotent: packages already present are left alone and nothing is fetched.
-# Works on Debian bookworm and Raspberry Pi OS bookworm (amd64, arm64, armhf).
+# Works on Debian 12 bookworm and 13 trixie and on Raspberry Pi OS of both
+# (amd64, arm64, armhf): every name below exists in both releases, and the
+# versioned ones are reached through Debian's meta-packages (linux-source:
+# 6.1 on bookworm, 6.12 on trixie; libclang-rt-dev: 14 or 19).
 set -euo pipefail
 
 packages=(
   # build
   build-essential cmake ninja-build pkg-config git
+  # the DEB package (cpack's DEB generator needs file; cli.package)
+  file
   # core
   libeigen3-dev
   # config files
   libtomlplusplus-dev
   # daemon and tools: JSON protocol and field log, command lines
   nlohmann-json3-dev libcli11-dev
-  # live drivers: GPIO status LEDs (libgpiod 1.6 on bookworm), libcamera capture
+  # live drivers: GPIO status LEDs (libgpiod 1.6 on bookworm, 2.2 on trixie),
+  # libcamera capture
   libgpiod-dev libcamera-dev
-  # image front end, detector, dataset readers (OpenCV 4.6 on bookworm)
+  # image front end, detector, dataset readers (OpenCV 4.6 on bookworm, 4.10 on trixie)
   libopencv-dev
   # tests and benchmarks (googletest: the sources, for the aarch64 cross build)
   libgtest-dev libgmock-dev libbenchmark-dev googletest
@@ -30,7 +36,7 @@ packages=(
   # the kernel source for vimc/gpio-sim/gpio-mockup/irq-sim, libcamera's IPA and
   # tools, V4L2 and GPIO command-line tools. No kernel is installed on the host:
   # tests/vm/fetch-kernel.sh unpacks Debian's kernel package into the build tree.
-  qemu-system-x86 busybox-static linux-source-6.1 bc flex bison libelf-dev libssl-dev
+  qemu-system-x86 busybox-static linux-source bc flex bison libelf-dev libssl-dev
   xz-utils patch kmod libcamera-ipa libcamera-tools v4l-utils gpiod
 )
 
