@@ -4,19 +4,24 @@
 # Gets Debian's own kernel for the VM tests, without installing anything on
 # the host: downloads (apt-get download) the kernel image, headers and kbuild
 # of the ABI that linux-image-amd64 depends on, unpacks them with dpkg -x into
-# CACHE_DIR/root, builds the test drivers Debian does not ship (vimc, gpio-sim,
-# gpio-mockup and the irq-sim they need; the IIO dummy device with its buffer,
-# patched into a 3-axis accelerometer (iio_dummy_accel_xyz.patch), the IIO
-# configfs, software-device and software-trigger cores and the sysfs
-# and hrtimer triggers) out of tree from the same version's linux-source-6.1,
-# installs them into ROOT/lib/modules/VER/extra and runs depmod so that
-# `modprobe -d ROOT` works in the guest.
+# CACHE_DIR/root, builds the test drivers the kernel's config lacks (on
+# Debian: vimc, gpio-sim, gpio-mockup and the irq-sim they need; the IIO dummy
+# device with its buffer, patched into a 3-axis accelerometer
+# (iio_dummy_accel_xyz.patch, or iio_dummy_accel_xyz-MAJOR.MINOR.patch when
+# there is one for the kernel's version), the IIO configfs, software-device
+# and software-trigger cores and the sysfs and hrtimer triggers) out of tree
+# from the same version's linux-source-MAJOR.MINOR with the compiler the
+# kernel was built with (CONFIG_CC_VERSION_TEXT), installs them into
+# ROOT/lib/modules/VER/extra and runs depmod so that `modprobe -d ROOT` works
+# in the guest. Works for whichever kernel the release's linux-image-amd64
+# depends on: bookworm's 6.1 (gcc-12), trixie's 6.12 (gcc-14).
 #
 # Idempotent: returns at once when CACHE_DIR/ready exists and was made by this
 # version of the script (FORMAT below; an older cache is rebuilt from its
 # downloaded packages, without downloading again). Exit codes: 0 ready,
 # 77 something cannot be had here (no apt, no network, no linux-source, no
-# compiler: one line on stderr), 1 any other failure (names the command).
+# compiler, a source patch that does not apply to this kernel: one line on
+# stderr), 1 any other failure (names the command).
 set -euo pipefail
 
 if [[ $# -ne 1 ]]; then
@@ -44,7 +49,8 @@ run() {
   fi
 }
 
-# What the cache holds; bump it when the set of modules built here changes.
+# What the cache holds; bump it when the set of modules built here (or their
+# content) changes, not for changes that leave a bookworm cache as it was.
 # 2: the IIO modules (iio_dummy and friends) added.
 # 3: iio_dummy patched into a 3-axis accelerometer (iio_dummy_accel_xyz.patch).
 format=3
@@ -67,11 +73,13 @@ start_s=$(date +%s)
 for tool in apt-get apt-cache dpkg dpkg-query; do
   command -v "$tool" >/dev/null || skip "$tool not found (not a Debian host)"
 done
-for tool in make gcc-12 tar xz depmod; do
+# The compiler is checked once the kernel's config says which one it needs.
+for tool in make tar xz patch depmod; do
   command -v "$tool" >/dev/null || skip "$tool not found (needed to build the test modules)"
 done
 
-# The kernel ABI is the one the meta-package depends on, e.g. 6.1.0-56.
+# The kernel ABI is the one the meta-package depends on, e.g. 6.1.0-56
+# (bookworm) or 6.12.118+deb13 (trixie).
 image_pkg=$(apt-cache depends linux-image-amd64 2>/dev/null |
   sed -n 's/^ *Depends: \(linux-image-[0-9][^ ]*-amd64\)$/\1/p' | head -n 1)
 [[ -n $image_pkg ]] || skip "apt-cache knows no linux-image-amd64 dependency (run apt-get update)"
@@ -79,7 +87,18 @@ krel=${image_pkg#linux-image-}
 abi=${krel%-amd64}
 version=$(apt-cache show --no-all-versions "$image_pkg" 2>/dev/null | sed -n 's/^Version: //p' | head -n 1)
 [[ -n $version ]] || skip "apt-cache has no version of $image_pkg (run apt-get update)"
-packages=("$image_pkg" "linux-headers-$krel" "linux-headers-$abi-common" "linux-kbuild-6.1")
+# The kernel's major.minor (6.1, 6.12) names its source package.
+[[ $version =~ ^([0-9]+\.[0-9]+)\. && $abi == "${BASH_REMATCH[1]}".* ]] ||
+  die "cannot tell the kernel's major.minor from $image_pkg $version"
+mm=${BASH_REMATCH[1]}
+# The kbuild package is whatever the headers depend on: named by major.minor
+# on bookworm (linux-kbuild-6.1), by ABI on trixie
+# (linux-kbuild-6.12.118+deb13). It comes from the same source package, so
+# it has the kernel's version.
+kbuild_pkg=$(apt-cache depends "linux-headers-$krel" 2>/dev/null |
+  sed -n 's/^ *Depends: \(linux-kbuild-[0-9][^ ]*\)$/\1/p' | head -n 1)
+[[ -n $kbuild_pkg ]] || skip "apt-cache knows no linux-kbuild dependency of linux-headers-$krel (run apt-get update)"
+packages=("$image_pkg" "linux-headers-$krel" "linux-headers-$abi-common" "$kbuild_pkg")
 
 # apt-get download as root: download unsandboxed (the _apt user may not be
 # able to write the cache), which is what apt would do anyway, minus the
@@ -104,16 +123,18 @@ download() { # download package=version into $debs, or skip
 }
 for p in "${packages[@]}"; do download "$p"; done
 
-# The sources: the installed linux-source-6.1 when it is the same version,
-# else that version's linux-source package, downloaded and unpacked here.
-src_tar=/usr/src/linux-source-6.1.tar.xz
-src_version=$(dpkg-query -W -f '${Version}' linux-source-6.1 2>/dev/null || true)
+# The sources: the installed linux-source-MAJOR.MINOR when it is the same
+# version, else that version's linux-source package, downloaded and unpacked
+# here.
+src_pkg=linux-source-$mm
+src_tar=/usr/src/$src_pkg.tar.xz
+src_version=$(dpkg-query -W -f '${Version}' "$src_pkg" 2>/dev/null || true)
 if [[ ! -f $src_tar || $src_version != "$version" ]]; then
-  download linux-source-6.1
+  download "$src_pkg"
   rm -rf "$cache/srcpkg"
-  run dpkg -x "$(deb_of linux-source-6.1)" "$cache/srcpkg"
-  src_tar=$cache/srcpkg/usr/src/linux-source-6.1.tar.xz
-  [[ -f $src_tar ]] || die "linux-source-6.1 $version has no $src_tar"
+  run dpkg -x "$(deb_of "$src_pkg")" "$cache/srcpkg"
+  src_tar=$cache/srcpkg/usr/src/$src_pkg.tar.xz
+  [[ -f $src_tar ]] || die "$src_pkg $version has no $src_tar"
 fi
 
 # Unpack (never install) into one root, then make the absolute paths in the
@@ -122,14 +143,23 @@ root=$cache/root
 rm -rf "$root"
 mkdir -p "$root"
 for p in "${packages[@]}"; do run dpkg -x "$(deb_of "$p")" "$root"; done
+# Trixie's packages ship the modules in /usr/lib/modules (merged /usr), where
+# bookworm's ship /lib/modules: make the root a merged-/usr one too, so that
+# ROOT/lib/modules is the place for both here and for modprobe -d/depmod -b
+# (whichever of the two directories the host's kmod looks in).
+if [[ ! -e $root/lib && -d $root/usr/lib/modules ]]; then
+  run ln -s usr/lib "$root/lib"
+fi
 headers=$root/usr/src/linux-headers-$krel
 vmlinuz=$root/boot/vmlinuz-$krel
 [[ -f $vmlinuz ]] || die "$image_pkg has no /boot/vmlinuz-$krel"
 [[ -f $headers/Makefile ]] || die "linux-headers-$krel has no Makefile"
 run sed -i "s#^include /usr/src/#include $root/usr/src/#" "$headers/Makefile"
 moddir=$root/lib/modules/$krel
-run ln -sfn "../../../usr/src/linux-headers-$krel" "$moddir/build"
-run ln -sfn "../../../usr/src/linux-headers-$abi-common" "$moddir/source"
+up=../../..
+[[ -L $root/lib ]] && up=../../../.. # moddir is really ROOT/usr/lib/modules/VER
+run ln -sfn "$up/usr/src/linux-headers-$krel" "$moddir/build"
+run ln -sfn "$up/usr/src/linux-headers-$abi-common" "$moddir/source"
 
 # The kernel config decides what must be built here: the drivers must be
 # absent, their dependencies present (modules or built in).
@@ -161,7 +191,15 @@ build=$cache/build
 rm -rf "$build" "$cache/src"
 mkdir -p "$build/vimc" "$build/iio" "$cache/src"
 if [[ ${#want[@]} -gt 0 ]]; then
-  s=linux-source-6.1
+  # The compiler the kernel was built with (the headers' Makefile calls it
+  # by that name: gcc-12 on bookworm, x86_64-linux-gnu-gcc-14 on trixie);
+  # modules built with another one may not load.
+  cc_text=$(sed -n 's/^CONFIG_CC_VERSION_TEXT="\(.*\)"$/\1/p' "$config")
+  cc=${cc_text%% *}
+  [[ -n $cc ]] || die "kernel $krel's config has no CONFIG_CC_VERSION_TEXT"
+  command -v "$cc" >/dev/null ||
+    skip "$cc not found (kernel $krel was built with '$cc_text'; install ${cc##*-linux-gnu-}, needed to build the test modules)"
+  s=$src_pkg
   run tar -xJf "$src_tar" -C "$cache/src" "$s/drivers/media/test-drivers/vimc" \
     "$s/drivers/gpio/gpio-sim.c" "$s/drivers/gpio/gpio-mockup.c" "$s/drivers/gpio/gpiolib.h" \
     "$s/kernel/irq/irq_sim.c" "$s/drivers/iio/dummy" "$s/drivers/iio/industrialio-configfs.c" \
@@ -171,7 +209,7 @@ if [[ ${#want[@]} -gt 0 ]]; then
   s=$cache/src/$s
   # The source must be the headers' version (same SUBLEVEL).
   sub=$(sed -n 's/^SUBLEVEL = //p' "$s/Makefile")
-  [[ $version == 6.1.$sub-* ]] || die "linux-source is 6.1.$sub but the kernel is $version"
+  [[ $version == "$mm.$sub"-* ]] || die "linux-source is $mm.$sub but the kernel is $version"
   kbuild=""
   iio_kbuild=""
   for m in "${want[@]}"; do
@@ -188,12 +226,19 @@ if [[ ${#want[@]} -gt 0 ]]; then
         run cp "$s/kernel/irq/irq_sim.c" "$build/"
         # irq_to_desc is not exported to modules; generic_handle_irq looks
         # the descriptor up and calls its handler, which irq_sim sets to
-        # handle_simple_irq: the same thing. Built-in code needs no
-        # MODULE_LICENSE, a module using GPL symbols does.
-        grep -q 'handle_simple_irq(irq_to_desc(irqnum));' "$build/irq_sim.c" ||
-          die "irq_sim.c changed: the irq_to_desc patch does not apply"
-        run sed -i 's/handle_simple_irq(irq_to_desc(irqnum));/generic_handle_irq(irqnum);/' "$build/irq_sim.c"
-        printf '\nMODULE_DESCRIPTION("Interrupt simulator, built out of tree for the scaled VM tests");\nMODULE_LICENSE("GPL");\n' >>"$build/irq_sim.c"
+        # handle_simple_irq: the same thing (6.1 and 6.12 have the same
+        # line). Built-in code needs no MODULE_LICENSE, a module using GPL
+        # symbols does. A source that no longer calls irq_to_desc needs
+        # neither change; one that calls it elsewhere cannot be built.
+        if grep -q 'handle_simple_irq(irq_to_desc(irqnum));' "$build/irq_sim.c"; then
+          run sed -i 's/handle_simple_irq(irq_to_desc(irqnum));/generic_handle_irq(irqnum);/' "$build/irq_sim.c"
+        fi
+        if grep -q 'irq_to_desc' "$build/irq_sim.c"; then
+          skip "kernel/irq/irq_sim.c of $src_pkg $version calls irq_to_desc (not exported) in a way the generic_handle_irq change does not cover: irq_sim cannot be built as a module"
+        fi
+        if ! grep -q '^MODULE_LICENSE' "$build/irq_sim.c"; then
+          printf '\nMODULE_DESCRIPTION("Interrupt simulator, built out of tree for the scaled VM tests");\nMODULE_LICENSE("GPL");\n' >>"$build/irq_sim.c"
+        fi
         kbuild+="obj-m += irq_sim.o"$'\n'
         ;;
       industrialio-configfs | industrialio-sw-device | industrialio-sw-trigger)
@@ -209,8 +254,21 @@ if [[ ${#want[@]} -gt 0 ]]; then
           "$s/drivers/iio/dummy/iio_simple_dummy_buffer.c" "$build/iio/"
         # A 3-axis accelerometer whose axes the tests set (the daemon's
         # [imu] in vm.daemon): in_accel_{y,z}_raw, writable raw values and
-        # in_accel_scale. The patch names what it changes.
-        run patch -p1 --forward -d "$build/iio" -i "$here/iio_dummy_accel_xyz.patch"
+        # in_accel_scale. The patch names what it changes. The driver was
+        # rewritten between 6.1 and 6.12 (guards, early returns), so each
+        # version has its own patch: iio_dummy_accel_xyz-MAJOR.MINOR.patch
+        # when it exists, else iio_dummy_accel_xyz.patch (made on 6.1).
+        # Without fuzz: a hunk placed by guesswork would compile and
+        # misbehave.
+        xyz_patch=$here/iio_dummy_accel_xyz.patch
+        [[ -f $here/iio_dummy_accel_xyz-$mm.patch ]] && xyz_patch=$here/iio_dummy_accel_xyz-$mm.patch
+        if patch -p1 --dry-run --reverse --force --fuzz=0 -d "$build/iio" -i "$xyz_patch" >/dev/null 2>&1; then
+          echo "fetch-kernel: iio_dummy of $src_pkg $version already has $(basename "$xyz_patch"), not patching" >&2
+        elif patch -p1 --dry-run --forward --fuzz=0 -d "$build/iio" -i "$xyz_patch" >>"$log" 2>&1; then
+          run patch -p1 --forward --fuzz=0 -d "$build/iio" -i "$xyz_patch"
+        else
+          skip "$(basename "$xyz_patch") does not apply to drivers/iio/dummy of $src_pkg $version (patch's output in $log; make an iio_dummy_accel_xyz-$mm.patch for it)"
+        fi
         # The buffer part is compiled in only when its Kconfig symbol is
         # defined (iio_simple_dummy.h); out of tree, define it by hand.
         iio_kbuild+="CFLAGS_iio_simple_dummy.o += -DCONFIG_IIO_SIMPLE_DUMMY_BUFFER"$'\n'
@@ -225,14 +283,44 @@ if [[ ${#want[@]} -gt 0 ]]; then
     kbuild+="obj-m += iio/"$'\n'
   fi
   printf '%s' "$kbuild" >"$build/Kbuild"
+  make_vars=(CONFIG_VIDEO_VIMC=m)
+  # Trixie's headers ship vmlinux, so with CONFIG_DEBUG_INFO_BTF_MODULES
+  # kbuild would give each module BTF with pahole (dwarves), which nothing
+  # else here needs; the test modules need no BTF (it only describes their
+  # types to BPF) and load without it. Bookworm's headers have no vmlinux
+  # and kbuild skips BTF by itself there.
+  if [[ -f $headers/vmlinux ]] && has DEBUG_INFO_BTF_MODULES; then
+    make_vars+=(CONFIG_DEBUG_INFO_BTF_MODULES=)
+  fi
   echo "fetch-kernel: building ${want[*]} for $krel" >&2
-  run nice make -C "$headers" M="$build" CONFIG_VIDEO_VIMC=m -j2 modules
+  run nice make -C "$headers" M="$build" "${make_vars[@]}" -j2 modules
   extra=$moddir/extra
   mkdir -p "$extra"
   while IFS= read -r ko; do
     run cp "$ko" "$extra/"
     run strip --strip-debug "$extra/$(basename "$ko")"
   done < <(find "$build" -name '*.ko')
+fi
+# mkinitramfs.sh copies the modules the guest needs before it can reach the
+# host (virtio_pci, 9pnet_virtio, 9p, overlay, configfs and what they depend
+# on: keep this list the same as its) into the initramfs, where busybox's
+# insmod loads them, and expects them plain (it looks for 9p.ko). Bookworm's
+# kernel ships its modules plain, trixie's compressed
+# (CONFIG_MODULE_COMPRESS_XZ, NAME.ko.xz): decompress those few in the root.
+# Every other module is loaded in the guest by the host's modprobe, which
+# reads compressed ones.
+if has MODULE_COMPRESS_XZ || has MODULE_COMPRESS_ZSTD || has MODULE_COMPRESS_GZIP; then
+  run depmod -b "$root" "$krel"
+  early=$(modprobe -d "$root" -S "$krel" --show-depends -a virtio_pci 9pnet_virtio 9p overlay configfs 2>>"$log") ||
+    die "modprobe --show-depends failed for the initramfs's modules (see $log)"
+  while read -r kind path _; do
+    [[ $kind == insmod && -f $path ]] || continue
+    case $path in
+      *.ko.xz) run xz -d -f "$path" ;;
+      *.ko.zst) run zstd -q -d --rm -f "$path" ;;
+      *.ko.gz) run gzip -d -f "$path" ;;
+    esac
+  done <<<"$early"
 fi
 run depmod -b "$root" "$krel"
 for m in vivid "${want[@]}"; do

@@ -19,6 +19,7 @@
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <linux/gpio.h>
 #include <memory>
 #include <optional>
@@ -177,6 +178,10 @@ protected:
 };
 
 TEST_F(GpioVmTest, OpensByLabelNameAndPath) {
+    // Which libgpiod API these tests drive (the trixie stage of CI runs them
+    // with libgpiod 2: docs/vm-tests.md); in the log and the XML report.
+    std::cout << "libgpiod API v" << drivers::gpiodApiVersion() << "\n";
+    RecordProperty("libgpiod_api", drivers::gpiodApiVersion());
     for (const std::string& spec : {std::string(kLabel), chip_.name, chip_.dev_path}) {
         SCOPED_TRACE(spec);
         auto outputs = drivers::openGpioOutputs(options(spec, {0}));

@@ -9,6 +9,9 @@
 # timed out), which the per-test ctest checks (check-result.sh) report.
 # Exits 0 once every test ran, whatever their results, and writes
 # RESULTS_DIR/suite-done; non-zero only when the suite itself cannot run.
+# SCALED_VM_TESTS, when set, is an extended regular expression: only the tests
+# whose NAME matches it run, the others are skipped (exit 77, their log says
+# why); e.g. SCALED_VM_TESTS='^gpio_patterns$' (docs/vm-tests.md).
 set -euo pipefail
 
 if [[ $# -ne 2 ]]; then
@@ -33,6 +36,12 @@ count=0
 while IFS=$'\t' read -r name timeout_s cmd; do
   [[ -z $name || $name == \#* ]] && continue
   count=$((count + 1))
+  if [[ -n ${SCALED_VM_TESTS:-} ]] && ! [[ $name =~ $SCALED_VM_TESTS ]]; then
+    echo "skip: not selected (SCALED_VM_TESTS='$SCALED_VM_TESTS')" >"$results/$name.log"
+    echo 77 >"$results/$name.rc"
+    summary+=("$(printf '%-24s %-18s %4d s' "$name" "not selected" 0)")
+    continue
+  fi
   work=$results/work/$name
   rm -rf "$work"
   mkdir -p "$work"

@@ -49,6 +49,11 @@ if [[ -n ${SCALED_SHARED_DIR:-} && -d $SCALED_SHARED_DIR ]]; then
   shares+=(--share-ro "$SCALED_SHARED_DIR" --env "SCALED_SHARED_DIR=$SCALED_SHARED_DIR")
 fi
 
+# Which guest tests run (guest-suite.sh): all unless SCALED_VM_TESTS says.
+if [[ -n ${SCALED_VM_TESTS:-} ]]; then
+  shares+=(--env "SCALED_VM_TESTS=$SCALED_VM_TESTS")
+fi
+
 rc=0
 "$here/run-vm.sh" --cache "$cache" --timeout 1050 "${shares[@]}" -- \
   "$here/guest-suite.sh" "$manifest" "$results" || rc=$?
