@@ -31,6 +31,19 @@ if [[ ! -f $sysroot/.scaled-arm64-sysroot ]]; then
 fi
 export SCALED_ARM64_SYSROOT=$sysroot
 
+# The sysroot's libstdc++ and the cross compiler's must be one GCC: a trixie
+# sysroot (GCC 14's libraries) wants trixie's cross compiler, so cross-build
+# for trixie inside a trixie system (scripts/test-in-chroot.sh trixie --
+# scripts/cross-build-arm64.sh; docs/arm.md).
+sysroot_suite=$(sed -n 's/^suite=//p' "$sysroot/.scaled-arm64-sysroot")
+host_suite=$(sed -n 's/^VERSION_CODENAME=//p' /etc/os-release 2>/dev/null || true)
+if [[ -n $host_suite && -n $sysroot_suite && $host_suite != "$sysroot_suite" ]]; then
+  echo "cross-build-arm64: the sysroot $sysroot is Debian $sysroot_suite but this machine is $host_suite:" \
+    "its cross compiler ($(aarch64-linux-gnu-g++ -dumpversion)) does not match the sysroot's libstdc++;" \
+    "use a $host_suite sysroot, or build inside $sysroot_suite (scripts/test-in-chroot.sh $sysroot_suite -- scripts/cross-build-arm64.sh)" >&2
+  exit 78
+fi
+
 werror=OFF
 [[ -n ${CI:-} ]] && werror=ON
 

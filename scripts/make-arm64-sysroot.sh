@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
 # Builds an arm64 (aarch64) Debian sysroot for cross-building the whole of
 # scaled (daemon, drivers, tools, tests) with cmake/toolchains/aarch64-linux-gnu.cmake.
-#   scripts/make-arm64-sysroot.sh DIR
+#   scripts/make-arm64-sysroot.sh DIR [SUITE]
 # DIR must not exist yet (or be empty); the sysroot is built next to it and
 # moved into place when complete, so an existing DIR is always a whole sysroot.
-# Environment: SCALED_DEBIAN_SUITE (default bookworm), SCALED_DEBIAN_MIRROR
-# (default: mmdebstrap's, deb.debian.org with updates and security).
+# SUITE: bookworm (Debian 12) or trixie (Debian 13); default
+# $SCALED_DEBIAN_SUITE, else this machine's release when it is one of those
+# (the sysroot's libstdc++ must be the one of the cross compiler that links
+# against it: GCC 12 on bookworm, GCC 14 on trixie), else bookworm.
+# Environment: SCALED_DEBIAN_MIRROR (default: mmdebstrap's, deb.debian.org
+# with updates and security).
 #
 # mmdebstrap's "extract" variant unpacks the packages and their hard
 # dependencies without running maintainer scripts, so no arm64 emulation is
@@ -14,11 +18,19 @@
 # docs/arm.md has the measured time and size.
 set -euo pipefail
 
-usage() { echo "usage: scripts/make-arm64-sysroot.sh DIR" >&2; exit 64; }
-(($# == 1)) || usage
+usage() { echo "usage: scripts/make-arm64-sysroot.sh DIR [bookworm|trixie]" >&2; exit 64; }
+(($# == 1 || $# == 2)) || usage
 dir=$1
 [[ $dir == /* ]] || dir=$PWD/$dir
-suite=${SCALED_DEBIAN_SUITE:-bookworm}
+host_suite=$(sed -n 's/^VERSION_CODENAME=//p' /etc/os-release 2>/dev/null || true)
+[[ $host_suite == bookworm || $host_suite == trixie ]] || host_suite=bookworm
+suite=${2:-${SCALED_DEBIAN_SUITE:-$host_suite}}
+# The C++ library headers of the suite's default GCC.
+case $suite in
+  bookworm) gcc_major=12 ;;
+  trixie) gcc_major=14 ;;
+  *) echo "make-arm64-sysroot: suite '$suite' is not supported (bookworm or trixie)" >&2; exit 64 ;;
+esac
 
 if [[ -e $dir ]] && [[ -n $(ls -A "$dir" 2>/dev/null) ]]; then
   echo "make-arm64-sysroot: $dir exists and is not empty; remove it to rebuild" >&2
@@ -46,7 +58,7 @@ fi
 # unpacked alone below.
 packages=(
   # C and C++ runtime and headers for the target
-  libc6-dev libstdc++-12-dev
+  libc6-dev "libstdc++-${gcc_major}-dev"
   # core
   libeigen3-dev
   # config files, daemon, tools
