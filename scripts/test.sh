@@ -1,39 +1,79 @@
 #!/usr/bin/env bash
-# Installs dependencies, builds and runs every test: the release preset, then the
-# asan preset (AddressSanitizer + UndefinedBehaviorSanitizer), then, on an x86-64
-# host, core and its tests cross-built for aarch64 with the float scalar and run
-# under qemu-user (preset aarch64-float, about 5 min; the double one, aarch64,
-# is left to `scripts/test.sh aarch64` to keep CI within its time: docs/arm.md),
-# then the daemon's tests under ThreadSanitizer (preset tsan) and the libFuzzer
-# targets, each fuzzing for SCALED_FUZZ_SECONDS (default 20; preset fuzz,
-# clang). tsan and fuzz build only the targets their build presets name
+# Installs dependencies, builds and runs every test. On a Debian 12 bookworm
+# x86-64 host (CI) that is: the release preset; core and its tests
+# cross-built for aarch64 with the float scalar and run under qemu-user
+# (preset aarch64-float, about 5 min; the double one, aarch64, is left to
+# `scripts/test.sh aarch64`: docs/arm.md); the daemon's tests under
+# ThreadSanitizer (preset tsan); the libFuzzer targets, each fuzzing for
+# SCALED_FUZZ_SECONDS (default 20; preset fuzz, clang); then, in a fresh
+# Debian 13 trixie chroot (scripts/test-in-chroot.sh: GCC 14, OpenCV 4.10,
+# libgpiod 2), the asan preset (AddressSanitizer + UndefinedBehaviorSanitizer)
+# and the GPIO VM test through libgpiod 2 (stage chroot-trixie). On any other
+# host (trixie, arm64 boards) the asan preset runs on the host instead of the
+# chroot stage; tsan and fuzz run by default only on x86-64 hosts, where they
+# are measured. tsan and fuzz build only the targets their build presets name
 # (docs/fuzzing.md).
-#   scripts/test.sh              # all those presets
-#   scripts/test.sh release      # only the presets named
+#   scripts/test.sh                      # all of the above
+#   scripts/test.sh release              # only the presets (or stages) named
+#   scripts/test.sh chroot-trixie        # the trixie stage alone
 #   SCALED_FUZZ_SECONDS=300 scripts/test.sh fuzz
-# In CI (CI=true) warnings are errors. Each preset's time is printed at its end.
+# In CI (CI=true) warnings are errors, in the chroot too. Each stage's time is
+# printed at its end.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 scripts/install-deps.sh
 
+release=$(sed -n 's/^VERSION_CODENAME=//p' /etc/os-release 2>/dev/null || true)
 presets=("$@")
 if ((${#presets[@]} == 0)); then
-  presets=(release asan)
+  presets=(release)
+  # ASan/UBSan: in the trixie chroot on a bookworm x86-64 host (CI: both
+  # releases in one run, docs/deploy.md), else on the host.
+  if [[ $(uname -m) == x86_64 && $release == bookworm ]]; then
+    trixie_stage=yes
+  else
+    presets+=(asan)
+  fi
   [[ $(uname -m) == x86_64 ]] && presets+=(aarch64-float)
   # The two sanitizer stages are measured and run on x86-64 hosts (CI); on an
   # arm64 board (untested there, and they would add most of an hour on a
   # Raspberry Pi) `scripts/test.sh tsan fuzz` asks for them.
   [[ $(uname -m) == x86_64 ]] && presets+=(tsan fuzz)
+  [[ ${trixie_stage:-} == yes ]] && presets+=(chroot-trixie)
 fi
 
 werror=OFF
 [[ -n ${CI:-} ]] && werror=ON
 
 jobs=$(nproc)
+# chroot-SUITE: the asan preset in a fresh chroot of SUITE, then the GPIO
+# VM test (smoke and gpio_patterns) there, booting the kernel that the
+# release preset's vm tests fetched when it ran first (else the chroot's own).
+chrootStage() {
+  local suite=$1
+  local cache=${SCALED_VM_CACHE:-$PWD/build/release/vm-cache}
+  local vm_env=()
+  [[ -f $cache/ready ]] && vm_env=(SCALED_VM_CACHE="$cache")
+  local rc=0
+  scripts/test-in-chroot.sh "$suite" asan || rc=$?
+  if ((rc == 77)); then
+    echo "=== SKIPPED: the $suite chroot cannot be made on this machine (see above)" >&2
+    return 0
+  fi
+  ((rc == 0)) || return "$rc"
+  env "${vm_env[@]}" scripts/test-in-chroot.sh "$suite" -- \
+    env SCALED_VM_TESTS='^(smoke|gpio_patterns)$' ctest --test-dir build/asan -L vm -j 1 --output-on-failure
+}
+
 for preset in "${presets[@]}"; do
   echo "=== preset ${preset}"
   start=${SECONDS}
+  if [[ ${preset} == chroot-* ]]; then
+    chrootStage "${preset#chroot-}"
+    echo "=== preset ${preset}: $((SECONDS - start)) s"
+    continue
+  fi
   extra=()
   [[ ${preset} == fuzz ]] && extra+=(-DSCALED_FUZZ_SECONDS="${SCALED_FUZZ_SECONDS:-20}")
   cmake --preset "${preset}" -DSCALED_WERROR="${werror}" "${extra[@]}" >/dev/null
