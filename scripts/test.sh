@@ -76,7 +76,9 @@ for preset in "${presets[@]}"; do
   fi
   extra=()
   [[ ${preset} == fuzz ]] && extra+=(-DSCALED_FUZZ_SECONDS="${SCALED_FUZZ_SECONDS:-20}")
-  cmake --preset "${preset}" -DSCALED_WERROR="${werror}" "${extra[@]}" >/dev/null
+  # The configure output but for the lines that say what the build uses
+  # (compiler, OpenCV, libgpiod API, libcamera); errors and warnings go to stderr.
+  cmake --preset "${preset}" -DSCALED_WERROR="${werror}" "${extra[@]}" | { grep -E '^-- scaled' || true; }
   cmake --build --preset "${preset}" -j "${jobs}"
   ctest --preset "${preset}" -j "${jobs}"
   echo "=== preset ${preset}: $((SECONDS - start)) s"
