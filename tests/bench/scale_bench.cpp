@@ -49,7 +49,7 @@ void runUpdate(benchmark::State& state, VarianceModel model, bool roll) {
     snap.features = std::span<const MapFeature>(&fx.feature, 1);
     const std::array<Detection, 1> dets{Detection{fx.box, "bottle", 1}};
     for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
-        const UpdateStats st = est.update(snap, dets);
+        UpdateStats st = est.update(snap, dets);  // DoNotOptimize(const T&) is deprecated
         benchmark::DoNotOptimize(st);
         if (st.observations != 1) {
             state.SkipWithError("no observation");
@@ -175,7 +175,7 @@ void BM_ObjectUpdate(benchmark::State& state) {
         snap.frame_id = k++;
         boxes(snap.pose, dets);
         state.ResumeTiming();
-        const UpdateStats st = est.update(snap, dets);
+        UpdateStats st = est.update(snap, dets);
         used = st.objects_used;
         benchmark::DoNotOptimize(st);
     }

@@ -125,7 +125,11 @@ int main(int argc, char** argv) {
             return kExCantCreat;
         }
         if (plots) {
-            std::vector<std::string> extra = {"--no-curves"};
+            // Grown from empty: GCC 14's -Warray-bounds misreads a
+            // one-element initializer list that grows (a false positive).
+            std::vector<std::string> extra;
+            extra.reserve(3);
+            extra.emplace_back("--no-curves");
             if (!title.empty()) {
                 extra.emplace_back("--title");
                 extra.push_back(title);

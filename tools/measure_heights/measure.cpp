@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <opencv2/imgproc.hpp>
 
 namespace scaled::tools::heights {
@@ -78,10 +79,14 @@ double mad(const std::vector<double>& v) {
     return 1.4826 * median(d);
 }
 
-double percentile(std::vector<float> v, double q) {
-    if (v.empty()) {
+double percentile(std::span<const float> values, double q) {
+    if (values.empty()) {
         return 0;
     }
+    // A scratch copy for nth_element, by memcpy once known non-empty: GCC 14
+    // at -O3 warns of a null dereference in a vector's copy constructor here.
+    std::vector<float> v(values.size());
+    std::memcpy(v.data(), values.data(), values.size() * sizeof(float));
     const auto i = static_cast<std::ptrdiff_t>(
         std::lround(std::clamp(q, 0.0, 1.0) * static_cast<double>(v.size() - 1)));
     std::nth_element(v.begin(), v.begin() + i, v.end());

@@ -19,6 +19,7 @@
 
 #include <cstdint>
 #include <opencv2/core.hpp>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -115,7 +116,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
 // Robust statistics.
 double median(std::vector<double> v);
 double mad(const std::vector<double>& v);  // median absolute deviation x 1.4826
-double percentile(std::vector<float> v, double q);
+double percentile(std::span<const float> values, double q);
 
 // Greedy grouping of views of one class into instances by world centroid
 // (horizontal distance, i.e. orthogonal to up): each view joins the instance

@@ -6,6 +6,7 @@
 #include <allocation_counter.h>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -226,7 +227,11 @@ cv::Mat colourPicture(int w, int h) {
 
 std::vector<std::uint8_t> bytesOf(const cv::Mat& m) {
     const cv::Mat c = m.isContinuous() ? m : m.clone();
-    return {c.data, c.data + c.total() * c.elemSize()};
+    std::vector<std::uint8_t> bytes(c.total() * c.elemSize());
+    if (!bytes.empty()) {  // (GCC 14 -O3 sees a null c.data in the range constructor)
+        std::memcpy(bytes.data(), c.data, bytes.size());
+    }
+    return bytes;
 }
 
 // libcamera's RGB layouts (names from the most significant byte of a
