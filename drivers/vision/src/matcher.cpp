@@ -49,6 +49,30 @@ struct Ellipse {
 // Centres scored together: two 4-float registers of accumulators.
 constexpr std::size_t kBlock = 8;
 
+#if CV_SIMD128
+// OpenCV 4.8 and later name the vector arithmetic (v_add, v_mul) and drop the
+// operators on NEON (aarch64: trixie's 4.10); 4.6 (bookworm) has only the
+// operators. The headers with the functions define CV_SIMD_SCALABLE. Both
+// spellings are the same multiply then add (no fused multiply-add).
+inline cv::v_float32x4 plus(const cv::v_float32x4& a, const cv::v_float32x4& b) {
+#ifdef CV_SIMD_SCALABLE
+    return cv::v_add(a, b);
+#else
+    return a + b;
+#endif
+}
+
+// acc + a * b
+inline cv::v_float32x4 plusProduct(const cv::v_float32x4& acc, const cv::v_float32x4& a,
+                                   const cv::v_float32x4& b) {
+#ifdef CV_SIMD_SCALABLE
+    return cv::v_add(acc, cv::v_mul(a, b));
+#else
+    return acc + a * b;
+#endif
+}
+#endif
+
 // out[m] = sum_ij t[i][j] * window[i][m + j] for B (4 or 8) consecutive centres,
 // the accumulators kept in registers.
 template <std::size_t B>
@@ -71,11 +95,11 @@ void correlateBlock(const float* window, std::size_t stride, const float* t, int
         for (std::size_t j = 0; j < n; ++j) {
             const cv::v_float32x4 tv = cv::v_setall_f32(ti[j]);
             const cv::v_float32x4 uv = cv::v_setall_f32(ui[j]);
-            a0 = a0 + tv * cv::v_load(w + j);
-            b0 = b0 + uv * cv::v_load(v + j);
+            a0 = plusProduct(a0, tv, cv::v_load(w + j));
+            b0 = plusProduct(b0, uv, cv::v_load(v + j));
             if constexpr (B == 8) {
-                a1 = a1 + tv * cv::v_load(w + j + 4);
-                b1 = b1 + uv * cv::v_load(v + j + 4);
+                a1 = plusProduct(a1, tv, cv::v_load(w + j + 4));
+                b1 = plusProduct(b1, uv, cv::v_load(v + j + 4));
             }
         }
     }
@@ -84,15 +108,15 @@ void correlateBlock(const float* window, std::size_t stride, const float* t, int
         const float* ti = t + i * n;
         for (std::size_t j = 0; j < n; ++j) {
             const cv::v_float32x4 tv = cv::v_setall_f32(ti[j]);
-            a0 = a0 + tv * cv::v_load(w + j);
+            a0 = plusProduct(a0, tv, cv::v_load(w + j));
             if constexpr (B == 8) {
-                a1 = a1 + tv * cv::v_load(w + j + 4);
+                a1 = plusProduct(a1, tv, cv::v_load(w + j + 4));
             }
         }
     }
-    cv::v_store(out, a0 + b0);
+    cv::v_store(out, plus(a0, b0));
     if constexpr (B == 8) {
-        cv::v_store(out + 4, a1 + b1);
+        cv::v_store(out + 4, plus(a1, b1));
     }
 #else
     std::array<float, B> a{};
