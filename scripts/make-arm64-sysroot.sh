@@ -89,6 +89,15 @@ echo "make-arm64-sysroot: $suite arm64 -> $dir"
   --extract-hook='cd "$1/tmp" && APT_CONFIG="$MMDEBSTRAP_APT_CONFIG" apt-get download -q libopencv-dev:arm64 && dpkg-deb -x libopencv-dev_*_arm64.deb "$1" && rm -f libopencv-dev_*_arm64.deb' \
   "$suite" "$tmp" "${mirror[@]}"
 
+# Merged /usr: trixie's packages ship everything under /usr, and the
+# /bin, /sbin and /lib links that a normal install makes are not made by the
+# extract variant; qemu -L looks for the loader at /lib/ld-linux-aarch64.so.1.
+for d in bin sbin lib; do
+  if [[ ! -e $tmp/$d && -d $tmp/usr/$d ]]; then
+    "${sudo[@]}" ln -s "usr/$d" "$tmp/$d"
+  fi
+done
+
 # Documentation, manuals and translations are of no use to a compiler.
 "${sudo[@]}" rm -rf "$tmp"/usr/share/{doc,man,info,locale}
 
