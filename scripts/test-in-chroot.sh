@@ -12,8 +12,8 @@
 # holds the marker .scaled-chroot of this script's FORMAT; delete the folder
 # to start again). The source tree is bind-mounted at /scaled, with
 # build/chroot/SUITE/build over /scaled/build, so the presets' build trees
-# (build/asan, ...) never mix with the host's; ../shared (SCALED_SHARED_DIR)
-# is bind-mounted read-only at /shared. The mounts live in a private mount
+# (build/asan, ...) never mix with the host's; ../shared (SCALED_SHARED_DIR),
+# when there is one, is bind-mounted read-only at /shared. The mounts live in a private mount
 # namespace (unshare) and vanish with it: nothing is left mounted whatever
 # happens. Runs as root, or through sudo (mmdebstrap root mode, chroot).
 #
@@ -100,12 +100,19 @@ mounts=(
   "mount --rbind /dev '$root/dev'"
   "mount -t tmpfs -o mode=1777 tmpfs '$root/tmp'"
   "mount -t tmpfs -o mode=755 tmpfs '$root/run'"
-  "mkdir -p '$root/scaled' '$root/shared'"
+  "mkdir -p '$root/scaled'"
   "mount --bind '$src' '$root/scaled'"
   "mount --bind '$top/build' '$root/scaled/build'"
 )
+# ../shared of /scaled is /shared: there when the host has the data, else
+# absent (not an empty folder, which tests would take for the data).
+shared_env=()
 if [[ -d $shared ]]; then
-  mounts+=("mount --bind '$(cd "$shared" && pwd -P)' '$root/shared'" "mount -o remount,bind,ro '$root/shared'")
+  mounts+=("mkdir -p '$root/shared'" "mount --bind '$(cd "$shared" && pwd -P)' '$root/shared'"
+    "mount -o remount,bind,ro '$root/shared'")
+  shared_env=(SCALED_SHARED_DIR=/shared)
+else
+  mounts+=("rmdir '$root/shared' 2>/dev/null || true")
 fi
 if [[ -n ${SCALED_VM_CACHE:-} && -d ${SCALED_VM_CACHE} ]]; then
   vmc=$(cd "$SCALED_VM_CACHE" && pwd -P)
@@ -117,7 +124,7 @@ mounts+=("cp -L /etc/resolv.conf '$root/etc/resolv.conf'")
 env=(
   PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
   HOME=/root LANG=C.UTF-8 TERM="${TERM:-dumb}"
-  SCALED_SHARED_DIR=/shared
+  "${shared_env[@]}"
 )
 for name in CI SCALED_FUZZ_SECONDS SCALED_VM_CACHE; do
   [[ -n ${!name:-} ]] && env+=("$name=${!name}")

@@ -34,19 +34,23 @@ printf 'version = 1\n[classes.cup]\nupright = true\nsource = "x"\nmean_m = 0.1\n
 expect 78 "$tmp/p.toml:9: classes.cup.partial_probability: must be in [0, 1) (got 1.5)" \
     -- "$ev" --dataset x --set "estimator.priors=$tmp/p.toml"
 expect 66 "$tmp/none" -- "$ev" --dataset "$tmp/none"
-# Images that do not match camera.txt: the reason and the file, not only "no
-# frame could be read" (issue 22).
-mkdir -p "$tmp/mismatch"
-printf '# width height fx fy cx cy\n640 480 500 500 320 240\n' > "$tmp/mismatch/camera.txt"
-for k in 0 1 2; do
-    { printf 'P5\n32 24\n255\n'; head -c 768 /dev/zero; } > "$tmp/mismatch/$k.pgm"
-done
-expect 65 "no frame could be read (3 unreadable; the first: $tmp/mismatch/0.pgm: image is 32x24 but the intrinsics are for 640x480)" \
-    -- "$ev" --dataset "$tmp/mismatch"
-
 model="$shared/models/yolox_nano.onnx"
 rk="$shared/data/redkitchen"
 tum="$shared/data/tum-fr3-office"
+# Images that do not match camera.txt: the reason and the file, not only "no
+# frame could be read" (issue 22). scale-eval loads the model first, so this
+# needs the model (without it: exit 66, model not found).
+if [[ -f "$model" ]]; then
+    mkdir -p "$tmp/mismatch"
+    printf '# width height fx fy cx cy\n640 480 500 500 320 240\n' > "$tmp/mismatch/camera.txt"
+    for k in 0 1 2; do
+        { printf 'P5\n32 24\n255\n'; head -c 768 /dev/zero; } > "$tmp/mismatch/$k.pgm"
+    done
+    expect 65 "no frame could be read (3 unreadable; the first: $tmp/mismatch/0.pgm: image is 32x24 but the intrinsics are for 640x480)" \
+        -- "$ev" --dataset "$tmp/mismatch"
+else
+    echo "SKIP unreadable-frames part: $model not found (set SCALED_SHARED_DIR)"
+fi
 if [[ ! -f "$model" || ! -d "$rk" || ! -d "$tum" ]]; then
     echo "SKIP real-data part: $model, $rk or $tum not found (set SCALED_SHARED_DIR)"
     exit 0
