@@ -64,9 +64,9 @@ std::vector<std::string> splitList(std::string_view text) {
 std::string detectionsText(const detector::DetectionResult& result) {
     std::string s;
     for (const detector::ObjectDetection& d : result.detections) {
-        s += std::string(d.class_name) + ' ' + fixed(d.score, 3) + ' ' + fixed(d.box.x_min_px, 1) +
-             ' ' + fixed(d.box.y_min_px, 1) + ' ' + fixed(d.box.x_max_px, 1) + ' ' +
-             fixed(d.box.y_max_px, 1) + '\n';
+        s += std::string(d.class_name) + ' ' + fixed(static_cast<double>(d.score), 3) + ' ' +
+             fixed(d.box.x_min_px, 1) + ' ' + fixed(d.box.y_min_px, 1) + ' ' +
+             fixed(d.box.x_max_px, 1) + ' ' + fixed(d.box.y_max_px, 1) + '\n';
     }
     return s;
 }
@@ -89,7 +89,7 @@ std::string detectionsJson(const std::filesystem::path& image, const detector::D
         s += i == 0 ? "{" : ",{";
         s += "\"class_id\":" + std::to_string(d.class_id);
         s += ",\"class_name\":" + jsonString(d.class_name);
-        s += ",\"score\":" + jsonNumber(d.score, 4);
+        s += ",\"score\":" + jsonNumber(static_cast<double>(d.score), 4);
         s += ",\"box\":[" + jsonNumber(d.box.x_min_px, 6) + "," + jsonNumber(d.box.y_min_px, 6) +
              "," + jsonNumber(d.box.x_max_px, 6) + "," + jsonNumber(d.box.y_max_px, 6) + "]}";
     }
@@ -113,7 +113,8 @@ Result<bool> drawDetections(const cv::Mat& image, const detector::DetectionResul
             const cv::Point p0(static_cast<int>(d.box.x_min_px), static_cast<int>(d.box.y_min_px));
             const cv::Point p1(static_cast<int>(d.box.x_max_px), static_cast<int>(d.box.y_max_px));
             cv::rectangle(canvas, p0, p1, colour, 2);
-            const std::string label = std::string(d.class_name) + " " + fixed(d.score, 2);
+            const std::string label =
+                std::string(d.class_name) + " " + fixed(static_cast<double>(d.score), 2);
             int baseline = 0;
             const cv::Size size =
                 cv::getTextSize(label, cv::FONT_HERSHEY_SIMPLEX, 0.5, 1, &baseline);

@@ -38,7 +38,7 @@ core::Vec3 DepthView::world(int u, int v, double z) const {
 namespace {
 
 bool validDepth(float z) {
-    const double d = z;
+    const double d = static_cast<double>(z);
     return d >= kMinDepthM && d <= kMaxDepthM;
 }
 
@@ -49,7 +49,8 @@ void appendHeights(const DepthView& view, int stride, std::vector<float>& height
         const auto* row = view.depth.ptr<float>(v);
         for (int u = 0; u < view.depth.cols; u += stride) {
             if (validDepth(row[u])) {
-                heights.push_back(static_cast<float>(view.height(view.world(u, v, row[u]))));
+                heights.push_back(
+                    static_cast<float>(view.height(view.world(u, v, static_cast<double>(row[u])))));
             }
         }
     }
@@ -90,7 +91,7 @@ double percentile(std::span<const float> values, double q) {
     const auto i = static_cast<std::ptrdiff_t>(
         std::lround(std::clamp(q, 0.0, 1.0) * static_cast<double>(v.size() - 1)));
     std::nth_element(v.begin(), v.begin() + i, v.end());
-    return v[static_cast<std::size_t>(i)];
+    return static_cast<double>(v[static_cast<std::size_t>(i)]);
 }
 
 std::vector<Plane> findPlanes(std::vector<float> heights, double min_fraction) {
@@ -100,8 +101,8 @@ std::vector<Plane> findPlanes(std::vector<float> heights, double min_fraction) {
     }
     std::sort(heights.begin(), heights.end());
     // Ignore the extreme 0.1 % on each side (stray readings) for the range.
-    const double lo = heights[heights.size() / 1000];
-    const double hi = heights[heights.size() - 1 - heights.size() / 1000];
+    const double lo = static_cast<double>(heights[heights.size() / 1000]);
+    const double hi = static_cast<double>(heights[heights.size() - 1 - heights.size() / 1000]);
     constexpr double kBin = 0.01;
     const int n = static_cast<int>(std::ceil((hi - lo) / kBin)) + 1;
     std::vector<double> hist(static_cast<std::size_t>(n), 0.0);
@@ -163,7 +164,7 @@ Shift estimateShift(const cv::Mat& color_bgr, const cv::Mat& depth) {
     cv::bitwise_not(edges, not_edges);
     cv::Mat dist;
     cv::distanceTransform(not_edges, dist, cv::DIST_L2, 3);
-    cv::min(dist, kTrunc, dist);
+    cv::min(dist, static_cast<double>(kTrunc), dist);
 
     // Depth discontinuities, foreground side: a pixel more than 5 % nearer
     // than one of its 4-neighbours.
@@ -334,7 +335,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
     };
     for (int v = y0; v <= y1; ++v) {
         for (int u = x0; u <= x1; ++u) {
-            const double z = view.depth.at<float>(v, u);
+            const double z = static_cast<double>(view.depth.at<float>(v, u));
             if (!inBand(z)) {
                 continue;
             }
@@ -397,7 +398,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         std::vector<float> seed_heights;
         for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
             for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
-                const double z = view.depth.at<float>(v, u);
+                const double z = static_cast<double>(view.depth.at<float>(v, u));
                 if (inBand(z)) {
                     seed_heights.push_back(static_cast<float>(view.height(view.world(u, v, z))));
                 }
@@ -428,7 +429,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         std::vector<double> local;
         for (int v = win.y; v < win.y + win.height; ++v) {
             for (int u = win.x; u < win.x + win.width; ++u) {
-                const double z = view.depth.at<float>(v, u);
+                const double z = static_cast<double>(view.depth.at<float>(v, u));
                 if (z >= kMinDepthM && z <= kMaxDepthM) {
                     const double hp = view.height(view.world(u, v, z));
                     if (std::abs(hp - support->height_m) < 0.015) {
@@ -449,7 +450,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         };
         for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
             for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
-                const double z = view.depth.at<float>(v, u);
+                const double z = static_cast<double>(view.depth.at<float>(v, u));
                 if (inBand(z) && above(u, v, z)) {
                     seen.at<std::uint8_t>(v, u) = 255;
                     stack.emplace_back(u, v);
@@ -459,7 +460,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         while (!stack.empty()) {
             const cv::Point p = stack.back();
             stack.pop_back();
-            const double z = view.depth.at<float>(p.y, p.x);
+            const double z = static_cast<double>(view.depth.at<float>(p.y, p.x));
             comp.push_back(static_cast<float>(view.height(view.world(p.x, p.y, z))));
             if (p.y == win.y) {
                 ++on_top_edge;
@@ -470,7 +471,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
                 if (!win.contains(q) || seen.at<std::uint8_t>(q.y, q.x) != 0) {
                     continue;
                 }
-                const double zq = view.depth.at<float>(q.y, q.x);
+                const double zq = static_cast<double>(view.depth.at<float>(q.y, q.x));
                 if (zq < kMinDepthM || zq > kMaxDepthM || std::abs(zq - z) > 0.01 + 0.02 * z ||
                     !above(q.x, q.y, zq)) {
                     continue;
@@ -502,7 +503,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         m.mask = cv::Mat::zeros(h, w, CV_8UC1);
         for (int v = y0; v <= y1; ++v) {
             for (int u = x0; u <= x1; ++u) {
-                if (inBand(view.depth.at<float>(v, u))) {
+                if (inBand(static_cast<double>(view.depth.at<float>(v, u)))) {
                     m.mask.at<std::uint8_t>(v, u) = 255;
                 }
             }

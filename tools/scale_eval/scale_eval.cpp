@@ -85,7 +85,7 @@ void depthErrors(const core::slam::EkfSlam& slam, const std::vector<core::slam::
         if (p_C.z() <= 0 || u < 0 || v < 0 || u >= depth_m.cols || v >= depth_m.rows) {
             continue;
         }
-        const double truth = depth_m.at<float>(v, u);
+        const double truth = static_cast<double>(depth_m.at<float>(v, u));
         if (!(truth > 0.1) || !std::isfinite(truth)) {
             continue;
         }
