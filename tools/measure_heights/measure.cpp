@@ -335,7 +335,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
     };
     for (int v = y0; v <= y1; ++v) {
         for (int u = x0; u <= x1; ++u) {
-            const double z = static_cast<double>(view.depth.at<float>(v, u));
+            const double z = view.depthAt(u, v);
             if (!inBand(z)) {
                 continue;
             }
@@ -398,7 +398,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         std::vector<float> seed_heights;
         for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
             for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
-                const double z = static_cast<double>(view.depth.at<float>(v, u));
+                const double z = view.depthAt(u, v);
                 if (inBand(z)) {
                     seed_heights.push_back(static_cast<float>(view.height(view.world(u, v, z))));
                 }
@@ -429,7 +429,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         std::vector<double> local;
         for (int v = win.y; v < win.y + win.height; ++v) {
             for (int u = win.x; u < win.x + win.width; ++u) {
-                const double z = static_cast<double>(view.depth.at<float>(v, u));
+                const double z = view.depthAt(u, v);
                 if (z >= kMinDepthM && z <= kMaxDepthM) {
                     const double hp = view.height(view.world(u, v, z));
                     if (std::abs(hp - support->height_m) < 0.015) {
@@ -450,7 +450,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         };
         for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
             for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
-                const double z = static_cast<double>(view.depth.at<float>(v, u));
+                const double z = view.depthAt(u, v);
                 if (inBand(z) && above(u, v, z)) {
                     seen.at<std::uint8_t>(v, u) = 255;
                     stack.emplace_back(u, v);
@@ -460,7 +460,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         while (!stack.empty()) {
             const cv::Point p = stack.back();
             stack.pop_back();
-            const double z = static_cast<double>(view.depth.at<float>(p.y, p.x));
+            const double z = view.depthAt(p.x, p.y);
             comp.push_back(static_cast<float>(view.height(view.world(p.x, p.y, z))));
             if (p.y == win.y) {
                 ++on_top_edge;
@@ -471,7 +471,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
                 if (!win.contains(q) || seen.at<std::uint8_t>(q.y, q.x) != 0) {
                     continue;
                 }
-                const double zq = static_cast<double>(view.depth.at<float>(q.y, q.x));
+                const double zq = view.depthAt(q.x, q.y);
                 if (zq < kMinDepthM || zq > kMaxDepthM || std::abs(zq - z) > 0.01 + 0.02 * z ||
                     !above(q.x, q.y, zq)) {
                     continue;
@@ -503,7 +503,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
         m.mask = cv::Mat::zeros(h, w, CV_8UC1);
         for (int v = y0; v <= y1; ++v) {
             for (int u = x0; u <= x1; ++u) {
-                if (inBand(static_cast<double>(view.depth.at<float>(v, u)))) {
+                if (inBand(view.depthAt(u, v))) {
                     m.mask.at<std::uint8_t>(v, u) = 255;
                 }
             }

@@ -57,6 +57,10 @@ struct DepthView {
     core::CameraPose T_CtoW;
     core::Vec3 up_W = core::Vec3::UnitZ();
 
+    // Depth of pixel (u, v) in metres, 0 = none.
+    [[nodiscard]] double depthAt(int u, int v) const {
+        return static_cast<double>(depth.at<float>(v, u));
+    }
     [[nodiscard]] core::Vec3 world(int u, int v, double z) const;
     [[nodiscard]] double height(const core::Vec3& p_W) const { return up_W.dot(p_W); }
     [[nodiscard]] double cameraHeight() const { return height(T_CtoW.p_CinW); }
