@@ -93,7 +93,8 @@ fi
 
 shared=${SCALED_SHARED_DIR:-$src/../shared}
 mkdir -p "$top/build"
-mounts=(
+# The steps run as root in the private mount namespace before the chroot.
+setup=(
   "mount --make-rprivate /"
   "mount -t proc proc '$root/proc'"
   "mount --rbind /sys '$root/sys'"
@@ -108,18 +109,18 @@ mounts=(
 # absent (not an empty folder, which tests would take for the data).
 shared_env=()
 if [[ -d $shared ]]; then
-  mounts+=("mkdir -p '$root/shared'" "mount --bind '$(cd "$shared" && pwd -P)' '$root/shared'"
+  setup+=("mkdir -p '$root/shared'" "mount --bind '$(cd "$shared" && pwd -P)' '$root/shared'"
     "mount -o remount,bind,ro '$root/shared'")
   shared_env=(SCALED_SHARED_DIR=/shared)
 else
-  mounts+=("rmdir '$root/shared' 2>/dev/null || true")
+  setup+=("rmdir '$root/shared' 2>/dev/null || true")
 fi
 if [[ -n ${SCALED_VM_CACHE:-} && -d ${SCALED_VM_CACHE} ]]; then
   vmc=$(cd "$SCALED_VM_CACHE" && pwd -P)
-  mounts+=("mkdir -p '$root$vmc'" "mount --bind '$vmc' '$root$vmc'")
+  setup+=("mkdir -p '$root$vmc'" "mount --bind '$vmc' '$root$vmc'")
 fi
 # The mirrors' names resolve as on the host.
-mounts+=("cp -L /etc/resolv.conf '$root/etc/resolv.conf'")
+setup+=("cp -L /etc/resolv.conf '$root/etc/resolv.conf'")
 
 env=(
   PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
@@ -132,10 +133,10 @@ done
 
 # git refuses a repository owned by another user (the host's checkout seen
 # by root in the chroot) unless told it is safe.
-mounts+=("printf '[safe]\n\tdirectory = /scaled\n' >'$root/root/.gitconfig'")
+setup+=("printf '[safe]\n\tdirectory = /scaled\n' >'$root/root/.gitconfig'")
 
 # The command goes through as arguments, never re-parsed by a shell.
-script="set -e; $(printf '%s; ' "${mounts[@]}")
+script="set -e; $(printf '%s; ' "${setup[@]}")
 exec chroot '$root' /usr/bin/env -i ${env[*]@Q} /bin/bash -c 'cd /scaled && exec \"\$@\"' bash \"\$@\""
 
 echo "test-in-chroot: $suite: ${command[*]}"

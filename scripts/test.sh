@@ -24,23 +24,21 @@ cd "$(dirname "$0")/.."
 
 scripts/install-deps.sh
 
-release=$(sed -n 's/^VERSION_CODENAME=//p' /etc/os-release 2>/dev/null || true)
 presets=("$@")
 if ((${#presets[@]} == 0)); then
+  x86=$([[ $(uname -m) == x86_64 ]] && echo yes || true)
+  release=$(sed -n 's/^VERSION_CODENAME=//p' /etc/os-release 2>/dev/null || true)
+  # ASan/UBSan: in the trixie chroot (last) on a bookworm x86-64 host (CI:
+  # both releases in one run, docs/deploy.md), else on the host. tsan and fuzz
+  # are measured and run on x86-64 hosts (CI); on an arm64 board (untested
+  # there, and they would add most of an hour on a Raspberry Pi)
+  # `scripts/test.sh tsan fuzz` asks for them.
+  asan=asan
+  [[ $x86 && $release == bookworm ]] && asan=chroot-trixie
   presets=(release)
-  # ASan/UBSan: in the trixie chroot on a bookworm x86-64 host (CI: both
-  # releases in one run, docs/deploy.md), else on the host.
-  if [[ $(uname -m) == x86_64 && $release == bookworm ]]; then
-    trixie_stage=yes
-  else
-    presets+=(asan)
-  fi
-  [[ $(uname -m) == x86_64 ]] && presets+=(aarch64-float)
-  # The two sanitizer stages are measured and run on x86-64 hosts (CI); on an
-  # arm64 board (untested there, and they would add most of an hour on a
-  # Raspberry Pi) `scripts/test.sh tsan fuzz` asks for them.
-  [[ $(uname -m) == x86_64 ]] && presets+=(tsan fuzz)
-  [[ ${trixie_stage:-} == yes ]] && presets+=(chroot-trixie)
+  [[ $asan == asan ]] && presets+=(asan)
+  [[ $x86 ]] && presets+=(aarch64-float tsan fuzz)
+  [[ $asan == chroot-trixie ]] && presets+=(chroot-trixie)
 fi
 
 werror=OFF
