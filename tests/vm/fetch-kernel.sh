@@ -301,27 +301,6 @@ if [[ ${#want[@]} -gt 0 ]]; then
     run strip --strip-debug "$extra/$(basename "$ko")"
   done < <(find "$build" -name '*.ko')
 fi
-# mkinitramfs.sh copies the modules the guest needs before it can reach the
-# host (virtio_pci, 9pnet_virtio, 9p, overlay, configfs and what they depend
-# on: keep this list the same as its) into the initramfs, where busybox's
-# insmod loads them, and expects them plain (it looks for 9p.ko). Bookworm's
-# kernel ships its modules plain, trixie's compressed
-# (CONFIG_MODULE_COMPRESS_XZ, NAME.ko.xz): decompress those few in the root.
-# Every other module is loaded in the guest by the host's modprobe, which
-# reads compressed ones.
-if has MODULE_COMPRESS_XZ || has MODULE_COMPRESS_ZSTD || has MODULE_COMPRESS_GZIP; then
-  run depmod -b "$root" "$krel"
-  early=$(modprobe -d "$root" -S "$krel" --show-depends -a virtio_pci 9pnet_virtio 9p overlay configfs 2>>"$log") ||
-    die "modprobe --show-depends failed for the initramfs's modules (see $log)"
-  while read -r kind path _; do
-    [[ $kind == insmod && -f $path ]] || continue
-    case $path in
-      *.ko.xz) run xz -d -f "$path" ;;
-      *.ko.zst) run zstd -q -d --rm -f "$path" ;;
-      *.ko.gz) run gzip -d -f "$path" ;;
-    esac
-  done <<<"$early"
-fi
 run depmod -b "$root" "$krel"
 for m in vivid "${want[@]}"; do
   run modprobe -d "$root" -S "$krel" --show-depends "$m"

@@ -54,13 +54,23 @@ done
 mknod -m 600 dev/console c 5 1 || die "cannot create dev/console (needs root)"
 mknod -m 666 dev/null c 1 3 || die "cannot create dev/null (needs root)"
 
-# The early modules, in load order (modprobe resolves the dependencies).
+# The early modules, in load order (modprobe resolves the dependencies),
+# plain: busybox's insmod loads them, and trixie's kernel ships its modules
+# compressed (NAME.ko.xz; bookworm's are plain).
 : >.vm/modules/order
 while read -r kind path _; do
   [[ $kind == insmod ]] || continue
   name=$(basename "$path")
+  name=${name%.xz}
+  name=${name%.zst}
+  name=${name%.gz}
   if ! grep -qx "$name" .vm/modules/order; then
-    cp "$path" ".vm/modules/$name"
+    case $path in
+      *.ko.xz) xz -dc "$path" >".vm/modules/$name" ;;
+      *.ko.zst) zstd -qdc "$path" >".vm/modules/$name" ;;
+      *.ko.gz) gzip -dc "$path" >".vm/modules/$name" ;;
+      *) cp "$path" ".vm/modules/$name" ;;
+    esac || die "cannot copy the module $path"
     echo "$name" >>.vm/modules/order
   fi
 done < <(modprobe -d "$root" -S "$krel" --show-depends -a virtio_pci 9pnet_virtio 9p overlay configfs ||
