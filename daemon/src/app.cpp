@@ -25,13 +25,14 @@
 #include <scaled/daemon/socket_service.h>
 #include <scaled/daemon/status_lights.h>
 #include <scaled/daemon/version.h>
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/detector/thread_priority.h>
-#include <scaled/drivers/libcamera_camera.h>
-#include <scaled/drivers/paced_source.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/drivers/v4l2_camera.h>
-#include <scaled/sim/sim_source.h>
+#include <scaled/drivers/camera/v4l2_camera.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/detector/thread_priority.h>
+#include <scaled/drivers/libcamera/libcamera_camera.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/source/paced_source.h>
 
 #include "live_source.h"
 #include "log_events.h"
@@ -90,8 +91,8 @@ int checkConfigurationAndReport(const CommandLine& cli, const std::filesystem::p
     return EX_OK;
 }
 
-sim::SimConfig simConfig(const SourceConfig& s) {
-    sim::SimConfig c;
+drivers::sim::SimConfig simConfig(const SourceConfig& s) {
+    drivers::sim::SimConfig c;
     c.seed = s.sim_seed;
     c.fps = s.sim_fps;
     c.width_px = s.sim_width_px;
@@ -115,9 +116,10 @@ std::string sourceName(const SourceConfig& s) {
 }
 
 // The detector the source needs: the simulated one for `sim`, the network otherwise.
-Result<std::unique_ptr<detector::ObjectDetector>> openDetector(const DaemonConfig& config) {
+Result<std::unique_ptr<drivers::detector::ObjectDetector>> openDetector(
+    const DaemonConfig& config) {
     if (config.source.kind == SourceKind::kSim) {
-        return sim::createSimDetector(simConfig(config.source));
+        return drivers::sim::createSimDetector(simConfig(config.source));
     }
     const auto& d = config.pipeline.detector;
     if (d.model_path.empty()) {
@@ -125,11 +127,11 @@ Result<std::unique_ptr<detector::ObjectDetector>> openDetector(const DaemonConfi
                          "detector.model: not set (the YOLOX-Nano ONNX model; see "
                          "config/scaled.toml)");
     }
-    auto det = detector::DnnDetector::create(d);
+    auto det = drivers::detector::DnnDetector::create(d);
     if (!det) {
         return det.error();
     }
-    return std::unique_ptr<detector::ObjectDetector>(std::move(*det));
+    return std::unique_ptr<drivers::detector::ObjectDetector>(std::move(*det));
 }
 
 Result<core::PriorTable> openPriors(const DaemonConfig& config) {
@@ -147,9 +149,10 @@ Result<core::PriorTable> openPriors(const DaemonConfig& config) {
         printInfo(path.string() +
                   " not found: using the priors built into this binary (config/priors.toml of "
                   "its source tree)");
-        return drivers::parsePriors(drivers::builtinPriorsToml(), "built-in config/priors.toml");
+        return drivers::priors::parsePriors(drivers::priors::builtinPriorsToml(),
+                                            "built-in config/priors.toml");
     }
-    return drivers::loadPriorsFile(path);
+    return drivers::priors::loadPriorsFile(path);
 }
 
 std::optional<Failure> openDetectorAndPriors(const DaemonConfig& config, PipelineParts& parts);
@@ -158,10 +161,10 @@ std::optional<Failure> openDetectorAndPriors(const DaemonConfig& config, Pipelin
 std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& parts) {
     const auto& s = config.source;
     parts.source_name = sourceName(s);
-    std::unique_ptr<drivers::FrameSource> source;
+    std::unique_ptr<drivers::source::FrameSource> source;
     switch (s.kind) {
         case SourceKind::kSim: {
-            auto src = sim::openSimSource(simConfig(s));
+            auto src = drivers::sim::openSimSource(simConfig(s));
             if (!src) {
                 return Failure{EX_CONFIG, "source sim: " + src.error().message};
             }
@@ -169,7 +172,7 @@ std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& part
             break;
         }
         case SourceKind::kReplay: {
-            auto src = drivers::openDataset(s.replay_path);
+            auto src = drivers::dataset::openDataset(s.replay_path);
             if (!src) {
                 return Failure{EX_NOINPUT,
                                "source " + parts.source_name + ": " + src.error().message};
@@ -204,13 +207,13 @@ std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& part
             return openDetectorAndPriors(config, parts);
         }
     }
-    parts.lossless = s.pacing == drivers::PacingMode::kAsFastAsPossible;
-    if (s.pacing == drivers::PacingMode::kRealTime) {
-        drivers::PacingOptions pacing;
-        pacing.mode = drivers::PacingMode::kRealTime;
+    parts.lossless = s.pacing == drivers::source::PacingMode::kAsFastAsPossible;
+    if (s.pacing == drivers::source::PacingMode::kRealTime) {
+        drivers::source::PacingOptions pacing;
+        pacing.mode = drivers::source::PacingMode::kRealTime;
         pacing.speed = s.speed;
         pacing.drop_late = false;  // the capture ring drops, and counts, instead
-        auto paced = drivers::PacedFrameSource::create(std::move(source), pacing);
+        auto paced = drivers::source::PacedFrameSource::create(std::move(source), pacing);
         if (!paced) {
             return Failure{EX_CONFIG, "source.speed: " + paced.error().message};
         }
@@ -343,7 +346,7 @@ int Daemon::run() {
 
     // 2d. OpenCV's worker threads, made at the detector's priority before
     //     anything runs a parallel OpenCV call (thread_priority.h).
-    if (auto workers = detector::startOpenCvWorkersAtNice(config_.pipeline.detector.nice);
+    if (auto workers = drivers::detector::startOpenCvWorkersAtNice(config_.pipeline.detector.nice);
         !workers) {
         printError("detector.nice: " + workers.error().message +
                    " (running with OpenCV's workers at the daemon's priority)");
@@ -588,14 +591,15 @@ void Daemon::teardown(const char* reason) {
 
 // `scaled --list-cameras`: what to put in source.device, and the modes.
 int listCameras() {
-    std::vector<drivers::CameraDescription> all = drivers::listV4l2Cameras();
-    for (auto& c : drivers::listLibcameraCameras()) {
+    std::vector<drivers::camera::CameraDescription> all = drivers::camera::listV4l2Cameras();
+    for (auto& c : drivers::libcam::listLibcameraCameras()) {
         all.push_back(std::move(c));
     }
     if (all.empty()) {
         std::printf("no cameras found (V4L2: no capture device in /dev/video*%s)\n",
-                    drivers::libcameraAvailable() ? "; libcamera: none listed"
-                                                  : "; this build has no libcamera support");
+                    drivers::libcam::libcameraAvailable()
+                        ? "; libcamera: none listed"
+                        : "; this build has no libcamera support");
         return EX_OK;
     }
     for (const auto& c : all) {
@@ -608,7 +612,7 @@ int listCameras() {
             std::printf("    %s\n", f.c_str());
         }
     }
-    if (!drivers::libcameraAvailable()) {
+    if (!drivers::libcam::libcameraAvailable()) {
         std::printf("(this build has no libcamera support)\n");
     }
     return EX_OK;

@@ -10,10 +10,11 @@
 #include <vector>
 
 #include <scaled/daemon/config_check.h>
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/drivers/unix_socket.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/ipc/unix_socket.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "config_registry.h"
 
@@ -100,7 +101,7 @@ void checkPriors(Reporter& r) {
                "repository's config/priors.toml)");
         return;
     }
-    if (auto priors = drivers::loadPriorsFile(path); !priors) {
+    if (auto priors = drivers::priors::loadPriorsFile(path); !priors) {
         r.error("estimator.priors", priors.error().message, quoted(path));
     }
 }
@@ -119,7 +120,7 @@ void checkDetector(Reporter& r) {
                 "\"\"");
         return;
     }
-    if (auto det = detector::DnnDetector::create(d); !det) {
+    if (auto det = drivers::detector::DnnDetector::create(d); !det) {
         r.error("detector.model", det.error().message, quoted(d.model_path));
     }
 }
@@ -131,7 +132,7 @@ void checkSource(Reporter& r) {
             return;
         case SourceKind::kReplay:
             if (!r.refused("source.replay") && !s.replay_path.empty()) {
-                if (auto src = drivers::openDataset(s.replay_path); !src) {
+                if (auto src = drivers::dataset::openDataset(s.replay_path); !src) {
                     r.error("source.replay", src.error().message, quoted(s.replay_path));
                 }
             }
@@ -214,7 +215,7 @@ core::Result<bool> checkSocketGroup(const SocketConfig& socket) {
     if (socket.group.empty()) {
         return true;
     }
-    auto gid = drivers::lookupGroup(socket.path, socket.group);
+    auto gid = drivers::ipc::lookupGroup(socket.path, socket.group);
     if (!gid) {
         return gid.error();
     }

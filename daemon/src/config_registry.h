@@ -25,7 +25,7 @@
 
 #include <scaled/core/result.h>
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/drivers/toml_detail.h>
+#include <scaled/drivers/priors/toml_read.h>
 
 namespace scaled::daemon::config_detail {
 
@@ -46,11 +46,11 @@ enum class Bound : std::uint8_t { kClosed, kOpen };
 template <typename T>
 Field real(const char* section, const char* key, T* target, double lo, double hi,
            Bound lo_bound = Bound::kClosed) {
-    using drivers::toml_detail::num;
-    using drivers::toml_detail::show;
+    using drivers::priors::tomlread::num;
+    using drivers::priors::tomlread::show;
     return {section, key,
             [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
-                const auto v = drivers::toml_detail::asNumber(n);
+                const auto v = drivers::priors::tomlread::asNumber(n);
                 const bool ok = v && std::isfinite(*v) && *v <= hi &&
                                 (lo_bound == Bound::kOpen ? *v > lo : *v >= lo);
                 if (!ok) {
@@ -71,7 +71,8 @@ Field integer(const char* section, const char* key, T* target, std::int64_t lo, 
                 const auto* i = n.as_integer();
                 if (i == nullptr || i->get() < lo || i->get() > hi) {
                     return "must be an integer in [" + std::to_string(lo) + ", " +
-                           std::to_string(hi) + "] (got " + drivers::toml_detail::show(n) + ")";
+                           std::to_string(hi) + "] (got " + drivers::priors::tomlread::show(n) +
+                           ")";
                 }
                 *target = static_cast<T>(i->get());
                 return std::nullopt;
@@ -96,7 +97,8 @@ Field choice(const char* section, const char* key, E* target,
                         }
                     }
                 }
-                return "must be one of " + allowed + " (got " + drivers::toml_detail::show(n) + ")";
+                return "must be one of " + allowed + " (got " + drivers::priors::tomlread::show(n) +
+                       ")";
             },
             [=] {
                 for (const auto& [name, value] : names) {
@@ -112,8 +114,8 @@ Field choice(const char* section, const char* key, E* target,
 template <std::size_t N>
 Field realArray(const char* section, const char* key, std::array<double, N>* target, double lo,
                 double hi) {
-    using drivers::toml_detail::num;
-    using drivers::toml_detail::show;
+    using drivers::priors::tomlread::num;
+    using drivers::priors::tomlread::show;
     return {section, key,
             [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
                 const auto* arr = n.as_array();
@@ -128,7 +130,7 @@ Field realArray(const char* section, const char* key, std::array<double, N>* tar
                 std::array<double, N> out{};
                 for (std::size_t i = 0; i < N; ++i) {
                     const toml::node& e = (*arr)[i];
-                    const auto v = drivers::toml_detail::asNumber(e);
+                    const auto v = drivers::priors::tomlread::asNumber(e);
                     if (!v || !std::isfinite(*v) || *v < lo || *v > hi) {
                         return expected + ": entry " + std::to_string(i) + " (got " + show(e) + ")";
                     }

@@ -23,7 +23,7 @@
 #include <scaled/core/geometry/gravity.h>
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/version.h>
-#include <scaled/drivers/toml_detail.h>
+#include <scaled/drivers/priors/toml_read.h>
 
 #include "config_registry.h"
 
@@ -32,7 +32,7 @@ namespace scaled::daemon {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
-using drivers::toml_detail::show;
+using drivers::priors::tomlread::show;
 
 namespace {
 
@@ -101,12 +101,12 @@ std::optional<std::string> rotationProblem(const std::array<double, 9>& r) {
     const core::RotationDefect d = core::rotationDefect(R);
     if (!(d.orthogonality <= core::kRotationTolerance)) {
         return "must be a rotation, row-major (orthonormal rows: max |R^T R - I| <= " +
-               drivers::toml_detail::num(core::kRotationTolerance) +
-               ") (got max |R^T R - I| = " + drivers::toml_detail::num(d.orthogonality) + ")";
+               drivers::priors::tomlread::num(core::kRotationTolerance) +
+               ") (got max |R^T R - I| = " + drivers::priors::tomlread::num(d.orthogonality) + ")";
     }
     if (!core::isRotation(d)) {
         return "must be a rotation, row-major (determinant +1, not a reflection) (got det = " +
-               drivers::toml_detail::num(d.determinant) + ")";
+               drivers::priors::tomlread::num(d.determinant) + ")";
     }
     return std::nullopt;
 }
@@ -128,8 +128,8 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         path("source", "replay", &s.replay_path),
         text("source", "device", &s.device),
         choice("source", "pacing", &s.pacing,
-               {{"realtime", drivers::PacingMode::kRealTime},
-                {"fast", drivers::PacingMode::kAsFastAsPossible}}),
+               {{"realtime", drivers::source::PacingMode::kRealTime},
+                {"fast", drivers::source::PacingMode::kAsFastAsPossible}}),
         real("source", "speed", &s.speed, 0, 1000, Bound::kOpen),
         choice("source", "at_end", &s.at_end,
                {{"stay", AtEnd::kStay}, {"exit", AtEnd::kExit}, {"loop", AtEnd::kLoop}}),
@@ -153,11 +153,11 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         integer("camera", "height_px", &m.height_px, 16, 8192),
         real("camera", "fps", &m.fps, 0, 1000, Bound::kOpen),
         choice("camera", "pixel_format", &m.pixel_format,
-               {{"auto", drivers::PixelFormat::kAuto},
-                {"YUYV", drivers::PixelFormat::kYuyv},
-                {"MJPEG", drivers::PixelFormat::kMjpeg},
-                {"GREY", drivers::PixelFormat::kGrey},
-                {"NV12", drivers::PixelFormat::kNv12}}),
+               {{"auto", drivers::camera::PixelFormat::kAuto},
+                {"YUYV", drivers::camera::PixelFormat::kYuyv},
+                {"MJPEG", drivers::camera::PixelFormat::kMjpeg},
+                {"GREY", drivers::camera::PixelFormat::kGrey},
+                {"NV12", drivers::camera::PixelFormat::kNv12}}),
         integer("camera", "buffers", &m.buffers, 2, 32),
         real("camera", "frame_timeout_s", &m.frame_timeout_s, 0, 3600, Bound::kOpen),
         real("camera", "retry_initial_s", &m.retry_initial_s, 0, 3600, Bound::kOpen),
@@ -239,14 +239,14 @@ Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where,
                    std::string("a live source (source.kind = \"") + toString(s.kind) +
                        "\") needs the camera's calibration: camera.fx_px, fy_px, cx_px "
                        "and cy_px must all be > 0 (got fx_px = " +
-                       drivers::toml_detail::num(m.fx_px) + ")")) {
+                       drivers::priors::tomlread::num(m.fx_px) + ")")) {
         return check.result();
     }
     if (m.retry_max_s < m.retry_initial_s &&
-        check.fail(
-            {"camera.retry_max_s", "camera.retry_initial_s"},
-            "must be >= camera.retry_initial_s = " + drivers::toml_detail::num(m.retry_initial_s) +
-                " (got " + drivers::toml_detail::num(m.retry_max_s) + ")")) {
+        check.fail({"camera.retry_max_s", "camera.retry_initial_s"},
+                   "must be >= camera.retry_initial_s = " +
+                       drivers::priors::tomlread::num(m.retry_initial_s) + " (got " +
+                       drivers::priors::tomlread::num(m.retry_max_s) + ")")) {
         return check.result();
     }
     const auto& g = c.gpio;
@@ -307,12 +307,12 @@ std::filesystem::path fromCommandLine(const std::filesystem::path& p) {
     return p.empty() || ec ? p : abs.lexically_normal();
 }
 
-std::optional<drivers::PacingMode> parsePacing(std::string_view text) {
+std::optional<drivers::source::PacingMode> parsePacing(std::string_view text) {
     if (text == "realtime") {
-        return drivers::PacingMode::kRealTime;
+        return drivers::source::PacingMode::kRealTime;
     }
     if (text == "fast") {
-        return drivers::PacingMode::kAsFastAsPossible;
+        return drivers::source::PacingMode::kAsFastAsPossible;
     }
     return std::nullopt;
 }
@@ -347,7 +347,7 @@ DaemonConfig defaultDaemonConfig() {
 
 Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source_name,
                              const std::filesystem::path& base_dir, DaemonConfig& config) {
-    auto root = drivers::toml_detail::parse(toml_text, source_name);
+    auto root = drivers::priors::tomlread::parse(toml_text, source_name);
     if (!root) {
         return root.error();
     }
@@ -716,7 +716,7 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
             out.locate = [file](const std::vector<std::string>&) { return file.string(); };
             return finish();
         }
-        auto parsed = drivers::toml_detail::parse(*text, file.string());
+        auto parsed = drivers::priors::tomlread::parse(*text, file.string());
         if (!parsed) {
             problems.add(parsed.error(), "");
             out.locate = [file](const std::vector<std::string>&) { return file.string(); };
@@ -725,8 +725,9 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
         *root = std::move(*parsed);
         source_name = file.string();
         const auto absolute = fromCommandLine(file);
-        config_detail::applyFields(*root, source_name, absolute.parent_path(),
-                                   daemonFields(out.config), &problems);
+        // Every problem goes to `problems` (the result says only whether there was one).
+        static_cast<void>(config_detail::applyFields(*root, source_name, absolute.parent_path(),
+                                                     daemonFields(out.config), &problems));
         config_detail::ProblemList cross;
         static_cast<void>(
             checkDaemon(out.config, config_detail::documentLocator(*root, source_name), &cross));
@@ -736,7 +737,8 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
 
     // The command line, as loadDaemonConfig applies it.
     std::vector<std::pair<std::string, std::string>> set_by;
-    config_detail::applyAssignments(cli.sets, daemonFields(out.config), set_by, &problems);
+    static_cast<void>(
+        config_detail::applyAssignments(cli.sets, daemonFields(out.config), set_by, &problems));
     static_cast<void>(applyDedicatedOptions(cli, out.config, set_by, &problems));
     const auto by_file = file.empty() ? config_detail::Locator([](const std::vector<std::string>&) {
         return std::string("built-in defaults");

@@ -2,8 +2,8 @@
 
 #include <utility>
 
-#include <scaled/drivers/libcamera_camera.h>
-#include <scaled/drivers/v4l2_camera.h>
+#include <scaled/drivers/camera/v4l2_camera.h>
+#include <scaled/drivers/libcamera/libcamera_camera.h>
 
 namespace scaled::daemon {
 
@@ -11,8 +11,9 @@ using core::ErrorCode;
 using core::makeError;
 using core::Result;
 
-LiveSource::LiveSource(CameraOpener opener, drivers::CameraOptions options, std::string name,
-                       std::unique_ptr<drivers::LiveCamera> camera, std::string missing_reason)
+LiveSource::LiveSource(CameraOpener opener, drivers::camera::CameraOptions options,
+                       std::string name, std::unique_ptr<drivers::camera::LiveCamera> camera,
+                       std::string missing_reason)
     : opener_(std::move(opener)),
       options_(std::move(options)),
       name_(std::move(name)),
@@ -27,7 +28,7 @@ LiveSource::LiveSource(CameraOpener opener, drivers::CameraOptions options, std:
     }
 }
 
-Result<bool> LiveSource::next(drivers::Frame& frame) {
+Result<bool> LiveSource::next(drivers::source::Frame& frame) {
     if (stopped_.load()) {
         return false;
     }
@@ -76,9 +77,9 @@ void LiveSource::stop() {
     }
 }
 
-drivers::CameraOptions cameraOptions(const DaemonConfig& config) {
+drivers::camera::CameraOptions cameraOptions(const DaemonConfig& config) {
     const auto& c = config.camera;
-    drivers::CameraOptions o;
+    drivers::camera::CameraOptions o;
     o.device = config.source.device;
     o.width_px = c.width_px;
     o.height_px = c.height_px;
@@ -102,16 +103,16 @@ Result<std::unique_ptr<LiveSource>> openLive(const DaemonConfig& config, std::st
     CameraOpener opener;
     std::string name;
     if (config.source.kind == SourceKind::kLibcamera) {
-        if (!drivers::libcameraAvailable()) {
+        if (!drivers::libcam::libcameraAvailable()) {
             return makeError(ErrorCode::kUnavailable,
                              "source libcamera:" + config.source.device +
                                  ": this build of scaled has no libcamera support (rebuild "
                                  "with libcamera-dev installed, or use a v4l2 source)");
         }
-        opener = drivers::openLibcameraCamera;
+        opener = drivers::libcam::openLibcameraCamera;
         name = "libcamera:" + config.source.device;
     } else {
-        opener = drivers::openV4l2Camera;
+        opener = drivers::camera::openV4l2Camera;
         name = "v4l2:" + config.source.device;
     }
     auto options = cameraOptions(config);

@@ -22,20 +22,20 @@
 
 #include <scaled/core/result.h>
 #include <scaled/daemon/daemon_config.h>
-#include <scaled/drivers/camera.h>
+#include <scaled/drivers/camera/camera.h>
 
 namespace scaled::daemon {
 
-using CameraOpener = std::function<core::Result<std::unique_ptr<drivers::LiveCamera>>(
-    const drivers::CameraOptions&)>;
+using CameraOpener = std::function<core::Result<std::unique_ptr<drivers::camera::LiveCamera>>(
+    const drivers::camera::CameraOptions&)>;
 
-class LiveSource final : public drivers::LiveCamera {
+class LiveSource final : public drivers::camera::LiveCamera {
 public:
-    LiveSource(CameraOpener opener, drivers::CameraOptions options, std::string name,
-               std::unique_ptr<drivers::LiveCamera> camera, std::string missing_reason);
+    LiveSource(CameraOpener opener, drivers::camera::CameraOptions options, std::string name,
+               std::unique_ptr<drivers::camera::LiveCamera> camera, std::string missing_reason);
 
-    [[nodiscard]] const drivers::SequenceInfo& info() const override { return info_; }
-    core::Result<bool> next(drivers::Frame& frame) override;
+    [[nodiscard]] const drivers::source::SequenceInfo& info() const override { return info_; }
+    core::Result<bool> next(drivers::source::Frame& frame) override;
     [[nodiscard]] std::string describe() const override;
     [[nodiscard]] std::string mode() const override;
     core::Result<bool> reopen() override;
@@ -45,18 +45,18 @@ public:
 
 private:
     CameraOpener opener_;
-    drivers::CameraOptions options_;
+    drivers::camera::CameraOptions options_;
     std::string name_;  // "v4l2:vivid"
-    std::unique_ptr<drivers::LiveCamera> camera_;
+    std::unique_ptr<drivers::camera::LiveCamera> camera_;
     std::string missing_reason_;
-    drivers::SequenceInfo info_;
+    drivers::source::SequenceInfo info_;
     // camera_ is replaced by the capture thread (reopen) while stop() may come
     // from the main thread.
     std::mutex mutex_;
     std::atomic<bool> stopped_{false};
 };
 
-drivers::CameraOptions cameraOptions(const DaemonConfig& config);
+drivers::camera::CameraOptions cameraOptions(const DaemonConfig& config);
 
 // Opens the configured live camera. A missing device gives a LiveSource
 // without a camera (`missing` says why, for one log line); other errors are

@@ -53,7 +53,7 @@ public:
         log_.frameEvent(e);
     }
 
-    void onDetection(const detector::DetectionResult& r, std::uint64_t epoch,
+    void onDetection(const drivers::detector::DetectionResult& r, std::uint64_t epoch,
                      double latency_ms) override {
         const std::size_t n = std::min(r.detections.size(), boxes_.size());
         for (std::size_t i = 0; i < n; ++i) {

@@ -11,7 +11,7 @@
 #include <scaled/daemon/json_write.h>
 #include <scaled/daemon/log_service.h>
 #include <scaled/daemon/protocol.h>
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 namespace scaled::daemon {
 
@@ -255,13 +255,13 @@ Result<std::unique_ptr<LogService>> LogService::create(const LogConfig& config, 
         for (auto& b : s->buf_) {
             b = std::make_unique<char[]>(s->half_bytes_);  // NOLINT(*-avoid-c-arrays)
         }
-        drivers::FieldLogWriterOptions options;
+        drivers::fieldlog::FieldLogWriterOptions options;
         options.dir = config.dir;
         options.max_file_bytes = config.max_file_bytes;
         options.max_total_bytes = config.max_total_bytes;
         options.open_file = std::move(hooks.open_file);
         options.utc_now_s = std::move(hooks.utc_now_s);
-        auto writer = drivers::FieldLogWriter::open(std::move(options));
+        auto writer = drivers::fieldlog::FieldLogWriter::open(std::move(options));
         const std::lock_guard io(s->io_mutex_);
         if (writer) {
             s->writer_ = std::move(*writer);

@@ -6,7 +6,7 @@
 
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pose.h>
-#include <scaled/detector/thread_priority.h>
+#include <scaled/drivers/detector/thread_priority.h>
 #include <scaled/drivers/imu/map_gravity.h>
 
 namespace scaled::daemon {
@@ -85,7 +85,7 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
         p->status_.gyro.present = true;
         p->status_.gyro.source = p->gyro_feed_.source();
     }
-    auto tracker = vision::MonoTracker::create(*camera, config.pipeline.tracker);
+    auto tracker = drivers::vision::MonoTracker::create(*camera, config.pipeline.tracker);
     if (!tracker) {
         return tracker.error();
     }
@@ -237,7 +237,8 @@ std::optional<core::Error> Pipeline::failure() const {
     return failure_;
 }
 
-void Pipeline::reload(core::PriorTable priors, std::unique_ptr<detector::ObjectDetector> detector,
+void Pipeline::reload(core::PriorTable priors,
+                      std::unique_ptr<drivers::detector::ObjectDetector> detector,
                       const DetectionSchedule& schedule) {
     const std::lock_guard lock(job_mutex_);
     reload_priors_ = std::move(priors);
@@ -522,7 +523,7 @@ void Pipeline::trackingLoop() {
             publishStatus(false);
             continue;
         }
-        drivers::Frame& frame = item.frame;
+        drivers::source::Frame& frame = item.frame;
         if (item.restart || (have_last && frame.t_ns <= last_t_ns)) {
             // A discontinuity (replay loop): the map cannot continue.
             tracker.reset();
@@ -576,7 +577,8 @@ void Pipeline::trackingLoop() {
             need_gravity = false;
         }
         const std::int64_t t0 = monotonicNowNs();
-        const vision::TrackStats stats = tracker.processFrame(frame.t_ns, frame.gray, imu_window);
+        const drivers::vision::TrackStats stats =
+            tracker.processFrame(frame.t_ns, frame.gray, imu_window);
         const double ms = msBetween(t0, monotonicNowNs());
         ++tracked;
         const bool ok = stats.health == core::slam::SlamHealth::kOk;
@@ -798,7 +800,7 @@ bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t ep
 void Pipeline::detectionLoop() {
     // Below the tracker and the socket (thread_priority.h); the daemon made
     // OpenCV's workers at this value before the pipeline started.
-    if (auto ok = detector::setThreadNice(config_.pipeline.detector.nice);
+    if (auto ok = drivers::detector::setThreadNice(config_.pipeline.detector.nice);
         !ok && events_ != nullptr) {
         events_->onError("detector priority", ok.error().message);
     }
@@ -806,7 +808,7 @@ void Pipeline::detectionLoop() {
     if (!job.snapshot.reserve(config_.pipeline.tracker.slam.max_features)) {
         return;
     }
-    detector::DetectionResult boxes;
+    drivers::detector::DetectionResult boxes;
     std::vector<core::Detection> dets(
         static_cast<std::size_t>(std::max(1, config_.pipeline.detector.max_detections)));
     std::vector<core::ObservationRecord> records(kMaxRecords);
@@ -894,7 +896,7 @@ void Pipeline::detectionLoop() {
             estimator.reset();
             estimator_epoch = job.snapshot.epoch();
         }
-        const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+        const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
         const std::int64_t update_start_ns = monotonicNowNs();
         const core::UpdateStats u =
             estimator.update(job.snapshot.view(), std::span(dets.data(), n), records);

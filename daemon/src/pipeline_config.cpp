@@ -18,8 +18,8 @@
 
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/detector/thread_priority.h>
-#include <scaled/drivers/toml_detail.h>
+#include <scaled/drivers/detector/thread_priority.h>
+#include <scaled/drivers/priors/toml_read.h>
 
 #include "config_registry.h"
 
@@ -28,8 +28,8 @@ namespace scaled::daemon {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
-using drivers::toml_detail::num;
-using drivers::toml_detail::show;
+using drivers::priors::tomlread::num;
+using drivers::priors::tomlread::show;
 
 namespace config_detail {
 
@@ -193,8 +193,8 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         real("tracker", "gyro_bias_time_s", &c.tracker.gyro_bias_time_s, 0, 3600),
         // [detector]
         choice("detector", "family", &d.family,
-               {{"yolox", detector::ModelFamily::kYolox},
-                {"darknet", detector::ModelFamily::kDarknet}}),
+               {{"yolox", drivers::detector::ModelFamily::kYolox},
+                {"darknet", drivers::detector::ModelFamily::kDarknet}}),
         path("detector", "model", &d.model_path),
         path("detector", "weights", &d.weights_path),
         path("detector", "names", &d.names_path),
@@ -203,7 +203,8 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         real("detector", "nms_iou_threshold", &d.nms_iou_threshold, 0, 1, Bound::kOpen),
         stringList("detector", "classes", &d.classes),
         integer("detector", "threads", &d.threads, 0, 256),
-        integer("detector", "nice", &d.nice, detector::kMinNice, detector::kMaxNice),
+        integer("detector", "nice", &d.nice, drivers::detector::kMinNice,
+                drivers::detector::kMaxNice),
         integer("detector", "max_detections", &d.max_detections, 1, 10000),
         // [detection]
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
@@ -375,7 +376,8 @@ Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where, Proble
                    "must be odd (got " + std::to_string(c.tracker.patch_size) + ")")) {
         return check.result();
     }
-    if (auto v = vision::validate(c.tracker); !v && check.fail({"tracker"}, v.error().message)) {
+    if (auto v = drivers::vision::validate(c.tracker);
+        !v && check.fail({"tracker"}, v.error().message)) {
         return check.result();
     }
     const auto& o = c.estimator.objects;
@@ -406,7 +408,8 @@ Result<bool> applyFields(const toml::table& root, std::string_view source,
         }
     }
     const auto error = [&](const toml::node* n, const std::string& key, const std::string& what) {
-        return drivers::toml_detail::errorAt(ErrorCode::kInvalidArgument, source, n, key, what);
+        return drivers::priors::tomlread::errorAt(ErrorCode::kInvalidArgument, source, n, key,
+                                                  what);
     };
     const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
     Checker check(nowhere, all);
@@ -469,7 +472,7 @@ Result<bool> applyAssignments(const std::vector<std::string>& assignments,
                               const std::vector<Field>& fields,
                               std::vector<std::pair<std::string, std::string>>& set_by,
                               ProblemList* all) {
-    using drivers::toml_detail::parse;
+    using drivers::priors::tomlread::parse;
     const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
     Checker check(nowhere, all);
     std::error_code ec;

@@ -80,11 +80,7 @@ ReportHub::ReportHub(std::size_t grid_bins) : wake_fd_(eventfd(0, EFD_NONBLOCK |
     scale_.fault.reserve(256);
 }
 
-ReportHub::~ReportHub() {
-    if (wake_fd_ >= 0) {
-        close(wake_fd_);
-    }
-}
+ReportHub::~ReportHub() = default;
 
 void ReportHub::publishScale(const ScaleReport& report, std::span<const double> grid_d,
                              std::span<const double> log_p) {
@@ -117,10 +113,10 @@ void ReportHub::publishScale(const ScaleReport& report, std::span<const double> 
 }
 
 void ReportHub::wake() const {
-    if (wake_fd_ >= 0) {
+    if (wake_fd_.isValid()) {
         const std::uint64_t one = 1;
         // Non-blocking: a full counter (never in practice) only means "already awake".
-        [[maybe_unused]] const ssize_t n = write(wake_fd_, &one, sizeof one);
+        [[maybe_unused]] const ssize_t n = write(wake_fd_.get(), &one, sizeof one);
     }
 }
 
@@ -200,9 +196,9 @@ void ReportHub::objects(ObjectsSnapshot& out) const {
 }
 
 void ReportHub::consumeWake() const {
-    if (wake_fd_ >= 0) {
+    if (wake_fd_.isValid()) {
         std::uint64_t v = 0;
-        [[maybe_unused]] const ssize_t n = read(wake_fd_, &v, sizeof v);
+        [[maybe_unused]] const ssize_t n = read(wake_fd_.get(), &v, sizeof v);
     }
 }
 

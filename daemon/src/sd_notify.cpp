@@ -53,24 +53,20 @@ SdNotifier::SdNotifier() {
     address_len_ = static_cast<unsigned>(offsetof(sockaddr_un, sun_path) + n);
     static_assert(sizeof address_ >= sizeof(sockaddr_un));
     std::memcpy(address_, &addr, sizeof addr);
-    fd_ = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    fd_.reset(socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0));
 }
 
-SdNotifier::~SdNotifier() {
-    if (fd_ >= 0) {
-        close(fd_);
-    }
-}
+SdNotifier::~SdNotifier() = default;
 
 bool SdNotifier::notify(std::string_view state) const {
-    if (fd_ < 0) {
+    if (!fd_.isValid()) {
         return false;
     }
     // Never block: if the manager does not read its socket (its queue holds
     // net.unix.max_dgram_qlen datagrams), a notification is dropped rather
     // than stalling the main loop, which must stay free to handle SIGTERM.
     const ssize_t sent =
-        sendto(fd_, state.data(), state.size(), MSG_NOSIGNAL | MSG_DONTWAIT,
+        sendto(fd_.get(), state.data(), state.size(), MSG_NOSIGNAL | MSG_DONTWAIT,
                reinterpret_cast<const sockaddr*>(address_),  // NOLINT: sockaddr API
                address_len_);
     return sent == static_cast<ssize_t>(state.size());

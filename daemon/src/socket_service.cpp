@@ -69,7 +69,7 @@ int unreadBytes(int fd) {
 
 struct SocketService::Loop {
     struct Client {
-        drivers::UniqueFd fd;
+        drivers::base::UniqueFd fd;
         std::string in;           // received, not handled yet: in[in_off, size)
         std::size_t in_off = 0;   // (complete lines first, then an incomplete one)
         bool discarding = false;  // skipping the rest of an oversize line
@@ -332,7 +332,7 @@ void SocketService::Loop::refreshPose() {
 
 void SocketService::Loop::acceptAll() {
     for (;;) {
-        auto accepted = drivers::acceptClient(svc.listener_.fd.get(), svc.path_.string());
+        auto accepted = drivers::ipc::acceptClient(svc.listener_.fd.get(), svc.path_.string());
         if (!accepted) {
             accept_paused = true;  // e.g. EMFILE: rest instead of spinning
             return;
@@ -709,7 +709,8 @@ void SocketService::Loop::detach(Client& c) {
 // --- SocketService ------------------------------------------------------------
 
 SocketService::SocketService(const SocketConfig& config, ReportHub& hub, std::string release,
-                             drivers::ListeningSocket listener, drivers::UniqueFd stop_fd)
+                             drivers::ipc::ListeningSocket listener,
+                             drivers::base::UniqueFd stop_fd)
     : config_(config),
       hub_(hub),
       release_(std::move(release)),
@@ -752,21 +753,21 @@ core::Result<std::unique_ptr<SocketService>> SocketService::create(const SocketC
                          "socket: pose_rate_hz must be a finite number >= 0 (got " +
                              std::to_string(config.pose_rate_hz) + ")");
     }
-    drivers::UniqueFd stop_fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
+    drivers::base::UniqueFd stop_fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
     if (!stop_fd.isValid()) {
         return makeError(ErrorCode::kIo,
                          "socket: cannot create an eventfd: " +
                              std::error_code(errno, std::generic_category()).message());
     }
-    auto activated = drivers::takeActivatedSocket(3);
+    auto activated = drivers::ipc::takeActivatedSocket(3);
     if (!activated) {
         return activated.error();
     }
-    drivers::ListeningSocket listener;
+    drivers::ipc::ListeningSocket listener;
     if (activated->has_value()) {
         listener = std::move(**activated);
     } else {
-        auto made = drivers::listenUnix({config.path, config.mode, config.group});
+        auto made = drivers::ipc::listenUnix({config.path, config.mode, config.group});
         if (!made) {
             return made.error();
         }
@@ -802,7 +803,7 @@ void SocketService::stop() {
         [[maybe_unused]] const ssize_t n = ::write(stop_fd_.get(), &one, sizeof one);
         thread_.join();
     }
-    drivers::removeSocketFile(listener_);
+    drivers::ipc::removeSocketFile(listener_);
     listener_.fd.reset();
 }
 

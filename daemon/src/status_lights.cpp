@@ -173,7 +173,7 @@ core::Result<std::unique_ptr<StatusLights>> StatusLights::open(const GpioConfig&
     if (auto ok = checkLines(config); !ok) {
         return ok.error();
     }
-    drivers::GpioOutputOptions options;
+    drivers::gpio::GpioOutputOptions options;
     options.chip = config.chip;
     for (const int line : {config.status_line, config.heartbeat_line}) {
         if (line >= 0) {
@@ -182,7 +182,7 @@ core::Result<std::unique_ptr<StatusLights>> StatusLights::open(const GpioConfig&
     }
     options.active_low = config.active_low;
     options.consumer = config.consumer;
-    auto outputs = drivers::openGpioOutputs(options);
+    auto outputs = drivers::gpio::openGpioOutputs(options);
     if (!outputs) {
         return outputs.error();
     }
@@ -190,7 +190,7 @@ core::Result<std::unique_ptr<StatusLights>> StatusLights::open(const GpioConfig&
 }
 
 core::Result<std::unique_ptr<StatusLights>> StatusLights::create(
-    std::unique_ptr<drivers::GpioOutputs> outputs, const GpioConfig& config) {
+    std::unique_ptr<drivers::gpio::GpioOutputs> outputs, const GpioConfig& config) {
     if (!outputs) {
         return makeError(ErrorCode::kInvalidArgument, "status LEDs: no GPIO outputs given");
     }
@@ -201,8 +201,8 @@ core::Result<std::unique_ptr<StatusLights>> StatusLights::create(
         new StatusLights(std::move(outputs), config, steadyNowNs()));
 }
 
-StatusLights::StatusLights(std::unique_ptr<drivers::GpioOutputs> outputs, const GpioConfig& config,
-                           std::int64_t now_ns)
+StatusLights::StatusLights(std::unique_ptr<drivers::gpio::GpioOutputs> outputs,
+                           const GpioConfig& config, std::int64_t now_ns)
     : outputs_(std::move(outputs)), config_(config), pattern_start_ns_(now_ns) {
     int next = 0;
     std::string lines;

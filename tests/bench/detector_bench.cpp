@@ -11,7 +11,7 @@
 
 #include <benchmark/benchmark.h>
 
-#include <scaled/detector/dnn_detector.h>
+#include <scaled/drivers/detector/dnn_detector.h>
 
 #include "shared_dir.h"
 
@@ -20,27 +20,28 @@ namespace {
 using namespace scaled;
 
 void BM_Detect(benchmark::State& state) {
-    const auto family =
-        state.range(0) == 0 ? detector::ModelFamily::kYolox : detector::ModelFamily::kDarknet;
-    const auto model = test::sharedModel(
-        family == detector::ModelFamily::kYolox ? "yolox_nano.onnx" : "yolo-fastest-1.1-xl.cfg");
+    const auto family = state.range(0) == 0 ? drivers::detector::ModelFamily::kYolox
+                                            : drivers::detector::ModelFamily::kDarknet;
+    const auto model = test::sharedModel(family == drivers::detector::ModelFamily::kYolox
+                                             ? "yolox_nano.onnx"
+                                             : "yolo-fastest-1.1-xl.cfg");
     const auto image_path = test::sharedDataset("redkitchen") / "rgb" / "000000.jpg";
     if (!std::filesystem::is_regular_file(model) || !std::filesystem::is_regular_file(image_path)) {
         state.SkipWithError("../shared models or redkitchen not found (set SCALED_SHARED_DIR)");
         return;
     }
-    detector::DetectorConfig config;
+    drivers::detector::DetectorConfig config;
     config.family = family;
     config.model_path = model;
     config.input_size_px = static_cast<int>(state.range(1));
     config.threads = static_cast<int>(state.range(2));
-    auto det = detector::DnnDetector::create(config);
+    auto det = drivers::detector::DnnDetector::create(config);
     if (!det) {
         state.SkipWithError(det.error().message.c_str());
         return;
     }
     const cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
-    detector::DetectionResult result;
+    drivers::detector::DetectionResult result;
     double pre = 0;
     double forward = 0;
     double post = 0;
@@ -59,7 +60,7 @@ void BM_Detect(benchmark::State& state) {
     state.counters["post_ms"] = post / n;
     state.counters["pre_post_pct"] = forward > 0 ? 100 * (pre + post) / forward : 0;
     state.counters["boxes"] = static_cast<double>(result.detections.size());
-    state.SetLabel(std::string(detector::toString(family)) + " " +
+    state.SetLabel(std::string(drivers::detector::toString(family)) + " " +
                    std::to_string(config.input_size_px) + " threads " +
                    std::to_string(config.threads));
 }

@@ -13,13 +13,14 @@
 
 #include <benchmark/benchmark.h>
 
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/dataset/dataset.h>
 #include <scaled/drivers/imu/simulated_gyro.h>
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/scene.h>
-#include <scaled/synth/trajectory.h>
-#include <scaled/vision/corner_detector.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/source/frame_source.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/scene.h>
+#include <scaled/drivers/synth/trajectory.h>
+#include <scaled/drivers/vision/corner_detector.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 #include "shared_dir.h"
 
@@ -44,11 +45,11 @@ const Sequence& syntheticSequence() {
         core::CameraIntrinsics k{500, 500, 320, 240, 0, 0, 640, 480};
         s.camera = std::make_unique<core::PinholeRadialCamera>(
             core::PinholeRadialCamera::create(k).value());
-        auto scene = synth::Scene::create();
-        synth::RenderOptions ro;
+        auto scene = drivers::synth::Scene::create();
+        drivers::synth::RenderOptions ro;
         ro.noise_sigma = 2.0;
-        synth::Renderer renderer(*scene, ro);
-        const auto frames = synth::Trajectory::create()->makeSequence(kFrames);
+        drivers::synth::Renderer renderer(*scene, ro);
+        const auto frames = drivers::synth::Trajectory::create()->makeSequence(kFrames);
         for (std::size_t i = 0; i < frames.size(); ++i) {
             cv::Mat g;
             renderer.render(*s.camera, frames[i].pose_CtoW, g, nullptr, i);
@@ -61,7 +62,7 @@ const Sequence& syntheticSequence() {
 }
 
 std::unique_ptr<Sequence> loadRedkitchen(int stride) {
-    auto src = drivers::openDataset(test::sharedDataset("redkitchen"));
+    auto src = drivers::dataset::openDataset(test::sharedDataset("redkitchen"));
     if (!src) {
         return nullptr;
     }
@@ -69,7 +70,7 @@ std::unique_ptr<Sequence> loadRedkitchen(int stride) {
     std::vector<core::Mat3> R_gt;
     s->camera = std::make_unique<core::PinholeRadialCamera>(
         core::PinholeRadialCamera::create((*src)->info().intrinsics).value());
-    drivers::Frame f;
+    drivers::source::Frame f;
     for (int i = 0; i < kFrames; ++i) {
         if (!(*src)->seek(static_cast<std::size_t>(i) * static_cast<std::size_t>(stride))) {
             return nullptr;
@@ -111,7 +112,7 @@ const Sequence* redkitchen10HzSequence() {
 void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue21 = false,
                 bool gyro = false) {
     const int n = static_cast<int>(state.range(0));
-    vision::TrackerConfig config;
+    drivers::vision::TrackerConfig config;
     if (before_issue21) {
         // No pyramid, no relocalisation (no descriptors kept): the tracker's
         // work before issue 21, for the cost comparison.
@@ -122,7 +123,7 @@ void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue2
     config.slam.min_visible = n;
     config.slam.max_features = n + n / 2;
     config.max_new_per_frame = std::max(10, n / 4);
-    auto tracker = vision::MonoTracker::create(*seq.camera, config);
+    auto tracker = drivers::vision::MonoTracker::create(*seq.camera, config);
     core::slam::ImuWindow imu;
     imu.samples = seq.gyro;
     std::size_t i = 0;
@@ -185,12 +186,12 @@ void BM_TrackerRedkitchenGyro(benchmark::State& state) {
 // 640x480, a mask that allows everywhere, a few new corners wanted.
 void runCorners(benchmark::State& state, const cv::Mat& gray) {
     cv::setNumThreads(1);
-    vision::CornerConfig config;
+    drivers::vision::CornerConfig config;
     config.max_corners = static_cast<int>(state.range(0));
     const cv::Mat mask(gray.size(), CV_8UC1, cv::Scalar(255));
     std::vector<core::Vec2> corners;
     for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
-        vision::detectCorners(gray, mask, config, corners);
+        drivers::vision::detectCorners(gray, mask, config, corners);
         benchmark::DoNotOptimize(corners.data());
     }
     state.counters["corners"] = static_cast<double>(corners.size());

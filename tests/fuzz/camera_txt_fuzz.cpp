@@ -7,7 +7,7 @@
 #include <string_view>
 
 #include <scaled/core/camera/pinhole_radial.h>
-#include <scaled/drivers/dataset_tum.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
 
 #include "fuzz_support.h"
 
@@ -16,8 +16,8 @@ using scaled::fuzz::isFinite;
 
 // NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const auto k =
-        scaled::drivers::parseTumCameraFile(scaled::fuzz::asText(data, size), "d/camera.txt");
+    const auto k = scaled::drivers::dataset::parseTumCameraFile(scaled::fuzz::asText(data, size),
+                                                                "d/camera.txt");
     if (!k) {
         check(scaled::fuzz::startsWith(k.error().message, "d/camera.txt"),
               "an error names the file");

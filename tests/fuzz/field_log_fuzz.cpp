@@ -11,7 +11,7 @@
 #include <string_view>
 #include <vector>
 
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 #include "field_log_report.h"
 #include "fuzz_support.h"
@@ -44,8 +44,8 @@ void checkRows(const std::vector<std::string>& rows, const char* what) {
 // NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
-    scaled::drivers::FieldLogContents contents;
-    scaled::drivers::readFieldLogText(text, "log/scaled-fuzz.jsonl", contents);
+    scaled::drivers::fieldlog::FieldLogContents contents;
+    scaled::drivers::fieldlog::readFieldLogText(text, "log/scaled-fuzz.jsonl", contents);
     check(contents.files.size() == 1, "one file read");
     std::size_t newlines = 0;
     for (const char c : text) {

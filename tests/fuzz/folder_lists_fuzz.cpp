@@ -10,19 +10,19 @@
 #include <string_view>
 #include <vector>
 
-#include <scaled/drivers/dataset_folder.h>
-#include <scaled/drivers/dataset_kitti.h>
+#include <scaled/drivers/dataset/dataset_folder.h>
+#include <scaled/drivers/dataset/dataset_kitti.h>
 
 #include "fuzz_support.h"
 
-using scaled::drivers::naturalLess;
+using scaled::drivers::dataset::naturalLess;
 using scaled::fuzz::check;
 
 // NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
 
-    const auto times = scaled::drivers::parseKittiTimes(text, "f/times.txt");
+    const auto times = scaled::drivers::dataset::parseKittiTimes(text, "f/times.txt");
     if (!times) {
         check(scaled::fuzz::startsWith(times.error().message, "f/times.txt:"),
               "an error names the file");
@@ -38,7 +38,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         pos = end + 1;
     }
     for (const std::string_view a : names) {
-        (void)scaled::drivers::isImageFileName(std::string(a));
+        (void)scaled::drivers::dataset::isImageFileName(std::string(a));
         check(!naturalLess(a, a), "natural order is irreflexive");
     }
     // Every pair and (for small inputs) every triple: asymmetric, transitive,

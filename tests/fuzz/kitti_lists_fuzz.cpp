@@ -8,7 +8,7 @@
 #include <Eigen/Core>
 #include <Eigen/LU>
 
-#include <scaled/drivers/dataset_kitti.h>
+#include <scaled/drivers/dataset/dataset_kitti.h>
 
 #include "fuzz_support.h"
 
@@ -31,7 +31,7 @@ void checkError(const T& result, std::string_view file) {
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
 
-    const auto times = scaled::drivers::parseKittiTimes(text, "s/times.txt");
+    const auto times = scaled::drivers::dataset::parseKittiTimes(text, "s/times.txt");
     checkError(times, "s/times.txt:");
     if (times) {
         for (std::size_t i = 1; i < times->size(); ++i) {
@@ -40,7 +40,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         }
     }
 
-    const auto poses = scaled::drivers::parseKittiPoses(text, "s/poses.txt");
+    const auto poses = scaled::drivers::dataset::parseKittiPoses(text, "s/poses.txt");
     checkError(poses, "s/poses.txt:");
     if (poses) {
         for (const auto& pose : *poses) {
@@ -53,7 +53,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
 
     for (const std::string_view key : {"P0", "P2"}) {
-        const auto P = scaled::drivers::parseKittiProjection(text, "s/calib.txt", key);
+        const auto P = scaled::drivers::dataset::parseKittiProjection(text, "s/calib.txt", key);
         checkError(P, "s/calib.txt");
         if (P) {
             for (const double x : *P) {

@@ -8,7 +8,7 @@
 #include <string_view>
 
 #include <scaled/core/scale/height_prior.h>
-#include <scaled/drivers/priors_toml.h>
+#include <scaled/drivers/priors/priors_toml.h>
 
 #include "fuzz_support.h"
 
@@ -17,7 +17,8 @@ using scaled::fuzz::isFinite;
 
 // NOLINTNEXTLINE(readability-identifier-naming): the name libFuzzer calls
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const auto table = scaled::drivers::parsePriors(scaled::fuzz::asText(data, size), "fuzz.toml");
+    const auto table =
+        scaled::drivers::priors::parsePriors(scaled::fuzz::asText(data, size), "fuzz.toml");
     if (!table) {
         check(scaled::fuzz::startsWith(table.error().message, "fuzz.toml"),
               "an error names the source");

@@ -11,8 +11,8 @@
 
 #include <Eigen/Core>
 
-#include <scaled/drivers/dataset_tum.h>
-#include <scaled/drivers/trajectory_io.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
+#include <scaled/drivers/dataset/trajectory_io.h>
 
 #include "fuzz_support.h"
 
@@ -40,7 +40,7 @@ void checkError(const T& result, std::string_view file) {
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string_view text = scaled::fuzz::asText(data, size);
 
-    const auto list = scaled::drivers::parseTumImageList(text, "d/rgb.txt");
+    const auto list = scaled::drivers::dataset::parseTumImageList(text, "d/rgb.txt");
     checkError(list, "d/rgb.txt:");
     if (list) {
         for (std::size_t i = 0; i < list->size(); ++i) {
@@ -52,7 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         }
     }
 
-    const auto gt = scaled::drivers::parseTumTrajectory(text, "d/groundtruth.txt");
+    const auto gt = scaled::drivers::dataset::parseTumTrajectory(text, "d/groundtruth.txt");
     checkError(gt, "d/groundtruth.txt:");
     if (gt) {
         for (std::size_t i = 0; i < gt->size(); ++i) {
@@ -63,13 +63,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         }
     }
 
-    const auto g = scaled::drivers::parseGravityFile(text, "d/gravity.txt");
+    const auto g = scaled::drivers::dataset::parseGravityFile(text, "d/gravity.txt");
     checkError(g, "d/gravity.txt");
     if (g) {
         check(std::abs(g->cast<double>().norm() - 1) < 1e-9, "gravity is a unit vector");
     }
 
-    const auto accel = scaled::drivers::parseTumAccelerometer(text, "d/accelerometer.txt");
+    const auto accel = scaled::drivers::dataset::parseTumAccelerometer(text, "d/accelerometer.txt");
     checkError(accel, "d/accelerometer.txt:");
     if (accel) {
         for (std::size_t i = 0; i < accel->size(); ++i) {

@@ -14,7 +14,8 @@
 #include <gtest/gtest.h>
 
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "daemon_harness.h"
 #include "shared_data.h"
@@ -137,7 +138,7 @@ TEST(DaemonReplay, RedkitchenHoldsTheTruthAndExitsCleanly) {
     // configuration gives the same camera positions (compared by their
     // distance from the map's origin, which the gravity-aligned frame keeps).
     ASSERT_GT(pose_norm.size(), 100u) << "too few POSE lines";
-    auto source = drivers::openDataset(dataset);
+    auto source = drivers::dataset::openDataset(dataset);
     ASSERT_TRUE(source.ok()) << source.error().message;
     auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
     ASSERT_TRUE(camera.ok());

@@ -706,7 +706,7 @@ TEST_F(DaemonTest, StartupFailuresExitWithSysexitsCodes) {
 TEST_F(DaemonTest, SocketActivationServesTheInheritedSocket) {
     const fs::path activated = tmp_.path() / "act.sock";
     Fd listener = listenUnix(activated);
-    ASSERT_TRUE(listener.valid()) << activated.string();
+    ASSERT_TRUE(listener.isValid()) << activated.string();
     writeFile(paths().config, daemonConfigText(paths(), kPriors));
     DaemonOptions opt;
     opt.args = {"--source", "sim"};

@@ -15,10 +15,11 @@
 
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/slam/slam_snapshot.h>
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/source/frame_source.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 #include "shared_data.h"
 
@@ -31,7 +32,7 @@ constexpr int kDelayFrames = 6;  // about 200 ms at 30 Hz: a slow detector on a 
 
 struct Pending {
     core::slam::SlamSnapshot snapshot;
-    detector::DetectionResult boxes;
+    drivers::detector::DetectionResult boxes;
     std::int64_t due_frame = 0;
 };
 
@@ -43,30 +44,30 @@ core::ScaleEstimator makeEstimator(const core::PriorTable& priors,
 }
 
 int updateWith(core::ScaleEstimator& estimator, const core::FrameSnapshot& snapshot,
-               const detector::DetectionResult& boxes) {
+               const drivers::detector::DetectionResult& boxes) {
     std::vector<core::Detection> dets(boxes.detections.size());
-    const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+    const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
     return estimator.update(snapshot, std::span(dets.data(), n)).observations;
 }
 
 TEST(LateDetectionRedkitchen, SnapshotGivesTheSynchronousPosterior) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SCALED_REQUIRE_MODEL(model, "yolox_nano.onnx");
-    auto source = drivers::openDataset(dir);
+    auto source = drivers::dataset::openDataset(dir);
     ASSERT_TRUE(source.ok()) << source.error().message;
     const auto& info = (*source)->info();
     auto camera = core::PinholeRadialCamera::create(info.intrinsics);
     ASSERT_TRUE(camera.ok());
-    auto priors =
-        drivers::loadPriorsFile(std::filesystem::path(SCALED_SOURCE_DIR) / "config/priors.toml");
+    auto priors = drivers::priors::loadPriorsFile(std::filesystem::path(SCALED_SOURCE_DIR) /
+                                                  "config/priors.toml");
     ASSERT_TRUE(priors.ok()) << priors.error().message;
-    vision::TrackerConfig tracker_config;
-    auto tracker = vision::MonoTracker::create(*camera, tracker_config);
+    drivers::vision::TrackerConfig tracker_config;
+    auto tracker = drivers::vision::MonoTracker::create(*camera, tracker_config);
     ASSERT_TRUE(tracker.ok()) << tracker.error().message;
-    detector::DetectorConfig dc;
+    drivers::detector::DetectorConfig dc;
     dc.model_path = model;
     dc.input_size_px = 416;
-    auto det = detector::DnnDetector::create(dc);
+    auto det = drivers::detector::DnnDetector::create(dc);
     ASSERT_TRUE(det.ok()) << det.error().message;
 
     core::ScaleEstimator sync = makeEstimator(*priors, *camera);
@@ -80,7 +81,7 @@ TEST(LateDetectionRedkitchen, SnapshotGivesTheSynchronousPosterior) {
     int naive_obs = 0;
     int delivered = 0;
 
-    drivers::Frame frame;
+    drivers::source::Frame frame;
     for (int i = 0; i < kFrames; ++i) {
         auto got = (*source)->next(frame);
         ASSERT_TRUE(got.ok()) << got.error().message;

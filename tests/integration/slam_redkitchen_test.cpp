@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <scaled/drivers/dataset/dataset.h>
+
 #include "shared_data.h"
 #include "slam_run.h"
 
@@ -17,7 +19,7 @@ namespace {
 // slam-run's library over redkitchen with these options.
 core::Result<SlamRunResult> runRedkitchen(const std::filesystem::path& dir,
                                           const SlamRunOptions& opt) {
-    auto source = drivers::openDataset(dir);
+    auto source = drivers::dataset::openDataset(dir);
     if (!source) {
         return source.error();
     }

@@ -14,10 +14,10 @@
 
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/slam/quaternion.h>
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/scene.h>
-#include <scaled/synth/trajectory.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/scene.h>
+#include <scaled/drivers/synth/trajectory.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 namespace scaled {
 namespace {
@@ -53,10 +53,10 @@ struct SyntheticRun {
 // Frames of the rendered sequence: its rate, and a range rendered black (a
 // covered lens) that the tracker must come back from.
 struct SyntheticFrames {
-    double fps = synth::kDefaultFps;
+    double fps = drivers::synth::kDefaultFps;
     int blank_first = -1;
     int blank_end = -1;
-    double speed_scale = 1;  // synth::TrajectoryConfig::speed_scale
+    double speed_scale = 1;  // drivers::synth::TrajectoryConfig::speed_scale
     // A simulated gyro at this rate (0: none): the trajectory's angular rate
     // (camera frame) plus white noise of gyro_noise_density and a constant
     // bias of gyro_bias_radps per axis.
@@ -67,7 +67,7 @@ struct SyntheticFrames {
 
 // The gyro samples of a trajectory from 0 to duration_s: the body rate over
 // each sample period from the poses at its ends.
-std::vector<core::ImuSample> simulateGyro(const synth::Trajectory& traj, double duration_s,
+std::vector<core::ImuSample> simulateGyro(const drivers::synth::Trajectory& traj, double duration_s,
                                           const SyntheticFrames& f, std::uint64_t seed) {
     std::vector<core::ImuSample> out;
     std::mt19937 rng(static_cast<std::uint32_t>(seed + 77));
@@ -92,8 +92,8 @@ std::vector<core::ImuSample> simulateGyro(const synth::Trajectory& traj, double 
 // Renders and tracks n frames. known_depth: the first map's features get their
 // true depth (scale fixed, metric) with a 2% prior.
 SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
-                          const vision::TrackerConfig& base = {}, Scalar tracker_focal_scale = 1,
-                          const SyntheticFrames& frames = {}) {
+                          const drivers::vision::TrackerConfig& base = {},
+                          Scalar tracker_focal_scale = 1, const SyntheticFrames& frames = {}) {
     SyntheticRun out;
     const auto cam = syntheticCamera();
     // The camera the tracker believes in (the renderer always uses cam).
@@ -101,15 +101,15 @@ SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
     believed.fx *= tracker_focal_scale;
     believed.fy *= tracker_focal_scale;
     const auto tracker_cam = core::PinholeRadialCamera::create(believed).value();
-    auto scene = synth::Scene::create();
+    auto scene = drivers::synth::Scene::create();
     EXPECT_TRUE(scene.ok());
-    synth::RenderOptions ro;
+    drivers::synth::RenderOptions ro;
     ro.noise_sigma = 2.0;
     ro.noise_seed = seed;
-    synth::Renderer renderer(*scene, ro);
-    synth::TrajectoryConfig tc;
+    drivers::synth::Renderer renderer(*scene, ro);
+    drivers::synth::TrajectoryConfig tc;
     tc.speed_scale = frames.speed_scale;
-    auto traj = synth::Trajectory::create(tc);
+    auto traj = drivers::synth::Trajectory::create(tc);
     EXPECT_TRUE(traj.ok());
     const auto seq = traj->makeSequence(n_frames, frames.fps);
     std::vector<core::ImuSample> gyro;
@@ -119,12 +119,12 @@ SyntheticRun runSynthetic(int n_frames, std::uint64_t seed, bool known_depth,
     core::slam::ImuWindow imu;
     imu.samples = gyro;
 
-    vision::TrackerConfig config = base;
+    drivers::vision::TrackerConfig config = base;
     config.slam.seed = seed;
-    auto tracker = vision::MonoTracker::create(tracker_cam, config);
+    auto tracker = drivers::vision::MonoTracker::create(tracker_cam, config);
     EXPECT_TRUE(tracker.ok());
     const core::CameraPose T0 = seq.front().pose_CtoW;
-    tracker->setGravityDownC(T0.R_CtoW.transpose() * synth::gravityDirectionW());
+    tracker->setGravityDownC(T0.R_CtoW.transpose() * drivers::synth::gravityDirectionW());
     cv::Mat gray;
     cv::Mat depth;
     if (known_depth) {
@@ -241,7 +241,7 @@ TEST(SlamSynthetic, TracksATenHertzSequenceWithTheCoarseToFineSearch) {
     std::printf("10 Hz: ATE %.2f%% of the path\n", double(100 * a->ate_rmse / len));
     EXPECT_LT(a->ate_rmse, Scalar(0.03) * len);
 
-    vision::TrackerConfig no_pyramid;
+    drivers::vision::TrackerConfig no_pyramid;
     no_pyramid.pyramid_levels = 0;
     no_pyramid.relocalise_s = 0;
     const auto flat = runSynthetic(150, 1, false, no_pyramid, 1, frames);
@@ -312,7 +312,7 @@ TEST(SlamSynthetic, TheMapsScaleHoldsWhenTheCameraModelIsRight) {
     EXPECT_GT(w->range, 1.15);
 }
 
-double meanPoseNees(const vision::TrackerConfig& config) {
+double meanPoseNees(const drivers::vision::TrackerConfig& config) {
     constexpr int kRuns = 4;
     constexpr int kFrames = 150;
     std::vector<double> sum(kFrames, 0.0);

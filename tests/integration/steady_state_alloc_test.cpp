@@ -60,11 +60,11 @@
 #include <scaled/daemon/protocol.h>
 #include <scaled/daemon/report.h>
 #include <scaled/daemon/socket_service.h>
-#include <scaled/detector/object_detector.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/sim/sim_source.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/detector/object_detector.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/source/frame_source.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 #include "allocation_counter.h"
 #include "malloc_counter.h"
@@ -163,12 +163,12 @@ struct RunRecord {
 
 // The run; gtest assertions inside stop it early (completed stays false).
 void runPipeline(RunRecord& rec, core::EstimatorModel model) {
-    sim::SimConfig config;  // seed 1, 320 x 240, 30 fps: the daemon's sim defaults
-    auto source = sim::openSimSource(config);
+    drivers::sim::SimConfig config;  // seed 1, 320 x 240, 30 fps: the daemon's sim defaults
+    auto source = drivers::sim::openSimSource(config);
     ASSERT_TRUE(source.ok()) << source.error().message;
-    auto detector = sim::createSimDetector(config);
+    auto detector = drivers::sim::createSimDetector(config);
     ASSERT_TRUE(detector.ok()) << detector.error().message;
-    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    auto priors = drivers::priors::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
     ASSERT_TRUE(priors.ok()) << priors.error().message;
     daemon::PipelineConfig pc = daemon::defaultPipelineConfig();
     pc.estimator.model = model;
@@ -180,7 +180,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     }
     auto camera = core::PinholeRadialCamera::create((*source)->info().intrinsics);
     ASSERT_TRUE(camera.ok());
-    auto tracker = vision::MonoTracker::create(*camera, pc.tracker);
+    auto tracker = drivers::vision::MonoTracker::create(*camera, pc.tracker);
     ASSERT_TRUE(tracker.ok()) << tracker.error().message;
     auto estimator = core::ScaleEstimator::create(pc.estimator, *priors, *camera);
     ASSERT_TRUE(estimator.ok()) << estimator.error().message;
@@ -196,7 +196,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     cv::Mat staging_image;
     cv::Mat pending_image;
     cv::Mat job_image;
-    detector::DetectionResult boxes;
+    drivers::detector::DetectionResult boxes;
     std::vector<core::Detection> dets(
         static_cast<std::size_t>(std::max(1, pc.detector.max_detections)));
     std::vector<core::ObservationRecord> records(512);
@@ -262,7 +262,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
     core::ScaleSummary& before_summary = rec.before_summary;
     std::vector<double> log_p_before;
 
-    drivers::Frame frame;
+    drivers::source::Frame frame;
     std::int64_t frames_in_map = 0;
     for (int i = 0; i < kWarmupFrames + kCountedFrames; ++i) {
         const bool counting = i >= kWarmupFrames;
@@ -283,7 +283,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
         }
 
         c0 = countsNow();
-        const vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray);
+        const drivers::vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray);
         if (counting) {
             track.add(c0, frame.id);
         }
@@ -363,7 +363,7 @@ void runPipeline(RunRecord& rec, core::EstimatorModel model) {
         ASSERT_TRUE(det.ok()) << det.error().message;
 
         c0 = countsNow();
-        const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+        const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
         if (counting) {
             convert.add(c0, frame.id);
         }

@@ -37,6 +37,8 @@
 
 #include <gtest/gtest.h>
 
+#include <scaled/drivers/base/unique_fd.h>
+
 extern char** environ;  // NOLINT(readability-redundant-declaration): POSIX, not in unistd.h
 
 namespace scaled::test {
@@ -77,33 +79,7 @@ inline std::string tomlString(std::string_view text) {
 }
 
 // An owned file descriptor.
-class Fd {
-public:
-    Fd() = default;
-    explicit Fd(int fd) : fd_(fd) {}
-    ~Fd() { reset(); }
-    Fd(const Fd&) = delete;
-    Fd& operator=(const Fd&) = delete;
-    Fd(Fd&& other) noexcept : fd_(std::exchange(other.fd_, -1)) {}
-    Fd& operator=(Fd&& other) noexcept {
-        if (this != &other) {
-            reset();
-            fd_ = std::exchange(other.fd_, -1);
-        }
-        return *this;
-    }
-    void reset() {
-        if (fd_ >= 0) {
-            ::close(fd_);
-        }
-        fd_ = -1;
-    }
-    [[nodiscard]] int get() const { return fd_; }
-    [[nodiscard]] bool valid() const { return fd_ >= 0; }
-
-private:
-    int fd_ = -1;
-};
+using Fd = drivers::base::UniqueFd;
 
 // A sockaddr_un for a filesystem path (false: the path is too long).
 inline bool unixAddress(const std::filesystem::path& path, sockaddr_un& addr) {
@@ -125,7 +101,7 @@ inline Fd listenUnix(const std::filesystem::path& path) {
         return {};
     }
     Fd fd(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    if (!fd.valid() ||
+    if (!fd.isValid() ||
         ::bind(fd.get(), reinterpret_cast<const sockaddr*>(&addr),  // NOLINT: sockaddr API
                sizeof addr) != 0 ||
         ::listen(fd.get(), 64) != 0) {
@@ -147,14 +123,14 @@ public:
             return;
         }
         Fd fd(::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
-        if (!fd.valid() ||
+        if (!fd.isValid() ||
             ::bind(fd.get(), reinterpret_cast<const sockaddr*>(&addr),  // NOLINT: sockaddr API
                    sizeof addr) != 0) {
             return;
         }
         wake_ = Fd(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
         stop_ = Fd(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
-        if (!wake_.valid() || !stop_.valid()) {
+        if (!wake_.isValid() || !stop_.isValid()) {
             return;
         }
         fd_ = std::move(fd);
@@ -171,7 +147,7 @@ public:
     NotifySocket(NotifySocket&&) = delete;
     NotifySocket& operator=(NotifySocket&&) = delete;
 
-    [[nodiscard]] bool valid() const { return fd_.valid(); }
+    [[nodiscard]] bool valid() const { return fd_.isValid(); }
     [[nodiscard]] const std::filesystem::path& path() const { return path_; }
 
     // Waits until a datagram has the line `line` (exactly), after the previous
@@ -368,7 +344,7 @@ public:
         const Fd in(::open("/dev/null", O_RDONLY | O_CLOEXEC));
         const Fd out(openOut(opt.stdout_path));
         const Fd err(openOut(opt.stderr_path));
-        if (!in.valid() || !out.valid() || !err.valid()) {
+        if (!in.isValid() || !out.isValid() || !err.isValid()) {
             return p;
         }
         const pid_t pid = ::fork();
@@ -420,7 +396,7 @@ public:
             return std::nullopt;
         }
         if (!status_) {
-            if (pidfd_.valid()) {
+            if (pidfd_.isValid()) {
                 pollfd pfd{pidfd_.get(), POLLIN, 0};
                 const auto deadline = Clock::now() + timeout;
                 while (true) {
@@ -501,7 +477,7 @@ public:
             return false;
         }
         Fd fd(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
-        if (!fd.valid() ||
+        if (!fd.isValid() ||
             ::connect(fd.get(), reinterpret_cast<const sockaddr*>(&addr),  // NOLINT: sockaddr API
                       sizeof addr) != 0) {
             return false;
@@ -511,7 +487,7 @@ public:
         eof_ = false;
         return true;
     }
-    [[nodiscard]] bool connected() const { return fd_.valid(); }
+    [[nodiscard]] bool connected() const { return fd_.isValid(); }
     [[nodiscard]] bool eof() const { return eof_; }
     [[nodiscard]] int fd() const { return fd_.get(); }
     void close() { fd_.reset(); }
@@ -543,7 +519,7 @@ public:
                 buffer_.erase(0, nl + 1);
                 return line;
             }
-            if (eof_ || !fd_.valid()) {
+            if (eof_ || !fd_.isValid()) {
                 return std::nullopt;
             }
             pollfd pfd{fd_.get(), POLLIN, 0};

@@ -32,7 +32,9 @@
 #include <gtest/gtest.h>
 
 #include <scaled/daemon/status_lights.h>
-#include <scaled/drivers/gpio_lines.h>
+#include <scaled/drivers/base/errno_text.h>
+#include <scaled/drivers/base/unique_fd.h>
+#include <scaled/drivers/gpio/gpio_lines.h>
 
 namespace scaled {
 namespace {
@@ -50,23 +52,7 @@ struct SimChip {
     unsigned lines = 0;
 };
 
-class Fd {
-public:
-    explicit Fd(int fd) : fd_(fd) {}
-    Fd(const Fd&) = delete;
-    Fd& operator=(const Fd&) = delete;
-    Fd(Fd&&) = delete;
-    Fd& operator=(Fd&&) = delete;
-    ~Fd() {
-        if (fd_ >= 0) {
-            ::close(fd_);
-        }
-    }
-    [[nodiscard]] int get() const { return fd_; }
-
-private:
-    int fd_;
-};
+using Fd = drivers::base::UniqueFd;
 
 // The gpio-sim chip labelled kLabel, found through GPIO_GET_CHIPINFO_IOCTL;
 // `why` says what is missing otherwise.
@@ -82,7 +68,7 @@ std::optional<SimChip> findSimChip(std::string& why) {
         const Fd fd(::open(it->path().c_str(), O_RDONLY | O_CLOEXEC));
         gpiochip_info info{};
         if (fd.get() < 0 || ::ioctl(fd.get(), GPIO_GET_CHIPINFO_IOCTL, &info) != 0) {
-            seen.push_back(name + " (" + std::strerror(errno) + ")");
+            seen.push_back(name + " (" + drivers::base::errnoText(errno) + ")");
             continue;
         }
         seen.push_back(name + " [" + info.label + "]");
@@ -154,7 +140,7 @@ protected:
         info.offset = offset;
         if (fd.get() < 0 || ::ioctl(fd.get(), GPIO_V2_GET_LINEINFO_IOCTL, &info) != 0) {
             ADD_FAILURE() << chip_.dev_path << ": cannot read line " << offset
-                          << " info: " << std::strerror(errno);
+                          << " info: " << drivers::base::errnoText(errno);
             return std::nullopt;
         }
         if ((info.flags & GPIO_V2_LINE_FLAG_USED) == 0) {
@@ -163,10 +149,10 @@ protected:
         return std::string(info.consumer);
     }
 
-    [[nodiscard]] drivers::GpioOutputOptions options(const std::string& chip,
-                                                     std::vector<unsigned> offsets,
-                                                     bool active_low = false) const {
-        drivers::GpioOutputOptions o;
+    [[nodiscard]] drivers::gpio::GpioOutputOptions options(const std::string& chip,
+                                                           std::vector<unsigned> offsets,
+                                                           bool active_low = false) const {
+        drivers::gpio::GpioOutputOptions o;
         o.chip = chip;
         o.offsets = std::move(offsets);
         o.active_low = active_low;
@@ -180,11 +166,11 @@ protected:
 TEST_F(GpioVmTest, OpensByLabelNameAndPath) {
     // Which libgpiod API these tests drive (the trixie stage of CI runs them
     // with libgpiod 2: docs/vm-tests.md); in the log and the XML report.
-    std::cout << "libgpiod API v" << drivers::gpiodApiVersion() << "\n";
-    RecordProperty("libgpiod_api", drivers::gpiodApiVersion());
+    std::cout << "libgpiod API v" << drivers::gpio::gpiodApiVersion() << "\n";
+    RecordProperty("libgpiod_api", drivers::gpio::gpiodApiVersion());
     for (const std::string& spec : {std::string(kLabel), chip_.name, chip_.dev_path}) {
         SCOPED_TRACE(spec);
-        auto outputs = drivers::openGpioOutputs(options(spec, {0}));
+        auto outputs = drivers::gpio::openGpioOutputs(options(spec, {0}));
         ASSERT_TRUE(outputs.ok()) << outputs.error().message;
         EXPECT_EQ((*outputs)->describe(), chip_.name + " [" + kLabel + "] lines 0");
         EXPECT_EQ(holder(0), "scaled-vm-test");
@@ -199,7 +185,7 @@ TEST_F(GpioVmTest, OpensByLabelNameAndPath) {
 }
 
 TEST_F(GpioVmTest, ActiveHighLinesAreSetOneAtATime) {
-    auto outputs = drivers::openGpioOutputs(options(kLabel, {1, 2}));
+    auto outputs = drivers::gpio::openGpioOutputs(options(kLabel, {1, 2}));
     ASSERT_TRUE(outputs.ok()) << outputs.error().message;
     auto& out = **outputs;
     EXPECT_EQ(pin(1), 0);
@@ -222,7 +208,7 @@ TEST_F(GpioVmTest, ActiveHighLinesAreSetOneAtATime) {
 }
 
 TEST_F(GpioVmTest, ActiveLowLinesAreHighWhenInactive) {
-    auto outputs = drivers::openGpioOutputs(options(kLabel, {3, 4}, true));
+    auto outputs = drivers::gpio::openGpioOutputs(options(kLabel, {3, 4}, true));
     ASSERT_TRUE(outputs.ok()) << outputs.error().message;
     auto& out = **outputs;
     EXPECT_NE(out.describe().find("active-low"), std::string::npos) << out.describe();
@@ -240,7 +226,7 @@ TEST_F(GpioVmTest, ActiveLowLinesAreHighWhenInactive) {
 }
 
 TEST_F(GpioVmTest, OffsetOutOfRangeNamesTheLineCount) {
-    auto outputs = drivers::openGpioOutputs(options(kLabel, {2, kLines}));
+    auto outputs = drivers::gpio::openGpioOutputs(options(kLabel, {2, kLines}));
     ASSERT_FALSE(outputs.ok());
     EXPECT_EQ(outputs.error().code, ErrorCode::kInvalidArgument);
     EXPECT_NE(outputs.error().message.find(chip_.name + " [" + kLabel + "]"), std::string::npos)
@@ -254,11 +240,11 @@ TEST_F(GpioVmTest, OffsetOutOfRangeNamesTheLineCount) {
 TEST_F(GpioVmTest, BusyLineNamesItsConsumer) {
     auto first_options = options(kLabel, {5});
     first_options.consumer = "scaled-vm-first";
-    auto first = drivers::openGpioOutputs(first_options);
+    auto first = drivers::gpio::openGpioOutputs(first_options);
     ASSERT_TRUE(first.ok()) << first.error().message;
     EXPECT_EQ(holder(5), "scaled-vm-first");
 
-    auto second = drivers::openGpioOutputs(options(chip_.dev_path, {4, 5}));
+    auto second = drivers::gpio::openGpioOutputs(options(chip_.dev_path, {4, 5}));
     ASSERT_FALSE(second.ok());
     EXPECT_EQ(second.error().code, ErrorCode::kUnavailable);
     EXPECT_NE(second.error().message.find("line 5 is used by 'scaled-vm-first'"), std::string::npos)
@@ -332,7 +318,7 @@ TEST_P(StatusLightsVmTest, EveryPatternAtThePins) {
     EXPECT_EQ(holder(kStatusLine), std::nullopt);
     EXPECT_EQ(holder(kHeartbeatLine), std::nullopt);
     // Free again: another request gets them.
-    auto again = drivers::openGpioOutputs(options(kLabel, {kStatusLine, kHeartbeatLine}));
+    auto again = drivers::gpio::openGpioOutputs(options(kLabel, {kStatusLine, kHeartbeatLine}));
     EXPECT_TRUE(again.ok()) << again.error().message;
 }
 

@@ -30,6 +30,7 @@
 
 #include <gtest/gtest.h>
 
+#include <scaled/drivers/base/errno_text.h>
 #include <scaled/drivers/imu/iio_device.h>
 
 namespace scaled::drivers::imu {
@@ -55,7 +56,8 @@ bool writeText(const fs::path& path, const std::string& value, std::string& why)
     out << value << '\n';
     out.flush();
     if (!out.good()) {
-        why = "cannot write '" + value + "' to " + path.string() + ": " + std::strerror(errno);
+        why = "cannot write '" + value + "' to " + path.string() + ": " +
+              drivers::base::errnoText(errno);
         return false;
     }
     return true;
@@ -92,7 +94,7 @@ protected:
         const fs::path dir = kConfigfsDummy / kName;
         if (!fs::exists(dir)) {
             ASSERT_EQ(::mkdir(dir.c_str(), 0755), 0)
-                << "mkdir " << dir << ": " << std::strerror(errno);
+                << "mkdir " << dir << ": " << drivers::base::errnoText(errno);
         }
         // The sysfs trigger sysfstrig0, once per VM.
         if (!findTrigger("sysfstrig0")) {
@@ -270,7 +272,8 @@ TEST_F(ImuVmTest, StreamFromTheHrtimerTrigger) {
         << "no " << kConfigfsHrtimer << ": iio-trig-hrtimer not loaded";
     const fs::path hrt = kConfigfsHrtimer / "scaled-hrt";
     if (!fs::exists(hrt)) {
-        ASSERT_EQ(::mkdir(hrt.c_str(), 0755), 0) << "mkdir " << hrt << ": " << std::strerror(errno);
+        ASSERT_EQ(::mkdir(hrt.c_str(), 0755), 0)
+            << "mkdir " << hrt << ": " << drivers::base::errnoText(errno);
     }
     auto trig = findTrigger("scaled-hrt");
     ASSERT_TRUE(trig.has_value()) << "no IIO trigger scaled-hrt after mkdir " << hrt;

@@ -15,11 +15,11 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/libcamera_camera.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/libcamera/libcamera_camera.h>
+#include <scaled/drivers/source/frame_source.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::libcam {
 namespace {
 
 using core::ErrorCode;
@@ -42,8 +42,8 @@ bool contains(const std::string& text, const std::string& part) {
     return text.find(part) != std::string::npos;
 }
 
-CameraOptions vimcOptions(const std::string& device) {
-    CameraOptions options;
+camera::CameraOptions vimcOptions(const std::string& device) {
+    camera::CameraOptions options;
     options.device = device;
     options.width_px = 640;
     options.height_px = 480;
@@ -54,7 +54,7 @@ CameraOptions vimcOptions(const std::string& device) {
     return options;
 }
 
-std::unique_ptr<LiveCamera> openOrFail(const std::string& device) {
+std::unique_ptr<camera::LiveCamera> openOrFail(const std::string& device) {
     auto opened = openLibcameraCamera(vimcOptions(device));
     EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
     return opened.ok() ? std::move(*opened) : nullptr;
@@ -67,9 +67,9 @@ int64_t monotonicNowNs() {
 }
 
 // Reads `count` frames and checks each; updates the last id and timestamp.
-void expectFrames(LiveCamera& camera, int count, int64_t& last_id, int64_t& last_t_ns) {
+void expectFrames(camera::LiveCamera& camera, int count, int64_t& last_id, int64_t& last_t_ns) {
     for (int i = 0; i < count; ++i) {
-        Frame frame;
+        source::Frame frame;
         auto got = camera.next(frame);
         ASSERT_TRUE(got.ok()) << got.error().message;
         ASSERT_TRUE(*got);
@@ -120,10 +120,10 @@ void expectColourBars(const cv::Mat& bgr) {
 
 TEST(LibcameraVm, ListShowsVimc) {
     REQUIRE_VM();
-    const std::vector<CameraDescription> cameras = listLibcameraCameras();
+    const std::vector<camera::CameraDescription> cameras = listLibcameraCameras();
     ASSERT_FALSE(cameras.empty()) << "libcamera lists no camera (vimc loaded? udev markers?)";
     bool found = false;
-    for (const CameraDescription& camera : cameras) {
+    for (const camera::CameraDescription& camera : cameras) {
         EXPECT_EQ(camera.backend, "libcamera");
         if (contains(camera.device, kVimcId)) {
             found = true;
@@ -148,7 +148,7 @@ TEST(LibcameraVm, CapturesTenFramesByIndex) {
     int64_t last_id = -1;
     int64_t last_t_ns = 0;
     expectFrames(*camera, 10, last_id, last_t_ns);
-    Frame frame;
+    source::Frame frame;
     auto got = camera->next(frame);
     ASSERT_TRUE(got.ok()) << got.error().message;
     expectColourBars(frame.color);
@@ -181,7 +181,7 @@ TEST(LibcameraVm, StopThenReopenDeliversAgain) {
     expectFrames(*camera, 3, last_id, last_t_ns);
 
     camera->stop();
-    Frame frame;
+    source::Frame frame;
     auto stopped = camera->next(frame);
     ASSERT_TRUE(stopped.ok()) << stopped.error().message;
     EXPECT_FALSE(*stopped);
@@ -206,4 +206,4 @@ TEST(LibcameraVm, UnknownIdListsTheCameras) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::libcam

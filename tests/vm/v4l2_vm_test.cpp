@@ -36,11 +36,12 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/unix_socket.h>
-#include <scaled/drivers/v4l2_camera.h>
+#include <scaled/drivers/base/errno_text.h>
+#include <scaled/drivers/base/unique_fd.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/camera/v4l2_camera.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::camera {
 namespace {
 
 using core::ErrorCode;
@@ -122,10 +123,10 @@ std::vector<std::string> rates(const std::string& line) {
 // from `first_id`, size and types, timestamps strictly increasing, after
 // `after_t_ns`, and close to CLOCK_MONOTONIC now.
 void captureFrames(LiveCamera& cam, int n, std::int64_t first_id, std::int64_t after_t_ns,
-                   std::vector<Frame>& out) {
+                   std::vector<source::Frame>& out) {
     std::int64_t last_t = after_t_ns;
     for (int i = 0; i < n; ++i) {
-        Frame f;
+        source::Frame f;
         auto r = cam.next(f);
         ASSERT_TRUE(r) << "frame " << i << ": " << r.error().message;
         ASSERT_TRUE(*r) << "frame " << i << ": next() returned false";
@@ -147,7 +148,7 @@ void captureFrames(LiveCamera& cam, int n, std::int64_t first_id, std::int64_t a
 
 // vivid's colour bars: lots of contrast, and different colours on the left
 // and on the right.
-void expectTestPattern(const Frame& f) {
+void expectTestPattern(const source::Frame& f) {
     EXPECT_GT(cv::countNonZero(f.gray), 0) << "an all-black frame";
     cv::Scalar mean;
     cv::Scalar stddev;
@@ -196,10 +197,10 @@ TEST_F(V4l2Vm, CaptureYuyv) {
             << "the rate was adjusted to " << fps << " without a note";
     }
 
-    std::vector<Frame> frames;
+    std::vector<source::Frame> frames;
     captureFrames(cam, 30, 0, 0, frames);
     ASSERT_EQ(frames.size(), 30U);
-    for (const Frame& f : frames) {
+    for (const source::Frame& f : frames) {
         EXPECT_EQ(f.image_path, vivid_.device);
     }
     expectTestPattern(frames.back());
@@ -212,7 +213,7 @@ TEST_F(V4l2Vm, CaptureYuyv) {
 
     // Steady state: next() into the same Frame makes no heap allocation
     // (operator new; the Mats' pixels are re-used, see pixel_convert.h).
-    Frame reused;
+    source::Frame reused;
     ASSERT_TRUE(cam.next(reused));
     std::int64_t allocations = 0;
     for (int i = 0; i < 10; ++i) {
@@ -241,10 +242,10 @@ TEST_F(V4l2Vm, CaptureOtherFormats) {
         ASSERT_TRUE(opened) << name << ": " << opened.error().message;
         LiveCamera& cam = **opened;
         EXPECT_EQ(cam.mode().rfind(name + " 640x480 @ ", 0), 0U) << cam.mode();
-        std::vector<Frame> frames;
+        std::vector<source::Frame> frames;
         captureFrames(cam, 5, 0, 0, frames);
         ASSERT_EQ(frames.size(), 5U) << name;
-        const Frame& f = frames.back();
+        const source::Frame& f = frames.back();
         if (format == PixelFormat::kGrey) {
             cv::Scalar mean;
             cv::Scalar stddev;
@@ -279,7 +280,7 @@ TEST_F(V4l2Vm, CaptureByPath) {
     LiveCamera& cam = **opened;
     EXPECT_EQ(cam.describe(), vivid_.device + " (vivid)");
     EXPECT_EQ(cam.mode().rfind("YUYV 640x480 @ ", 0), 0U) << cam.mode();
-    std::vector<Frame> frames;
+    std::vector<source::Frame> frames;
     captureFrames(cam, 5, 0, 0, frames);
     ASSERT_EQ(frames.size(), 5U);
     EXPECT_EQ(frames.back().image_path, vivid_.device);
@@ -290,7 +291,7 @@ TEST_F(V4l2Vm, CaptureErrors) {
     {
         auto first = openV4l2Camera(vividOptions());
         ASSERT_TRUE(first) << first.error().message;
-        std::vector<Frame> frames;
+        std::vector<source::Frame> frames;
         captureFrames(**first, 1, 0, 0, frames);  // streaming for sure
 
         auto second = openV4l2Camera(vividOptions());
@@ -334,12 +335,12 @@ TEST_F(V4l2Vm, CaptureErrors) {
 
 // Writes `text` to a sysfs attribute; empty on success, else the error.
 std::string writeSysfs(const std::string& path, const std::string& text) {
-    const UniqueFd fd(::open(path.c_str(), O_WRONLY | O_CLOEXEC));
+    const base::UniqueFd fd(::open(path.c_str(), O_WRONLY | O_CLOEXEC));
     if (!fd.isValid()) {
-        return path + ": " + std::strerror(errno);
+        return path + ": " + drivers::base::errnoText(errno);
     }
     if (::write(fd.get(), text.data(), text.size()) != static_cast<ssize_t>(text.size())) {
-        return path + ": " + std::strerror(errno);
+        return path + ": " + drivers::base::errnoText(errno);
     }
     return {};
 }
@@ -373,9 +374,9 @@ private:
 // Sets one of vivid's controls, found by name ("Percentage of Dropped
 // Buffers"), through a second descriptor: controls are shared by all.
 std::string setVividControl(const std::string& node, const std::string& name, int value) {
-    const UniqueFd fd(::open(node.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC));
+    const base::UniqueFd fd(::open(node.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC));
     if (!fd.isValid()) {
-        return node + ": " + std::strerror(errno);
+        return node + ": " + drivers::base::errnoText(errno);
     }
     v4l2_query_ext_ctrl q{};
     q.id = V4L2_CTRL_FLAG_NEXT_CTRL;
@@ -394,7 +395,7 @@ std::string setVividControl(const std::string& node, const std::string& name, in
     c.id = q.id;
     c.value = value;
     if (::ioctl(fd.get(), VIDIOC_S_CTRL, &c) != 0) {
-        return node + ": VIDIOC_S_CTRL " + name + ": " + std::strerror(errno);
+        return node + ": VIDIOC_S_CTRL " + name + ": " + drivers::base::errnoText(errno);
     }
     return {};
 }
@@ -450,14 +451,14 @@ TEST_F(V4l2Vm, RecoverAfterUnbind) {
     auto opened = openV4l2Camera(o);
     ASSERT_TRUE(opened) << opened.error().message;
     LiveCamera& cam = **opened;
-    std::vector<Frame> frames;
+    std::vector<source::Frame> frames;
     captureFrames(cam, 3, 0, 0, frames);
     ASSERT_EQ(frames.size(), 3U);
 
-    const UniqueFd inotify(::inotify_init1(IN_NONBLOCK | IN_CLOEXEC));
-    ASSERT_TRUE(inotify.isValid()) << std::strerror(errno);
+    const base::UniqueFd inotify(::inotify_init1(IN_NONBLOCK | IN_CLOEXEC));
+    ASSERT_TRUE(inotify.isValid()) << drivers::base::errnoText(errno);
     ASSERT_GE(::inotify_add_watch(inotify.get(), "/dev", IN_CREATE | IN_ATTRIB), 0)
-        << std::strerror(errno);
+        << drivers::base::errnoText(errno);
 
     {
         VividUnbound unbound;
@@ -466,7 +467,7 @@ TEST_F(V4l2Vm, RecoverAfterUnbind) {
             << vivid_.device << " still exists after unbinding vivid";
 
         // next() notices (frames dequeued before the unbind may come first).
-        Frame scratch;
+        source::Frame scratch;
         core::Result<bool> r = cam.next(scratch);
         for (int i = 0; i < o.buffers && r; ++i) {
             frames.push_back(scratch);
@@ -478,7 +479,7 @@ TEST_F(V4l2Vm, RecoverAfterUnbind) {
         EXPECT_TRUE(contains(r.error().message, "lost")) << r.error().message;
 
         // Closed now: next() says so, and reopen() cannot find it.
-        Frame f;
+        source::Frame f;
         auto closed = cam.next(f);
         ASSERT_FALSE(closed);
         EXPECT_EQ(closed.error().code, ErrorCode::kUnavailable);
@@ -505,7 +506,7 @@ TEST_F(V4l2Vm, RecoverAfterUnbind) {
         const VividControl silent(node, "Percentage of Dropped Buffers", 100, 0);
         ASSERT_EQ(silent.error(), "");
         core::Result<bool> timeout = true;
-        Frame f;
+        source::Frame f;
         for (int i = 0; i <= o.buffers + 1 && timeout; ++i) {
             timeout = cam.next(f);  // buffers filled before the control took effect
             if (timeout) {
@@ -519,7 +520,7 @@ TEST_F(V4l2Vm, RecoverAfterUnbind) {
     }
     auto again = cam.reopen();
     ASSERT_TRUE(again) << again.error().message;
-    Frame after;
+    source::Frame after;
     auto r = cam.next(after);
     ASSERT_TRUE(r) << r.error().message;
     EXPECT_EQ(after.id, frames.back().id + 1);
@@ -538,7 +539,7 @@ TEST_F(V4l2Vm, StopWakesABlockedNext) {
     ASSERT_EQ(silent.error(), "");
     core::Result<bool> result = true;
     std::thread reader([&] {
-        Frame f;
+        source::Frame f;
         while ((result = cam.next(f)) && *result) {
         }
     });
@@ -546,7 +547,7 @@ TEST_F(V4l2Vm, StopWakesABlockedNext) {
     reader.join();
     ASSERT_TRUE(result) << result.error().message;
     EXPECT_FALSE(*result);
-    Frame f;
+    source::Frame f;
     auto later = cam.next(f);
     ASSERT_TRUE(later);
     EXPECT_FALSE(*later);
@@ -583,4 +584,4 @@ TEST_F(V4l2Vm, ListCameras) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::camera

@@ -61,9 +61,9 @@ std::vector<std::string> splitList(std::string_view text) {
     return out;
 }
 
-std::string detectionsText(const detector::DetectionResult& result) {
+std::string detectionsText(const drivers::detector::DetectionResult& result) {
     std::string s;
-    for (const detector::ObjectDetection& d : result.detections) {
+    for (const drivers::detector::ObjectDetection& d : result.detections) {
         s += std::string(d.class_name) + ' ' + fixed(static_cast<double>(d.score), 3) + ' ' +
              fixed(d.box.x_min_px, 1) + ' ' + fixed(d.box.y_min_px, 1) + ' ' +
              fixed(d.box.x_max_px, 1) + ' ' + fixed(d.box.y_max_px, 1) + '\n';
@@ -71,21 +71,22 @@ std::string detectionsText(const detector::DetectionResult& result) {
     return s;
 }
 
-std::string detectionsJson(const std::filesystem::path& image, const detector::DetectorInfo& info,
-                           const detector::DetectionResult& result) {
+std::string detectionsJson(const std::filesystem::path& image,
+                           const drivers::detector::DetectorInfo& info,
+                           const drivers::detector::DetectionResult& result) {
     std::string s = "{\"class\":\"DETECTIONS\"";
     s += ",\"image\":" + jsonString(image.string());
     s += ",\"width\":" + std::to_string(result.width_px);
     s += ",\"height\":" + std::to_string(result.height_px);
     s += ",\"model\":" + jsonString(info.model_path.string());
-    s += ",\"family\":" + jsonString(detector::toString(info.family));
+    s += ",\"family\":" + jsonString(drivers::detector::toString(info.family));
     s += ",\"input_size\":" + std::to_string(info.input_size_px);
     s += ",\"timing_ms\":{\"pre\":" + jsonNumber(result.timing.pre_ms, 4) +
          ",\"forward\":" + jsonNumber(result.timing.forward_ms, 4) +
          ",\"post\":" + jsonNumber(result.timing.post_ms, 4) + "}";
     s += ",\"detections\":[";
     for (std::size_t i = 0; i < result.detections.size(); ++i) {
-        const detector::ObjectDetection& d = result.detections[i];
+        const drivers::detector::ObjectDetection& d = result.detections[i];
         s += i == 0 ? "{" : ",{";
         s += "\"class_id\":" + std::to_string(d.class_id);
         s += ",\"class_name\":" + jsonString(d.class_name);
@@ -97,7 +98,7 @@ std::string detectionsJson(const std::filesystem::path& image, const detector::D
     return s;
 }
 
-Result<bool> drawDetections(const cv::Mat& image, const detector::DetectionResult& result,
+Result<bool> drawDetections(const cv::Mat& image, const drivers::detector::DetectionResult& result,
                             const std::filesystem::path& out) {
     try {
         cv::Mat canvas;
@@ -108,7 +109,7 @@ Result<bool> drawDetections(const cv::Mat& image, const detector::DetectionResul
         } else {
             canvas = image.clone();
         }
-        for (const detector::ObjectDetection& d : result.detections) {
+        for (const drivers::detector::ObjectDetection& d : result.detections) {
             const cv::Scalar colour = classColour(d.class_id);
             const cv::Point p0(static_cast<int>(d.box.x_min_px), static_cast<int>(d.box.y_min_px));
             const cv::Point p1(static_cast<int>(d.box.x_max_px), static_cast<int>(d.box.y_max_px));

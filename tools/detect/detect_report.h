@@ -9,7 +9,7 @@
 #include <vector>
 
 #include <scaled/core/result.h>
-#include <scaled/detector/dnn_detector.h>
+#include <scaled/drivers/detector/dnn_detector.h>
 
 namespace scaled::tools {
 
@@ -18,15 +18,17 @@ namespace scaled::tools {
 std::vector<std::string> splitList(std::string_view text);
 
 // One line per detection: `class_name score x_min y_min x_max y_max`.
-std::string detectionsText(const detector::DetectionResult& result);
+std::string detectionsText(const drivers::detector::DetectionResult& result);
 
 // One JSON object (one line) with class "DETECTIONS": image, size, model,
 // family, input size, timing, and the detections.
-std::string detectionsJson(const std::filesystem::path& image, const detector::DetectorInfo& info,
-                           const detector::DetectionResult& result);
+std::string detectionsJson(const std::filesystem::path& image,
+                           const drivers::detector::DetectorInfo& info,
+                           const drivers::detector::DetectionResult& result);
 
 // The image with boxes and labels, written to `out` (format from its extension).
-core::Result<bool> drawDetections(const cv::Mat& image, const detector::DetectionResult& result,
+core::Result<bool> drawDetections(const cv::Mat& image,
+                                  const drivers::detector::DetectionResult& result,
                                   const std::filesystem::path& out);
 
 }  // namespace scaled::tools

@@ -15,8 +15,8 @@
 #include <string>
 #include <string_view>
 
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/drivers/image_file.h>
+#include <scaled/drivers/dataset/image_file.h>
+#include <scaled/drivers/detector/dnn_detector.h>
 
 #include "args.h"
 #include "detect_report.h"
@@ -30,7 +30,7 @@ using scaled::tools::kExNoInput;
 using scaled::tools::kExUsage;
 
 using scaled::core::ErrorCode;
-using scaled::detector::DetectorConfig;
+using scaled::drivers::detector::DetectorConfig;
 
 void usage(std::FILE* out) {
     std::fputs(
@@ -140,31 +140,31 @@ int main(int argc, char** argv) {
     if (config.model_path.empty()) {
         config.model_path = scaled::tools::defaultModelPath();
     }
-    config.family = scaled::detector::familyFromPath(config.model_path);
+    config.family = scaled::drivers::detector::familyFromPath(config.model_path);
     if (family_text) {
-        auto f = scaled::detector::parseModelFamily(*family_text);
+        auto f = scaled::drivers::detector::parseModelFamily(*family_text);
         if (!f) {
             std::fprintf(stderr, "scaled-detect: --family: %s\n", f.error().message.c_str());
             return kExUsage;
         }
         config.family = *f;
     }
-    if (auto valid = scaled::detector::validate(config); !valid) {
+    if (auto valid = scaled::drivers::detector::validate(config); !valid) {
         std::fprintf(stderr, "scaled-detect: %s\n", valid.error().message.c_str());
         return kExUsage;
     }
 
-    auto image = scaled::drivers::loadImage(image_path);
+    auto image = scaled::drivers::dataset::loadImage(image_path);
     if (!image) {
         std::fprintf(stderr, "scaled-detect: %s\n", image.error().message.c_str());
         return exitCodeFor(image.error().code);
     }
-    auto detector = scaled::detector::DnnDetector::create(config);
+    auto detector = scaled::drivers::detector::DnnDetector::create(config);
     if (!detector) {
         std::fprintf(stderr, "scaled-detect: %s\n", detector.error().message.c_str());
         return exitCodeFor(detector.error().code);
     }
-    scaled::detector::DetectionResult result;
+    scaled::drivers::detector::DetectionResult result;
     if (auto ok = (*detector)->detect(*image, 0, 0, result); !ok) {
         std::fprintf(stderr, "scaled-detect: %s: %s\n", image_path.c_str(),
                      ok.error().message.c_str());

@@ -15,7 +15,8 @@
 
 #include <Eigen/Geometry>
 
-#include <scaled/drivers/trajectory_io.h>
+#include <scaled/drivers/base/errno_text.h>
+#include <scaled/drivers/dataset/trajectory_io.h>
 
 #include "files.h"
 #include "json.h"
@@ -513,7 +514,7 @@ std::string num(std::optional<double> v, int digits = 7) {
 
 }  // namespace
 
-FieldLogAnalysis analyseFieldLog(const drivers::FieldLogContents& contents,
+FieldLogAnalysis analyseFieldLog(const drivers::fieldlog::FieldLogContents& contents,
                                  const std::string& log) {
     FieldLogAnalysis a;
     a.log = log;
@@ -656,7 +657,7 @@ Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& 
         std::ofstream out(path);
         if (!out) {
             return makeError(ErrorCode::kIo,
-                             path.string() + ": cannot create: " + std::strerror(errno));
+                             path.string() + ": cannot create: " + drivers::base::errnoText(errno));
         }
         if (header != nullptr) {
             out << header << '\n';
@@ -667,7 +668,7 @@ Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& 
         out.close();
         if (out.fail()) {
             return makeError(ErrorCode::kIo,
-                             path.string() + ": write failed: " + std::strerror(errno));
+                             path.string() + ": write failed: " + drivers::base::errnoText(errno));
         }
         return true;
     };
@@ -687,13 +688,14 @@ Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& 
         return ok;
     }
     for (const auto& t : a.trajectories) {
-        if (auto ok = drivers::writeTumTrajectory(dir / t.file, t.t_ns, t.poses); !ok) {
+        if (auto ok = drivers::dataset::writeTumTrajectory(dir / t.file, t.t_ns, t.poses); !ok) {
             return ok;
         }
     }
     if (a.main_trajectory) {
         const auto& t = a.trajectories[*a.main_trajectory];
-        if (auto ok = drivers::writeTumTrajectory(dir / kMainTrajectory, t.t_ns, t.poses); !ok) {
+        if (auto ok = drivers::dataset::writeTumTrajectory(dir / kMainTrajectory, t.t_ns, t.poses);
+            !ok) {
             return ok;
         }
     }

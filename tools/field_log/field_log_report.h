@@ -15,7 +15,7 @@
 
 #include <scaled/core/result.h>
 #include <scaled/core/scale/vertical_extent.h>
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 namespace scaled::tools {
 
@@ -84,7 +84,8 @@ struct FieldLogAnalysis {
     std::optional<std::size_t> main_trajectory;
 };
 
-FieldLogAnalysis analyseFieldLog(const drivers::FieldLogContents& contents, const std::string& log);
+FieldLogAnalysis analyseFieldLog(const drivers::fieldlog::FieldLogContents& contents,
+                                 const std::string& log);
 
 // summary.json (one line).
 std::string toJson(const FieldLogAnalysis& a);

@@ -13,7 +13,7 @@
 #include <string_view>
 #include <vector>
 
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 #include "field_log_report.h"
 #include "plot.h"
@@ -101,7 +101,7 @@ int main(int argc, char** argv) {
         return kExUsage;
     }
 
-    auto contents = scaled::drivers::readFieldLog(log);
+    auto contents = scaled::drivers::fieldlog::readFieldLog(log);
     if (!contents) {
         std::fprintf(stderr, "field-log: %s\n", contents.error().message.c_str());
         return contents.error().code == scaled::core::ErrorCode::kNotFound ? kExNoInput : kExIoErr;

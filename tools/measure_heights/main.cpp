@@ -35,9 +35,10 @@
 #include <string_view>
 #include <vector>
 
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/drivers/depth_image.h>
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/dataset/depth_image.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "args.h"
 #include "json.h"
@@ -140,7 +141,7 @@ cv::Scalar colourOf(std::size_t i) {
     return kColours[i % 6];
 }
 
-bool drawFrame(const std::filesystem::path& dir, const scaled::drivers::Frame& frame,
+bool drawFrame(const std::filesystem::path& dir, const scaled::drivers::source::Frame& frame,
                const cv::Mat& depth, const std::vector<View>& views, std::size_t first) {
     cv::Mat left = frame.color.clone();
     cv::Mat d8;
@@ -270,12 +271,12 @@ int main(int argc, char** argv) {
         return kExCantCreat;
     }
 
-    auto source = scaled::drivers::openDataset(dataset);
+    auto source = scaled::drivers::dataset::openDataset(dataset);
     if (!source) {
         std::fprintf(stderr, "measure-heights: %s\n", source.error().message.c_str());
         return source.error().code == ErrorCode::kNotFound ? kExNoInput : kExDataErr;
     }
-    const scaled::drivers::SequenceInfo& info = (*source)->info();
+    const scaled::drivers::source::SequenceInfo& info = (*source)->info();
     if (!info.gravity_down_W) {
         std::fprintf(stderr, "measure-heights: %s: no gravity direction (gravity.txt)\n",
                      dataset.c_str());
@@ -288,12 +289,12 @@ int main(int argc, char** argv) {
     }
     const Vec3 up_W = -info.gravity_down_W->normalized();
 
-    scaled::detector::DetectorConfig dc;
+    scaled::drivers::detector::DetectorConfig dc;
     dc.model_path = model;
-    dc.family = scaled::detector::familyFromPath(model);
+    dc.family = scaled::drivers::detector::familyFromPath(model);
     dc.input_size_px = 416;
     dc.classes = classes;
-    auto detector = scaled::detector::DnnDetector::create(dc);
+    auto detector = scaled::drivers::detector::DnnDetector::create(dc);
     if (!detector) {
         std::fprintf(stderr, "measure-heights: %s\n", detector.error().message.c_str());
         return detector.error().code == ErrorCode::kNotFound ? kExNoInput : kExDataErr;
@@ -304,7 +305,7 @@ int main(int argc, char** argv) {
     std::vector<float> scene_heights;
     std::vector<double> camera_heights;
     int frames_used = 0;
-    scaled::drivers::Frame frame;
+    scaled::drivers::source::Frame frame;
     const auto nextView = [&](hx::DepthView& dv) -> std::optional<int> {
         // 1: a view; 0: the end; an exit code otherwise.
         while (true) {
@@ -319,7 +320,7 @@ int main(int argc, char** argv) {
             if (frame.id % every != 0 || !frame.T_CtoW_gt || !frame.depth_path) {
                 continue;
             }
-            auto depth = scaled::drivers::loadDepthMetres(frame, info);
+            auto depth = scaled::drivers::dataset::loadDepthMetres(frame, info);
             if (!depth) {
                 std::fprintf(stderr, "measure-heights: %s\n", depth.error().message.c_str());
                 return kExDataErr;
@@ -370,7 +371,7 @@ int main(int argc, char** argv) {
         return kExDataErr;
     }
     std::vector<View> views;
-    scaled::detector::DetectionResult result;
+    scaled::drivers::detector::DetectionResult result;
     while (true) {
         if (const auto done = nextView(dv)) {
             if (*done != 0) {

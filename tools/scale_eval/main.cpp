@@ -20,8 +20,9 @@
 #include <vector>
 
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/drivers/priors_toml.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/priors/priors_toml.h>
 
 #include "args.h"
 #include "plot.h"
@@ -90,7 +91,7 @@ int main(int argc, char** argv) {
     std::string out_dir;
     bool json = false;
     bool plots = true;
-    scaled::drivers::DatasetOptions dopt;
+    scaled::drivers::dataset::DatasetOptions dopt;
     EvalOptions opt;
     for (int i = 1; i < argc; ++i) {
         const std::string_view a = argv[i];
@@ -126,7 +127,7 @@ int main(int argc, char** argv) {
             out_dir = std::string(v);
             ok = !out_dir.empty();
         } else if (a == "--format") {
-            using scaled::drivers::DatasetFormat;
+            using scaled::drivers::dataset::DatasetFormat;
             if (v == "tum") {
                 dopt.format = DatasetFormat::kTum;
             } else if (v == "kitti") {
@@ -143,7 +144,7 @@ int main(int argc, char** argv) {
         } else if (a == "--stride") {
             ok = parseNumber(v, opt.selection.stride) && opt.selection.stride >= 1;
         } else if (a == "--blank") {
-            auto r = scaled::drivers::parseBlankRange(v);
+            auto r = scaled::drivers::source::parseBlankRange(v);
             ok = r.ok();
             if (ok) {
                 opt.selection.blank.push_back(*r);
@@ -207,12 +208,12 @@ int main(int argc, char** argv) {
         cfg.detector.model_path = shared_model;
     }
 
-    auto priors = scaled::drivers::loadPriorsFile(cfg.priors_path);
+    auto priors = scaled::drivers::priors::loadPriorsFile(cfg.priors_path);
     if (!priors) {
         std::fprintf(stderr, "scale-eval: %s\n", priors.error().message.c_str());
         return priors.error().code == scaled::core::ErrorCode::kIo ? kExNoInput : kExConfig;
     }
-    auto source = scaled::drivers::openDataset(dataset, dopt);
+    auto source = scaled::drivers::dataset::openDataset(dataset, dopt);
     if (!source) {
         std::fprintf(stderr, "scale-eval: %s\n", source.error().message.c_str());
         return source.error().code == scaled::core::ErrorCode::kParse ? kExDataErr : kExNoInput;
@@ -224,7 +225,7 @@ int main(int argc, char** argv) {
                      dataset.string().c_str());
         return kExUsage;
     }
-    auto detector = scaled::detector::DnnDetector::create(cfg.detector);
+    auto detector = scaled::drivers::detector::DnnDetector::create(cfg.detector);
     if (!detector) {
         std::fprintf(stderr, "scale-eval: %s\n", detector.error().message.c_str());
         return detector.error().code == scaled::core::ErrorCode::kInvalidArgument ? kExConfig

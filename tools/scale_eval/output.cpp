@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <scaled/drivers/base/errno_text.h>
+
 #include "files.h"
 #include "json.h"
 #include "scale_eval.h"
@@ -90,7 +92,7 @@ public:
         out_.close();
         if (out_.fail()) {
             return makeError(ErrorCode::kIo,
-                             path_.string() + ": write failed: " + std::strerror(errno));
+                             path_.string() + ": write failed: " + drivers::base::errnoText(errno));
         }
         return true;
     }
@@ -255,8 +257,8 @@ Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
     auto open = [&](const char* name) -> Result<CsvFile*> {
         files.emplace_back(dir / name);
         if (!files.back().open()) {
-            return makeError(ErrorCode::kIo,
-                             (dir / name).string() + ": cannot create: " + std::strerror(errno));
+            return makeError(ErrorCode::kIo, (dir / name).string() + ": cannot create: " +
+                                                 drivers::base::errnoText(errno));
         }
         return &files.back();
     };

@@ -12,10 +12,10 @@
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/scale/likelihood.h>
 #include <scaled/core/slam/ekf_slam.h>
-#include <scaled/drivers/depth_image.h>
+#include <scaled/drivers/dataset/depth_image.h>
 #include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 namespace scaled::tools {
 
@@ -310,7 +310,8 @@ std::optional<double> truthScale(std::span<const Vec3> est, std::span<const Vec3
     return static_cast<double>(a->scale);
 }
 
-Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetector& detector,
+Result<EvalResult> evaluate(drivers::source::FrameSource& source,
+                            drivers::detector::ObjectDetector& detector,
                             const core::PriorTable& priors, const EvalOptions& options) {
     const auto& info = source.info();
     if (!info.has_intrinsics) {
@@ -322,7 +323,7 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
         return camera.error();
     }
     const daemon::PipelineConfig& config = options.config;
-    auto tracker = vision::MonoTracker::create(*camera, config.tracker);
+    auto tracker = drivers::vision::MonoTracker::create(*camera, config.tracker);
     if (!tracker) {
         return tracker.error();
     }
@@ -359,7 +360,7 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
     std::vector<core::Detection> dets(static_cast<std::size_t>(config.detector.max_detections));
     std::vector<core::ObservationRecord> records(4096);
     std::vector<Scalar> log_l(grid.size());
-    detector::DetectionResult boxes;
+    drivers::detector::DetectionResult boxes;
 
     // Per epoch: the trajectory, its frame rows, and the baselines.
     Track track;
@@ -386,11 +387,11 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
     double detector_ms = 0;
     double estimator_ms = 0;
 
-    drivers::Frame frame;
+    drivers::source::Frame frame;
     const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
     std::optional<std::string> first_read_error;
     for (std::size_t i = options.first_frame; i < end; i += stride) {
-        auto got = drivers::readSelected(source, options.selection, i, frame);
+        auto got = drivers::source::readSelected(source, options.selection, i, frame);
         if (!got) {
             // A frame that cannot be read is skipped (the reader moved past it);
             // the tracker sees a longer frame gap.
@@ -411,7 +412,7 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             need_gravity = false;
         }
         auto t0 = Clock::now();
-        const vision::TrackStats stats =
+        const drivers::vision::TrackStats stats =
             tracker->processFrame(frame.t_ns, frame.gray, gyro_feed->forFrame(frame));
         tracker_ms += msSince(t0);
         if (stats.gyro == core::slam::GyroCoverage::kOk) {
@@ -478,7 +479,7 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
                 return makeError(det.error().code,
                                  "frame " + std::to_string(frame.id) + ": " + det.error().message);
             }
-            const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+            const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
             slam.mapPoints(points);
             features.clear();
             for (const auto& m : points) {
@@ -592,7 +593,7 @@ Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetect
             }
             if (frame.depth_path && info.depth_scale_m > 0 &&
                 up.scale.state != core::ScaleState::kNoData) {
-                if (auto depth = drivers::loadDepthMetres(frame, info)) {
+                if (auto depth = drivers::dataset::loadDepthMetres(frame, info)) {
                     std::vector<double> rel;
                     std::vector<double> abs_m;
                     depthErrors(slam, points, *depth, static_cast<double>(up.scale.map), rel,

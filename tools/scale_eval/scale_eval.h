@@ -18,18 +18,18 @@
 #include <scaled/core/result.h>
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/detector/object_detector.h>
-#include <scaled/drivers/frame_selection.h>
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/detector/object_detector.h>
 #include <scaled/drivers/imu/simulated_gyro.h>
+#include <scaled/drivers/source/frame_selection.h>
+#include <scaled/drivers/source/frame_source.h>
 
 namespace scaled::tools {
 
 struct EvalOptions {
     daemon::PipelineConfig config;
     std::size_t first_frame = 0;
-    std::optional<std::size_t> end_frame;  // exclusive
-    drivers::FrameSelection selection;     // --stride, --blank
+    std::optional<std::size_t> end_frame;       // exclusive
+    drivers::source::FrameSelection selection;  // --stride, --blank
     // --gyro-sim: the gyro prior fed by a gyro simulated from the ground truth
     // (drivers/imu/gyro_feed.h); else the dataset's IMU log when it has a gyro.
     std::optional<drivers::imu::SimulatedGyroOptions> gyro_sim;
@@ -199,7 +199,8 @@ struct EvalResult {
     double estimator_ms_per_update = 0;
 };
 
-core::Result<EvalResult> evaluate(drivers::FrameSource& source, detector::ObjectDetector& detector,
+core::Result<EvalResult> evaluate(drivers::source::FrameSource& source,
+                                  drivers::detector::ObjectDetector& detector,
                                   const core::PriorTable& priors, const EvalOptions& options);
 
 // ---- metrics -------------------------------------------------------------

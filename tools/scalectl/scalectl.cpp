@@ -16,6 +16,8 @@
 #include <unistd.h>
 #include <utility>
 
+#include <scaled/drivers/base/errno_text.h>
+
 #include "sysexits.h"
 
 namespace scaled::tools::scalectl {
@@ -214,7 +216,8 @@ core::Result<bool> waitUntil(int fd, short events, int interrupt_fd,
             if (errno == EINTR) {
                 continue;  // a signal handler wrote to the interrupt fd, or an unrelated one
             }
-            return makeError(ErrorCode::kIo, std::string("poll: ") + std::strerror(errno));
+            return makeError(ErrorCode::kIo,
+                             std::string("poll: ") + drivers::base::errnoText(errno));
         }
         if (n == 2 && (fds[1].revents & (POLLIN | POLLHUP)) != 0) {
             return makeError(ErrorCode::kDegenerate, "interrupted");
@@ -641,34 +644,6 @@ int getExitCode(const ScaleReply& scale, bool require_converged) {
 
 // ---- the connection -------------------------------------------------------
 
-Client::Client(Client&& other) noexcept
-    : fd_(std::exchange(other.fd_, -1)),
-      interrupt_fd_(other.interrupt_fd_),
-      eof_(other.eof_),
-      buffer_(std::move(other.buffer_)) {}
-
-Client& Client::operator=(Client&& other) noexcept {
-    if (this != &other) {
-        close();
-        fd_ = std::exchange(other.fd_, -1);
-        interrupt_fd_ = other.interrupt_fd_;
-        eof_ = other.eof_;
-        buffer_ = std::move(other.buffer_);
-    }
-    return *this;
-}
-
-Client::~Client() {
-    close();
-}
-
-void Client::close() {
-    if (fd_ >= 0) {
-        ::close(fd_);
-        fd_ = -1;
-    }
-}
-
 core::Result<Client> Client::connect(const std::string& path,
                                      std::optional<Clock::time_point> deadline) {
     sockaddr_un addr{};
@@ -681,7 +656,7 @@ core::Result<Client> Client::connect(const std::string& path,
     std::memcpy(static_cast<void*>(addr.sun_path), path.data(), path.size());
     const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     if (fd < 0) {
-        return makeError(ErrorCode::kIo, std::string("socket: ") + std::strerror(errno));
+        return makeError(ErrorCode::kIo, std::string("socket: ") + drivers::base::errnoText(errno));
     }
     Client client(fd);
     for (;;) {
@@ -714,8 +689,8 @@ core::Result<Client> Client::connect(const std::string& path,
                 return client;
             }
             errno = so_error;
-            return makeError(ErrorCode::kIo,
-                             "cannot connect to " + path + ": " + std::strerror(so_error));
+            return makeError(ErrorCode::kIo, "cannot connect to " + path + ": " +
+                                                 drivers::base::errnoText(so_error));
         }
         if (err == ENOENT) {
             return makeError(
@@ -730,12 +705,13 @@ core::Result<Client> Client::connect(const std::string& path,
             return makeError(ErrorCode::kIo, "permission denied on " + path +
                                                  " (is this user in the group scaled?)");
         }
-        return makeError(ErrorCode::kIo, "cannot connect to " + path + ": " + std::strerror(err));
+        return makeError(ErrorCode::kIo,
+                         "cannot connect to " + path + ": " + drivers::base::errnoText(err));
     }
 }
 
 core::Result<bool> Client::waitFor(short events, std::optional<Clock::time_point> deadline) {
-    return waitUntil(fd_, events, interrupt_fd_, deadline);
+    return waitUntil(fd_.get(), events, interrupt_fd_, deadline);
 }
 
 core::Result<bool> Client::sendLine(std::string_view line,
@@ -744,7 +720,7 @@ core::Result<bool> Client::sendLine(std::string_view line,
     data += '\n';
     std::size_t sent = 0;
     while (sent < data.size()) {
-        const ssize_t n = ::send(fd_, data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
+        const ssize_t n = ::send(fd_.get(), data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
         if (n >= 0) {
             sent += static_cast<std::size_t>(n);
             continue;
@@ -762,7 +738,7 @@ core::Result<bool> Client::sendLine(std::string_view line,
         if (errno == EPIPE || errno == ECONNRESET) {
             return makeError(ErrorCode::kIo, "the daemon closed the connection");
         }
-        return makeError(ErrorCode::kIo, std::string("send: ") + std::strerror(errno));
+        return makeError(ErrorCode::kIo, std::string("send: ") + drivers::base::errnoText(errno));
     }
     return true;
 }
@@ -791,13 +767,14 @@ core::Result<std::string> Client::readLine(std::optional<Clock::time_point> dead
             return ready.error();
         }
         std::array<char, 65536> chunk{};
-        const ssize_t n = ::recv(fd_, chunk.data(), chunk.size(), 0);
+        const ssize_t n = ::recv(fd_.get(), chunk.data(), chunk.size(), 0);
         if (n > 0) {
             buffer_.append(chunk.data(), static_cast<std::size_t>(n));
         } else if (n == 0 || errno == ECONNRESET) {
             eof_ = true;  // closed (a reset, too, ends the stream)
         } else if (errno != EINTR && errno != EAGAIN && errno != EWOULDBLOCK) {
-            return makeError(ErrorCode::kIo, std::string("recv: ") + std::strerror(errno));
+            return makeError(ErrorCode::kIo,
+                             std::string("recv: ") + drivers::base::errnoText(errno));
         }
     }
 }

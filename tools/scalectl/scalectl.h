@@ -21,6 +21,7 @@
 #include <vector>
 
 #include <scaled/core/result.h>
+#include <scaled/drivers/base/unique_fd.h>
 
 namespace scaled::tools::scalectl {
 
@@ -163,9 +164,9 @@ public:
     Client() = default;
     Client(const Client&) = delete;
     Client& operator=(const Client&) = delete;
-    Client(Client&& other) noexcept;
-    Client& operator=(Client&& other) noexcept;
-    ~Client();
+    Client(Client&& other) noexcept = default;
+    Client& operator=(Client&& other) noexcept = default;
+    ~Client() = default;
 
     // kNotFound: no socket file; kIo: refused, permission denied, timed out;
     // kInvalidArgument: the path is too long for a UNIX socket address.
@@ -183,7 +184,7 @@ public:
     core::Result<std::string> readLine(std::optional<Clock::time_point> deadline);
 
     [[nodiscard]] bool eof() const { return eof_; }
-    [[nodiscard]] int fd() const { return fd_; }
+    [[nodiscard]] int fd() const { return fd_.get(); }
 
     static constexpr std::size_t kMaxLineBytes = 16u << 20;
 
@@ -191,9 +192,8 @@ private:
     explicit Client(int fd) : fd_(fd) {}
     // Waits for `events` on the socket; false with `error` set otherwise.
     core::Result<bool> waitFor(short events, std::optional<Clock::time_point> deadline);
-    void close();
 
-    int fd_ = -1;
+    drivers::base::UniqueFd fd_;
     int interrupt_fd_ = -1;
     bool eof_ = false;
     std::string buffer_;

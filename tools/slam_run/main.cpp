@@ -19,8 +19,9 @@
 #include <system_error>
 #include <unistd.h>
 
-#include <scaled/drivers/dataset_tum.h>
-#include <scaled/drivers/trajectory_io.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
+#include <scaled/drivers/dataset/trajectory_io.h>
 
 #include "args.h"
 #include "slam_run.h"
@@ -65,7 +66,7 @@ void usage(std::FILE* out) {
 }
 
 // --set KEY=VALUE: the tracker's tuning knobs, for experiments.
-bool setParameter(std::string_view kv, scaled::vision::TrackerConfig& c) {
+bool setParameter(std::string_view kv, scaled::drivers::vision::TrackerConfig& c) {
     const auto eq = kv.find('=');
     if (eq == std::string_view::npos) {
         return false;
@@ -185,7 +186,7 @@ int main(int argc, char** argv) {
     std::filesystem::path window_out;
     bool json = false;
     bool verbose = false;
-    scaled::drivers::DatasetOptions dopt;
+    scaled::drivers::dataset::DatasetOptions dopt;
     scaled::tools::SlamRunOptions ropt;
     std::optional<scaled::core::CameraIntrinsics> intrinsics;
     std::filesystem::path camera_file;
@@ -228,13 +229,13 @@ int main(int argc, char** argv) {
             ok = !window_out.empty();
         } else if (a == "--format") {
             if (*v == "tum") {
-                dopt.format = scaled::drivers::DatasetFormat::kTum;
+                dopt.format = scaled::drivers::dataset::DatasetFormat::kTum;
             } else if (*v == "kitti") {
-                dopt.format = scaled::drivers::DatasetFormat::kKitti;
+                dopt.format = scaled::drivers::dataset::DatasetFormat::kKitti;
             } else if (*v == "folder") {
-                dopt.format = scaled::drivers::DatasetFormat::kImageFolder;
+                dopt.format = scaled::drivers::dataset::DatasetFormat::kImageFolder;
             } else if (*v == "video") {
-                dopt.format = scaled::drivers::DatasetFormat::kVideo;
+                dopt.format = scaled::drivers::dataset::DatasetFormat::kVideo;
             } else {
                 ok = false;
             }
@@ -243,7 +244,7 @@ int main(int argc, char** argv) {
         } else if (a == "--stride") {
             ok = parseNumber(*v, ropt.selection.stride) && ropt.selection.stride >= 1;
         } else if (a == "--blank") {
-            auto r = scaled::drivers::parseBlankRange(*v);
+            auto r = scaled::drivers::source::parseBlankRange(*v);
             ok = r.ok();
             if (ok) {
                 ropt.selection.blank.push_back(*r);
@@ -300,14 +301,14 @@ int main(int argc, char** argv) {
         return kExNoInput;
     }
     if (!camera_file.empty()) {
-        auto k = scaled::drivers::readTumCameraFile(camera_file);
+        auto k = scaled::drivers::dataset::readTumCameraFile(camera_file);
         if (!k) {
             std::fprintf(stderr, "slam-run: --camera: %s\n", k.error().message.c_str());
             return k.error().code == scaled::core::ErrorCode::kNotFound ? kExNoInput : kExDataErr;
         }
         dopt.intrinsics = *k;
     }
-    auto source = scaled::drivers::openDataset(dataset, dopt);
+    auto source = scaled::drivers::dataset::openDataset(dataset, dopt);
     if (!source) {
         std::fprintf(stderr, "slam-run: %s\n", source.error().message.c_str());
         return kExDataErr;
@@ -329,7 +330,7 @@ int main(int argc, char** argv) {
         return kExDataErr;
     }
     if (k.width_px <= 0 || k.height_px <= 0) {
-        scaled::drivers::Frame first;
+        scaled::drivers::source::Frame first;
         if (auto got = src.next(first); !got || !*got) {
             std::fprintf(stderr, "slam-run: %s: cannot read the first frame%s%s\n", dataset.c_str(),
                          got ? "" : ": ", got ? "" : got.error().message.c_str());
@@ -345,7 +346,8 @@ int main(int argc, char** argv) {
     }
     const bool tty = isatty(STDERR_FILENO) == 1;
     if (verbose) {
-        ropt.progress = [](std::size_t done, std::size_t, const scaled::vision::TrackStats& s) {
+        ropt.progress = [](std::size_t done, std::size_t,
+                           const scaled::drivers::vision::TrackStats& s) {
             std::fprintf(stderr,
                          "frame %zu %s map %d visible %d searched %d matched %d inliers %d "
                          "rescued %d added %d ncc_evals %d coarse %d/%d reloc %d/%d\n",
@@ -356,7 +358,7 @@ int main(int argc, char** argv) {
         };
     } else if (tty) {
         ropt.progress = [](std::size_t done, std::size_t total,
-                           const scaled::vision::TrackStats& s) {
+                           const scaled::drivers::vision::TrackStats& s) {
             if (done % 10 == 0 || done == total) {
                 std::fprintf(stderr, "\r%zu/%zu frames  %s  features %d  measured %d   ", done,
                              total, scaled::core::slam::toString(s.health), s.features,
@@ -382,7 +384,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "slam-run: note: %s\n", note.c_str());
     }
     if (!out.empty()) {
-        if (auto w = scaled::drivers::writeTumTrajectory(out, result->t_ns, result->poses); !w) {
+        if (auto w = scaled::drivers::dataset::writeTumTrajectory(out, result->t_ns, result->poses);
+            !w) {
             std::fprintf(stderr, "slam-run: %s\n", w.error().message.c_str());
             return kExCantCreat;
         }

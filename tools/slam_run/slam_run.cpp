@@ -59,10 +59,10 @@ std::optional<Vec3> rotationGain(const std::vector<core::CameraPose>& poses,
 
 }  // namespace
 
-core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
+core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
                                     const core::PinholeRadialCamera& camera,
                                     const SlamRunOptions& options) {
-    auto tracker = vision::MonoTracker::create(camera, options.tracker);
+    auto tracker = drivers::vision::MonoTracker::create(camera, options.tracker);
     if (!tracker) {
         return tracker.error();
     }
@@ -89,14 +89,14 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
     }
     result.gyro_source = gyro_feed->source();
     std::vector<Segment> segments(1);
-    drivers::Frame frame;
+    drivers::source::Frame frame;
     double ms_sum = 0;
     double measured_sum = 0;
     double map_sum = 0;
     bool need_gravity = true;
     const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
     for (std::size_t i = options.first_frame; i < end; i += stride) {
-        auto got = drivers::readSelected(source, options.selection, i, frame);
+        auto got = drivers::source::readSelected(source, options.selection, i, frame);
         if (!got) {
             return got.error();
         }
@@ -112,7 +112,8 @@ core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
         }
         const auto t0 = std::chrono::steady_clock::now();
         const core::slam::ImuWindow* imu = gyro_feed->forFrame(frame);
-        const vision::TrackStats stats = tracker->processFrame(frame.t_ns, frame.gray, imu);
+        const drivers::vision::TrackStats stats =
+            tracker->processFrame(frame.t_ns, frame.gray, imu);
         if (stats.gyro == core::slam::GyroCoverage::kOk) {
             ++result.gyro_frames;
         }

@@ -14,25 +14,26 @@
 
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/result.h>
-#include <scaled/drivers/frame_selection.h>
-#include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/imu/simulated_gyro.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/source/frame_selection.h>
+#include <scaled/drivers/source/frame_source.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 namespace scaled::tools {
 
 struct SlamRunOptions {
-    vision::TrackerConfig tracker;
+    drivers::vision::TrackerConfig tracker;
     std::size_t first_frame = 0;
-    std::optional<std::size_t> end_frame;  // exclusive
-    drivers::FrameSelection selection;     // --stride, --blank
+    std::optional<std::size_t> end_frame;       // exclusive
+    drivers::source::FrameSelection selection;  // --stride, --blank
     // --gyro-sim: the gyro prior fed from the ground truth (an evaluation of
     // what a gyro would give; drivers/imu/simulated_gyro.h). Without it the
     // dataset's own IMU log feeds the prior when it has a gyroscope.
     std::optional<drivers::imu::SimulatedGyroOptions> gyro_sim;
     int window_frames = 150;  // the sliding-window scale's window (tracked frames)
     // Called after every frame (progress display); may be empty.
-    std::function<void(std::size_t done, std::size_t total, const vision::TrackStats&)> progress;
+    std::function<void(std::size_t done, std::size_t total, const drivers::vision::TrackStats&)>
+        progress;
 };
 
 struct SlamRunResult {
@@ -73,7 +74,7 @@ struct SlamRunResult {
     core::Vec3 gyro_bias_C = core::Vec3::Zero();  // the tracker's bias estimate at the end
 };
 
-core::Result<SlamRunResult> runSlam(drivers::FrameSource& source,
+core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
                                     const core::PinholeRadialCamera& camera,
                                     const SlamRunOptions& options);
 

@@ -31,9 +31,9 @@
 #include <Eigen/Geometry>
 
 #include <scaled/core/camera/pinhole_radial.h>
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/scene.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/scene.h>
+#include <scaled/drivers/synth/trajectory.h>
 
 #include "sysexits.h"
 
@@ -210,13 +210,13 @@ int run(const Options& opts) {
         std::cerr << "synth-render: " << cam.error().message << "\n";
         return kExUsage;
     }
-    scaled::synth::SceneConfig scene_config;
+    scaled::drivers::synth::SceneConfig scene_config;
     scene_config.seed = static_cast<std::uint64_t>(opts.seed);
-    auto scene = scaled::synth::Scene::create(scene_config);
-    scaled::synth::TrajectoryConfig traj_config;
+    auto scene = scaled::drivers::synth::Scene::create(scene_config);
+    scaled::drivers::synth::TrajectoryConfig traj_config;
     traj_config.seed = static_cast<std::uint64_t>(opts.seed);
     traj_config.speed_scale = opts.speed;
-    auto traj = scaled::synth::Trajectory::create(traj_config);
+    auto traj = scaled::drivers::synth::Trajectory::create(traj_config);
     if (!scene || !traj) {
         std::cerr << "synth-render: " << (!scene ? scene.error().message : traj.error().message)
                   << "\n";
@@ -263,7 +263,7 @@ int run(const Options& opts) {
         depth_txt << "# synthetic depth along the optical axis, 16-bit PNG, 5000 per metre\n"
                   << "# timestamp filename\n";
     }
-    const auto g = scaled::synth::gravityDirectionW();
+    const auto g = scaled::drivers::synth::gravityDirectionW();
     gravity_txt << "# unit gravity (down) direction in the world frame: gx gy gz\n"
                 << static_cast<double>(g.x()) << " " << static_cast<double>(g.y()) << " "
                 << static_cast<double>(g.z()) << "\n";
@@ -273,11 +273,11 @@ int run(const Options& opts) {
            << ")\n"
            << "# timestamp tx ty tz qx qy qz qw\n";
 
-    scaled::synth::RenderOptions render_options;
+    scaled::drivers::synth::RenderOptions render_options;
     render_options.antialias = opts.antialias;
     render_options.noise_sigma = opts.noise;
     render_options.noise_seed = static_cast<std::uint64_t>(opts.seed);
-    scaled::synth::Renderer renderer(*scene, render_options);
+    scaled::drivers::synth::Renderer renderer(*scene, render_options);
     const auto frames = traj->makeSequence(static_cast<int>(opts.frames), opts.fps);
     cv::Mat image;
     cv::Mat depth;
@@ -315,8 +315,8 @@ int run(const Options& opts) {
         return kExCantCreat;
     }
     std::cout << "synth-render: " << frames.size() << " frames, "
-              << static_cast<double>(scaled::synth::pathLength(frames)) << " m of path, in "
-              << dir.string() << "\n";
+              << static_cast<double>(scaled::drivers::synth::pathLength(frames))
+              << " m of path, in " << dir.string() << "\n";
     return 0;
 }
 

@@ -2,9 +2,9 @@
 #include <cstddef>
 #include <string>
 
-#include <scaled/drivers/camera.h>
+#include <scaled/drivers/camera/camera.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::camera {
 
 const char* toString(PixelFormat f) {
     switch (f) {
@@ -65,4 +65,4 @@ core::Result<bool> LiveCamera::seek(std::size_t index) {
         describe() + ": a live camera cannot seek (to frame " + std::to_string(index) + ")");
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::camera

@@ -7,9 +7,9 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
-#include <scaled/drivers/pixel_convert.h>
+#include <scaled/drivers/camera/pixel_convert.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::camera {
 namespace {
 
 using core::ErrorCode;
@@ -381,4 +381,4 @@ core::Result<bool> convertRawImage(const RawImage& raw, const std::string& sourc
     return makeError(ErrorCode::kInvalidArgument, source + ": unknown pixel format");
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::camera

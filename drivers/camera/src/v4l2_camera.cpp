@@ -31,11 +31,12 @@
 #include <utility>
 #include <vector>
 
-#include <scaled/drivers/pixel_convert.h>
-#include <scaled/drivers/unix_socket.h>
-#include <scaled/drivers/v4l2_camera.h>
+#include <scaled/drivers/base/errno_text.h>
+#include <scaled/drivers/base/unique_fd.h>
+#include <scaled/drivers/camera/pixel_convert.h>
+#include <scaled/drivers/camera/v4l2_camera.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::camera {
 namespace {
 
 using core::ErrorCode;
@@ -45,9 +46,7 @@ constexpr std::uint32_t kCaptureType = V4L2_BUF_TYPE_VIDEO_CAPTURE;
 constexpr int kMinBuffers = 2;
 constexpr int kMaxBuffers = 32;
 
-std::string errnoText(int err) {
-    return std::error_code(err, std::generic_category()).message();
-}
+using base::errnoText;
 
 // Every ioctl goes through here: a signal arriving during a blocking driver
 // call makes it fail with EINTR, which is not the device's answer.
@@ -509,7 +508,7 @@ struct NodeProbe {
     std::string card;
     std::string bus;
     std::uint32_t caps = 0;
-    UniqueFd fd;
+    base::UniqueFd fd;
 };
 
 NodeProbe probeNode(const std::string& path) {
@@ -658,7 +657,7 @@ struct CaptureStream {
         void* addr = nullptr;
         std::size_t length = 0;
     };
-    UniqueFd fd;
+    base::UniqueFd fd;
     std::vector<Mapping> buffers;
     // "/dev/video0 (vivid): buffer 2" for each buffer, made once: conversion
     // errors name the buffer, and building the name per frame would allocate.
@@ -1035,12 +1034,12 @@ core::Result<bool> checkOptions(const CameraOptions& o) {
 
 class V4l2Camera final : public LiveCamera {
 public:
-    V4l2Camera(CameraOptions options, UniqueFd stop_fd)
+    V4l2Camera(CameraOptions options, base::UniqueFd stop_fd)
         : options_(std::move(options)),
           by_name_(options_.device.find('/') == std::string::npos),
           stop_fd_(std::move(stop_fd)) {}
 
-    [[nodiscard]] const SequenceInfo& info() const override { return info_; }
+    [[nodiscard]] const source::SequenceInfo& info() const override { return info_; }
 
     [[nodiscard]] std::string describe() const override {
         const std::lock_guard<std::mutex> lock(text_mutex_);
@@ -1081,7 +1080,7 @@ public:
         return true;
     }
 
-    core::Result<bool> next(Frame& frame) override {
+    core::Result<bool> next(source::Frame& frame) override {
         if (stopped_.load()) {
             return false;
         }
@@ -1196,7 +1195,7 @@ private:
         return true;
     }
 
-    core::Result<bool> deliver(v4l2_buffer& buf, Frame& frame) {
+    core::Result<bool> deliver(v4l2_buffer& buf, source::Frame& frame) {
         std::int64_t t_ns = 0;
         const bool monotonic =
             (buf.flags & V4L2_BUF_FLAG_TIMESTAMP_MASK) == V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
@@ -1248,12 +1247,12 @@ private:
     }
 
     CameraOptions options_;
-    bool by_name_ = false;  // options_.device is a card name, not a path
-    UniqueFd stop_fd_;      // eventfd: stop() makes it readable
+    bool by_name_ = false;    // options_.device is a card name, not a path
+    base::UniqueFd stop_fd_;  // eventfd: stop() makes it readable
     std::atomic<bool> stopped_{false};
     std::unique_ptr<CaptureStream> stream_;  // null after a loss, until reopen()
     Negotiated neg_;
-    SequenceInfo info_;
+    source::SequenceInfo info_;
     std::int64_t next_id_ = 0;
     std::int64_t last_t_ns_ = 0;
     bool have_last_t_ = false;
@@ -1295,7 +1294,7 @@ core::Result<std::unique_ptr<LiveCamera>> openV4l2Camera(const CameraOptions& op
     if (!ok) {
         return ok.error();
     }
-    UniqueFd stop_fd(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
+    base::UniqueFd stop_fd(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
     if (!stop_fd.isValid()) {
         return makeError(ErrorCode::kIo, "camera \"" + options.device +
                                              "\": cannot create an eventfd: " + errnoText(errno));
@@ -1342,4 +1341,4 @@ std::vector<CameraDescription> listV4l2Cameras() {
     return out;
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::camera

@@ -12,11 +12,11 @@
 #include <system_error>
 #include <utility>
 
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/detector/thread_priority.h>
-#include <scaled/detector/yolo_decode.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/detector/thread_priority.h>
+#include <scaled/drivers/detector/yolo_decode.h>
 
-namespace scaled::detector {
+namespace scaled::drivers::detector {
 
 using core::ErrorCode;
 using core::makeError;
@@ -512,4 +512,4 @@ std::size_t toEstimatorDetections(const DetectionResult& result, std::span<core:
     return n;
 }
 
-}  // namespace scaled::detector
+}  // namespace scaled::drivers::detector

@@ -10,9 +10,9 @@
 #include <thread>
 #include <unistd.h>
 
-#include <scaled/detector/thread_priority.h>
+#include <scaled/drivers/detector/thread_priority.h>
 
-namespace scaled::detector {
+namespace scaled::drivers::detector {
 namespace {
 
 id_t threadId() {
@@ -73,4 +73,4 @@ core::Result<int> startOpenCvWorkersAtNice(int nice) {
     return cv::getNumThreads();
 }
 
-}  // namespace scaled::detector
+}  // namespace scaled::drivers::detector

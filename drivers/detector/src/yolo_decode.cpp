@@ -4,9 +4,9 @@
 #include <opencv2/dnn.hpp>
 #include <utility>
 
-#include <scaled/detector/yolo_decode.h>
+#include <scaled/drivers/detector/yolo_decode.h>
 
-namespace scaled::detector {
+namespace scaled::drivers::detector {
 
 using core::Scalar;
 
@@ -160,4 +160,4 @@ void YoloDecoder::finish(std::span<const std::string> names, float score_thresho
     }
 }
 
-}  // namespace scaled::detector
+}  // namespace scaled::drivers::detector

@@ -8,12 +8,14 @@
 #include <system_error>
 #include <utility>
 
+#include <scaled/drivers/base/errno_text.h>
+
 #ifndef SCALED_GPIOD_API
 #error "SCALED_GPIOD_API (1 or 2) comes from drivers/gpio/CMakeLists.txt"
 #endif
 
-namespace scaled::drivers {
-namespace gpio_detail {
+namespace scaled::drivers::gpio {
+namespace detail {
 namespace {
 
 using core::ErrorCode;
@@ -97,10 +99,6 @@ std::string offsetsText(const std::vector<unsigned>& offsets) {
 }
 
 }  // namespace
-
-std::string errnoText(int err) {
-    return std::error_code(err, std::generic_category()).message();
-}
 
 std::vector<std::string> listChipPaths() {
     std::vector<std::pair<unsigned, std::string>> chips;
@@ -248,10 +246,10 @@ std::string describeOutputs(const ChipInfo& chip, const GpioOutputOptions& optio
            (options.active_low ? " active-low" : "");
 }
 
-}  // namespace gpio_detail
+}  // namespace detail
 
 int gpiodApiVersion() {
     return SCALED_GPIOD_API;
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::gpio

@@ -10,9 +10,10 @@
 #include <vector>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/gpio_lines.h>
+#include <scaled/drivers/base/errno_text.h>
+#include <scaled/drivers/gpio/gpio_lines.h>
 
-namespace scaled::drivers::gpio_detail {
+namespace scaled::drivers::gpio::detail {
 
 // The most lines one request holds (GPIOD_LINE_BULK_MAX_LINES in v1,
 // GPIO_V2_LINES_MAX in the kernel's v2 uAPI).
@@ -29,7 +30,7 @@ struct ChipInfo {
 // Returns 0, or the errno of the failure.
 int probeChip(const std::string& path, ChipInfo& info);
 
-std::string errnoText(int err);
+using base::errnoText;
 
 // /dev/gpiochip*, in numeric order.
 std::vector<std::string> listChipPaths();
@@ -64,4 +65,4 @@ std::string busyText(unsigned offset, const char* consumer);
 // "gpiochip1 [scaled-leds] lines 0,1" (plus " active-low").
 std::string describeOutputs(const ChipInfo& chip, const GpioOutputOptions& options);
 
-}  // namespace scaled::drivers::gpio_detail
+}  // namespace scaled::drivers::gpio::detail

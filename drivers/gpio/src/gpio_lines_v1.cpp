@@ -13,8 +13,8 @@
 
 #include "gpio_common.h"
 
-namespace scaled::drivers {
-namespace gpio_detail {
+namespace scaled::drivers::gpio {
+namespace detail {
 
 int probeChip(const std::string& path, ChipInfo& info) {
     errno = 0;
@@ -30,13 +30,13 @@ int probeChip(const std::string& path, ChipInfo& info) {
     return 0;
 }
 
-}  // namespace gpio_detail
+}  // namespace detail
 
 namespace {
 
-using gpio_detail::ChipInfo;
+using detail::ChipInfo;
 
-static_assert(gpio_detail::kMaxLines == GPIOD_LINE_BULK_MAX_LINES);
+static_assert(detail::kMaxLines == GPIOD_LINE_BULK_MAX_LINES);
 
 struct ChipCloser {
     void operator()(gpiod_chip* chip) const { ::gpiod_chip_close(chip); }
@@ -51,7 +51,7 @@ public:
         : chip_(std::move(chip)),
           info_(std::move(info)),
           offsets_(options.offsets),
-          description_(gpio_detail::describeOutputs(info_, options)),
+          description_(detail::describeOutputs(info_, options)),
           bulk_(bulk) {}
     GpiodV1Outputs(const GpiodV1Outputs&) = delete;
     GpiodV1Outputs& operator=(const GpiodV1Outputs&) = delete;
@@ -62,7 +62,7 @@ public:
 
     core::Result<bool> set(std::size_t index, bool active) override {
         if (index >= offsets_.size()) {
-            return gpio_detail::indexError(info_, index, offsets_.size());
+            return detail::indexError(info_, index, offsets_.size());
         }
         // All lines at once, from the values kept here: in 1.6,
         // gpiod_line_set_value() on one line of a bulk request sends a single
@@ -74,7 +74,7 @@ public:
         if (::gpiod_line_set_value_bulk(&bulk_, values_.data()) != 0) {
             const int err = errno != 0 ? errno : EIO;
             values_[index] = previous;
-            return gpio_detail::setError(info_, offsets_[index], err);
+            return detail::setError(info_, offsets_[index], err);
         }
         return true;
     }
@@ -101,7 +101,7 @@ std::string busyDetail(gpiod_line_bulk& bulk) {
         if (!detail.empty()) {
             detail += "; ";
         }
-        detail += gpio_detail::busyText(::gpiod_line_offset(line), ::gpiod_line_consumer(line));
+        detail += detail::busyText(::gpiod_line_offset(line), ::gpiod_line_consumer(line));
     }
     return detail;
 }
@@ -109,21 +109,21 @@ std::string busyDetail(gpiod_line_bulk& bulk) {
 }  // namespace
 
 core::Result<std::unique_ptr<GpioOutputs>> openGpioOutputs(const GpioOutputOptions& options) {
-    auto path = gpio_detail::findChip(options.chip);
+    auto path = detail::findChip(options.chip);
     if (!path) {
         return path.error();
     }
     errno = 0;
     ChipPtr chip(::gpiod_chip_open(path->c_str()));
     if (!chip) {
-        return gpio_detail::openError(options.chip, *path, errno != 0 ? errno : EIO);
+        return detail::openError(options.chip, *path, errno != 0 ? errno : EIO);
     }
     ChipInfo info;
     info.path = *path;
     info.name = ::gpiod_chip_name(chip.get());
     info.label = ::gpiod_chip_label(chip.get());
     info.num_lines = ::gpiod_chip_num_lines(chip.get());
-    if (auto ok = gpio_detail::checkOffsets(options, info); !ok) {
+    if (auto ok = detail::checkOffsets(options, info); !ok) {
         return ok.error();
     }
 
@@ -135,9 +135,9 @@ core::Result<std::unique_ptr<GpioOutputs>> openGpioOutputs(const GpioOutputOptio
     if (::gpiod_chip_get_lines(chip.get(), offsets.data(), static_cast<unsigned>(offsets.size()),
                                &bulk) != 0) {
         const int err = errno != 0 ? errno : EIO;
-        return core::makeError(core::ErrorCode::kIo, gpio_detail::chipText(info) +
+        return core::makeError(core::ErrorCode::kIo, detail::chipText(info) +
                                                          ": cannot get the lines' information: " +
-                                                         gpio_detail::errnoText(err));
+                                                         detail::errnoText(err));
     }
     const int flags = options.active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
     const std::array<int, GPIOD_LINE_BULK_MAX_LINES> inactive{};
@@ -145,13 +145,13 @@ core::Result<std::unique_ptr<GpioOutputs>> openGpioOutputs(const GpioOutputOptio
     if (::gpiod_line_request_bulk_output_flags(&bulk, options.consumer.c_str(), flags,
                                                inactive.data()) != 0) {
         const int err = errno != 0 ? errno : EIO;
-        return gpio_detail::requestError(info, options, err,
-                                         err == EBUSY ? busyDetail(bulk) : std::string());
+        return detail::requestError(info, options, err,
+                                    err == EBUSY ? busyDetail(bulk) : std::string());
     }
     return std::unique_ptr<GpioOutputs>(
         std::make_unique<GpiodV1Outputs>(std::move(chip), std::move(info), options, bulk));
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::gpio
 
 #endif  // SCALED_GPIOD_API == 1

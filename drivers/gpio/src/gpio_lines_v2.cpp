@@ -13,10 +13,10 @@
 
 #include "gpio_common.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::gpio {
 namespace {
 
-using gpio_detail::ChipInfo;
+using detail::ChipInfo;
 
 struct ChipCloser {
     void operator()(gpiod_chip* chip) const { ::gpiod_chip_close(chip); }
@@ -71,7 +71,7 @@ public:
         : request_(std::move(request)),
           info_(std::move(info)),
           offsets_(options.offsets),
-          description_(gpio_detail::describeOutputs(info_, options)) {}
+          description_(detail::describeOutputs(info_, options)) {}
     GpiodV2Outputs(const GpiodV2Outputs&) = delete;
     GpiodV2Outputs& operator=(const GpiodV2Outputs&) = delete;
     GpiodV2Outputs(GpiodV2Outputs&&) = delete;
@@ -80,7 +80,7 @@ public:
 
     core::Result<bool> set(std::size_t index, bool active) override {
         if (index >= offsets_.size()) {
-            return gpio_detail::indexError(info_, index, offsets_.size());
+            return detail::indexError(info_, index, offsets_.size());
         }
         // One GPIO_V2_LINE_SET_VALUES_IOCTL with a mask of this line only: the
         // other lines keep their values.
@@ -88,7 +88,7 @@ public:
         if (::gpiod_line_request_set_value(
                 request_.get(), offsets_[index],
                 active ? GPIOD_LINE_VALUE_ACTIVE : GPIOD_LINE_VALUE_INACTIVE) != 0) {
-            return gpio_detail::setError(info_, offsets_[index], lastErrno());
+            return detail::setError(info_, offsets_[index], lastErrno());
         }
         return true;
     }
@@ -113,19 +113,19 @@ std::string busyDetail(gpiod_chip* chip, const std::vector<unsigned>& offsets) {
         if (!detail.empty()) {
             detail += "; ";
         }
-        detail += gpio_detail::busyText(offset, ::gpiod_line_info_get_consumer(info.get()));
+        detail += detail::busyText(offset, ::gpiod_line_info_get_consumer(info.get()));
     }
     return detail;
 }
 
 core::Error setupError(const ChipInfo& info, const char* what, int err) {
-    return core::makeError(core::ErrorCode::kIo, gpio_detail::chipText(info) + ": " + what + ": " +
-                                                     gpio_detail::errnoText(err));
+    return core::makeError(core::ErrorCode::kIo,
+                           detail::chipText(info) + ": " + what + ": " + detail::errnoText(err));
 }
 
 }  // namespace
 
-namespace gpio_detail {
+namespace detail {
 
 int probeChip(const std::string& path, ChipInfo& info) {
     errno = 0;
@@ -136,17 +136,17 @@ int probeChip(const std::string& path, ChipInfo& info) {
     return readChipInfo(chip.get(), path, info);
 }
 
-}  // namespace gpio_detail
+}  // namespace detail
 
 core::Result<std::unique_ptr<GpioOutputs>> openGpioOutputs(const GpioOutputOptions& options) {
-    auto path = gpio_detail::findChip(options.chip);
+    auto path = detail::findChip(options.chip);
     if (!path) {
         return path.error();
     }
     errno = 0;
     const ChipPtr chip(::gpiod_chip_open(path->c_str()));
     if (!chip) {
-        return gpio_detail::openError(options.chip, *path, lastErrno());
+        return detail::openError(options.chip, *path, lastErrno());
     }
     ChipInfo info;
     info.path = *path;
@@ -154,7 +154,7 @@ core::Result<std::unique_ptr<GpioOutputs>> openGpioOutputs(const GpioOutputOptio
     if (const int err = readChipInfo(chip.get(), *path, info); err != 0) {
         return setupError(info, "cannot read the chip's information", err);
     }
-    if (auto ok = gpio_detail::checkOffsets(options, info); !ok) {
+    if (auto ok = detail::checkOffsets(options, info); !ok) {
         return ok.error();
     }
 
@@ -191,13 +191,13 @@ core::Result<std::unique_ptr<GpioOutputs>> openGpioOutputs(const GpioOutputOptio
         ::gpiod_chip_request_lines(chip.get(), request_config.get(), line_config.get()));
     if (!request) {
         const int err = lastErrno();
-        return gpio_detail::requestError(
-            info, options, err, err == EBUSY ? busyDetail(chip.get(), options.offsets) : "");
+        return detail::requestError(info, options, err,
+                                    err == EBUSY ? busyDetail(chip.get(), options.offsets) : "");
     }
     return std::unique_ptr<GpioOutputs>(
         std::make_unique<GpiodV2Outputs>(std::move(request), std::move(info), options));
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::gpio
 
 #endif  // SCALED_GPIOD_API == 2

@@ -37,7 +37,7 @@ core::Result<GyroFeed> GyroFeed::create(const MapGravitySelector& dataset,
     return feed;
 }
 
-const core::slam::ImuWindow* GyroFeed::forFrame(const Frame& frame) {
+const core::slam::ImuWindow* GyroFeed::forFrame(const source::Frame& frame) {
     if (log_window_) {
         return &*log_window_;
     }

@@ -14,6 +14,7 @@
 #include <unistd.h>
 #include <utility>
 
+#include <scaled/drivers/base/errno_text.h>
 #include <scaled/drivers/imu/iio_device.h>
 
 namespace scaled::drivers::imu {
@@ -89,10 +90,11 @@ ErrorCode codeOf(int err) {
 
 // A sysfs attribute's text without its trailing newline, NULs and blanks.
 Result<std::string> readAttr(const fs::path& path) {
-    const UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+    const base::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
     if (!fd.isValid()) {
         const int err = errno;
-        return makeError(codeOf(err), path.string() + ": cannot open: " + std::strerror(err));
+        return makeError(codeOf(err),
+                         path.string() + ": cannot open: " + drivers::base::errnoText(err));
     }
     std::string text;
     std::array<char, 512> buf{};
@@ -103,7 +105,8 @@ Result<std::string> readAttr(const fs::path& path) {
                 continue;
             }
             const int err = errno;
-            return makeError(codeOf(err), path.string() + ": cannot read: " + std::strerror(err));
+            return makeError(codeOf(err),
+                             path.string() + ": cannot read: " + drivers::base::errnoText(err));
         }
         if (n == 0) {
             break;
@@ -120,11 +123,11 @@ Result<std::string> readAttr(const fs::path& path) {
 }
 
 Result<bool> writeAttr(const fs::path& path, std::string_view value) {
-    const UniqueFd fd(::open(path.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC));
+    const base::UniqueFd fd(::open(path.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC));
     if (!fd.isValid()) {
         const int err = errno;
         return makeError(codeOf(err), path.string() + ": cannot open to write " + quote(value) +
-                                          ": " + std::strerror(err));
+                                          ": " + drivers::base::errnoText(err));
     }
     const std::string line = std::string(value) + "\n";
     ssize_t n = 0;
@@ -134,7 +137,7 @@ Result<bool> writeAttr(const fs::path& path, std::string_view value) {
     if (n != static_cast<ssize_t>(line.size())) {
         const int err = n < 0 ? errno : EIO;
         return makeError(codeOf(err), path.string() + ": cannot write " + quote(value) + ": " +
-                                          std::strerror(err));
+                                          drivers::base::errnoText(err));
     }
     return true;
 }
@@ -717,14 +720,15 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
     if (auto w = writeAttr(sysfs_dir_ / "buffer" / "length", std::to_string(options.length)); !w) {
         return w.error();
     }
-    UniqueFd fd(::open(dev_path_.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC));
+    base::UniqueFd fd(::open(dev_path_.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC));
     if (!fd.isValid()) {
         const int err = errno;
-        return makeError(codeOf(err), dev_path_.string() + ": cannot open: " + std::strerror(err));
+        return makeError(codeOf(err),
+                         dev_path_.string() + ": cannot open: " + drivers::base::errnoText(err));
     }
     if (auto w = writeAttr(enable_file, "1"); !w) {
         core::Error e = w.error();
-        if (e.message.find(std::strerror(EINVAL)) != std::string::npos) {
+        if (e.message.find(drivers::base::errnoText(EINVAL)) != std::string::npos) {
             const fs::path trigger_file = sysfs_dir_ / "trigger" / "current_trigger";
             auto current = readAttr(trigger_file);
             e.message += current && current->empty()
@@ -768,7 +772,8 @@ Result<std::vector<IioScan>> IioDevice::readScans(std::size_t max_scans, int tim
                 continue;
             }
             const int err = errno;
-            return makeError(codeOf(err), dev_path_.string() + ": poll: " + std::strerror(err));
+            return makeError(codeOf(err),
+                             dev_path_.string() + ": poll: " + drivers::base::errnoText(err));
         }
         if (rc == 0) {
             return out;  // nothing in time
@@ -784,8 +789,8 @@ Result<std::vector<IioScan>> IioDevice::readScans(std::size_t max_scans, int tim
                 continue;
             }
             const int err = errno;
-            return makeError(codeOf(err),
-                             dev_path_.string() + ": cannot read: " + std::strerror(err));
+            return makeError(codeOf(err), dev_path_.string() +
+                                              ": cannot read: " + drivers::base::errnoText(err));
         }
         if (n == 0) {
             return makeError(ErrorCode::kUnavailable, dev_path_.string() + ": end of data");

@@ -11,7 +11,7 @@
 
 #include <Eigen/LU>
 
-#include <scaled/drivers/dataset_tum.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
 #include <scaled/drivers/imu/imu_log.h>
 
 #include "dataset_common.h"
@@ -56,11 +56,11 @@ Result<int64_t> parseIntegerNs(std::string_view field) {
     const auto [ptr, ec] = std::from_chars(field.data(), end, v);
     if (ec == std::errc::result_out_of_range) {
         return makeError(ErrorCode::kParse,
-                         "timestamp out of range: '" + detail::printable(field) + "'");
+                         "timestamp out of range: '" + dataset::detail::printable(field) + "'");
     }
     if (ec != std::errc() || ptr != end || field.empty() || v < 0) {
         return makeError(ErrorCode::kParse, "timestamp is not a non-negative integer [ns]: '" +
-                                                detail::printable(field) + "'");
+                                                dataset::detail::printable(field) + "'");
     }
     return v;
 }
@@ -68,15 +68,15 @@ Result<int64_t> parseIntegerNs(std::string_view field) {
 // A finite number within +-limit, named `name` in errors.
 Result<core::Scalar> parseBounded(std::string_view field, std::string_view name, double limit,
                                   const char* unit) {
-    auto x = detail::parseFiniteNumber(field, name);
+    auto x = dataset::detail::parseFiniteNumber(field, name);
     if (!x) {
         return x.error();
     }
     if (!(std::abs(*x) <= limit)) {
         return makeError(ErrorCode::kParse, std::string(name) + " is implausibly large (|" +
                                                 std::string(name) + "| > " +
-                                                detail::shortNumber(limit) + " " + unit + "): '" +
-                                                detail::printable(field) + "'");
+                                                dataset::detail::shortNumber(limit) + " " + unit +
+                                                "): '" + dataset::detail::printable(field) + "'");
     }
     return static_cast<core::Scalar>(*x);
 }
@@ -91,15 +91,15 @@ core::Mat3 tumKinectImuToCamera() {
 }
 
 Result<ImuLog> readTumAccelerometer(const std::filesystem::path& path) {
-    // drivers::readTumAccelerometer (dataset_tum.h) parses the file for the
+    // drivers::dataset::readTumAccelerometer (dataset_tum.h) parses the file for the
     // frame sources; the same checks and messages here.
-    auto rows = drivers::readTumAccelerometer(path);
+    auto rows = drivers::dataset::readTumAccelerometer(path);
     if (!rows) {
         return rows.error();
     }
     ImuLog log;
     log.samples.reserve(rows->size());
-    for (const TumAccelSample& row : *rows) {
+    for (const dataset::TumAccelSample& row : *rows) {
         core::ImuSample s;
         s.t_ns = row.t_ns;
         s.accel_mps2 = row.accel;
@@ -111,7 +111,7 @@ Result<ImuLog> readTumAccelerometer(const std::filesystem::path& path) {
 }
 
 Result<core::Mat3> readEurocSensorRotation(const std::filesystem::path& sensor_yaml) {
-    auto text = detail::readTextFile(sensor_yaml);
+    auto text = dataset::detail::readTextFile(sensor_yaml);
     if (!text) {
         return text.error();
     }
@@ -129,15 +129,15 @@ Result<core::Mat3> readEurocSensorRotation(const std::filesystem::path& sensor_y
     const std::size_t open = data == std::string_view::npos ? data : all.find('[', data);
     const std::size_t close = open == std::string_view::npos ? open : all.find(']', open);
     if (close == std::string_view::npos) {
-        return detail::lineError(ErrorCode::kParse, sensor_yaml, lineOf(key),
-                                 "T_BS has no `data: [...]`", all.substr(key, 40));
+        return dataset::detail::lineError(ErrorCode::kParse, sensor_yaml, lineOf(key),
+                                          "T_BS has no `data: [...]`", all.substr(key, 40));
     }
     std::string list(all.substr(open + 1, close - open - 1));
     std::replace(list.begin(), list.end(), '\n', ' ');
     std::replace(list.begin(), list.end(), '\r', ' ');
     const auto fields = splitCsv(list);
     if (fields.size() != 16) {
-        return detail::lineError(
+        return dataset::detail::lineError(
             ErrorCode::kParse, sensor_yaml, lineOf(data),
             "T_BS data: expected 16 numbers, got " + std::to_string(fields.size()),
             all.substr(data, close - data + 1));
@@ -145,29 +145,30 @@ Result<core::Mat3> readEurocSensorRotation(const std::filesystem::path& sensor_y
     Eigen::Matrix3d R;
     for (int r = 0; r < 3; ++r) {
         for (int c = 0; c < 3; ++c) {
-            auto x = detail::parseFiniteNumber(
+            auto x = dataset::detail::parseFiniteNumber(
                 fields[static_cast<std::size_t>(r) * 4 + static_cast<std::size_t>(c)],
                 "T_BS element");
             if (!x) {
-                return detail::lineError(ErrorCode::kParse, sensor_yaml, lineOf(data),
-                                         x.error().message, all.substr(data, close - data + 1));
+                return dataset::detail::lineError(ErrorCode::kParse, sensor_yaml, lineOf(data),
+                                                  x.error().message,
+                                                  all.substr(data, close - data + 1));
             }
             R(r, c) = *x;
         }
     }
     const double err = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    if (!(err <= detail::kRotationTolerance) || !(R.determinant() > 0)) {
-        return detail::lineError(
+    if (!(err <= dataset::detail::kRotationTolerance) || !(R.determinant() > 0)) {
+        return dataset::detail::lineError(
             ErrorCode::kParse, sensor_yaml, lineOf(data),
-            "T_BS is not a rotation (max |R^T R - I| = " + detail::shortNumber(err) +
-                ", det = " + detail::shortNumber(R.determinant()) + ")",
+            "T_BS is not a rotation (max |R^T R - I| = " + dataset::detail::shortNumber(err) +
+                ", det = " + dataset::detail::shortNumber(R.determinant()) + ")",
             all.substr(data, close - data + 1));
     }
     return R.cast<core::Scalar>().eval();
 }
 
 Result<ImuLog> readEurocImu(const std::filesystem::path& path) {
-    auto text = detail::readTextFile(path);
+    auto text = dataset::detail::readTextFile(path);
     if (!text) {
         return text.error();
     }
@@ -176,9 +177,10 @@ Result<ImuLog> readEurocImu(const std::filesystem::path& path) {
     ImuLog log;
     int64_t last_t_ns = -1;
     std::size_t last_line = 0;
-    for (const detail::TextLine& line : detail::dataLines(*text)) {
+    for (const dataset::detail::TextLine& line : dataset::detail::dataLines(*text)) {
         const auto bad = [&](const std::string& what) {
-            return detail::lineError(ErrorCode::kParse, path, line.number, what, line.text);
+            return dataset::detail::lineError(ErrorCode::kParse, path, line.number, what,
+                                              line.text);
         };
         const auto fields = splitCsv(line.text);
         if (fields.size() != 7) {
@@ -220,7 +222,7 @@ Result<ImuLog> readEurocImu(const std::filesystem::path& path) {
     const std::filesystem::path mav = path.parent_path().parent_path();
     const std::filesystem::path cam_yaml = mav / "cam0" / "sensor.yaml";
     const std::filesystem::path imu_yaml = mav / "imu0" / "sensor.yaml";
-    if (!detail::isRegularFile(cam_yaml)) {
+    if (!dataset::detail::isRegularFile(cam_yaml)) {
         log.R_ItoC_source = "identity (no " + cam_yaml.string() + ")";
         log.R_ItoC_known = false;
         log.notes.push_back(path.string() + ": no " + cam_yaml.string() +
@@ -232,7 +234,7 @@ Result<ImuLog> readEurocImu(const std::filesystem::path& path) {
         return R_CtoB.error();
     }
     core::Mat3 R_ItoB = core::Mat3::Identity();
-    if (detail::isRegularFile(imu_yaml)) {
+    if (dataset::detail::isRegularFile(imu_yaml)) {
         auto r = readEurocSensorRotation(imu_yaml);
         if (!r) {
             return r.error();

@@ -42,7 +42,8 @@ std::string accelerometerSource(std::string_view label, const core::GravityEstim
 
 }  // namespace
 
-MapGravity MapGravitySelector::atMapStart(const Frame& frame, const LiveAccelerometer& live) const {
+MapGravity MapGravitySelector::atMapStart(const source::Frame& frame,
+                                          const LiveAccelerometer& live) const {
     core::GravityOptions opt;
     opt.at_t_ns = live.now_ns;
     opt.window_ns = static_cast<int64_t>(std::llround(live.window_s * 1e9));
@@ -59,7 +60,7 @@ MapGravity MapGravitySelector::atMapStart(const Frame& frame, const LiveAccelero
     return g;
 }
 
-MapGravity MapGravitySelector::atMapStart(const Frame& frame) const {
+MapGravity MapGravitySelector::atMapStart(const source::Frame& frame) const {
     MapGravity g;
     std::string refused;
     if (log_) {

@@ -10,17 +10,18 @@ namespace {
 using core::ErrorCode;
 using core::makeError;
 
-constexpr std::array<PixelFormat, 7> kPreferred{
-    PixelFormat::kYuyv,   PixelFormat::kNv12,     PixelFormat::kYuv420,   PixelFormat::kRgb888,
-    PixelFormat::kBgr888, PixelFormat::kXrgb8888, PixelFormat::kXbgr8888,
+constexpr std::array<camera::PixelFormat, 7> kPreferred{
+    camera::PixelFormat::kYuyv,     camera::PixelFormat::kNv12,   camera::PixelFormat::kYuv420,
+    camera::PixelFormat::kRgb888,   camera::PixelFormat::kBgr888, camera::PixelFormat::kXrgb8888,
+    camera::PixelFormat::kXbgr8888,
 };
 
 // Format planes: 1, or 2 (NV12) and 3 (YUV420) with their chroma.
-std::size_t planeCount(PixelFormat format) {
+std::size_t planeCount(camera::PixelFormat format) {
     switch (format) {
-        case PixelFormat::kNv12:
+        case camera::PixelFormat::kNv12:
             return 2;
-        case PixelFormat::kYuv420:
+        case camera::PixelFormat::kYuv420:
             return 3;
         default:
             return 1;
@@ -29,20 +30,20 @@ std::size_t planeCount(PixelFormat format) {
 
 }  // namespace
 
-std::span<const PixelFormat> preferredFormats() {
+std::span<const camera::PixelFormat> preferredFormats() {
     return kPreferred;
 }
 
-core::Result<RawImage> describeBuffer(PixelFormat format, int width_px, int height_px,
-                                      std::size_t stride_bytes,
-                                      std::span<const BufferPlane> planes) {
+core::Result<camera::RawImage> describeBuffer(camera::PixelFormat format, int width_px,
+                                              int height_px, std::size_t stride_bytes,
+                                              std::span<const BufferPlane> planes) {
     const std::string name = toString(format);
     if (std::find(kPreferred.begin(), kPreferred.end(), format) == kPreferred.end()) {
         return makeError(ErrorCode::kInvalidArgument,
                          name + ": not a format the libcamera driver converts");
     }
     const std::size_t count = planeCount(format);
-    RawImage raw;
+    camera::RawImage raw;
     raw.format = format;
     raw.width_px = width_px;
     raw.height_px = height_px;
@@ -52,7 +53,7 @@ core::Result<RawImage> describeBuffer(PixelFormat format, int width_px, int heig
         raw.data = planes[0].data;
         raw.size_bytes = planes[0].length_bytes;
         const std::size_t chroma_stride =
-            format == PixelFormat::kYuv420 ? stride_bytes / 2 : stride_bytes;
+            format == camera::PixelFormat::kYuv420 ? stride_bytes / 2 : stride_bytes;
         for (std::size_t i = 1; i < count; ++i) {
             raw.chroma.at(i - 1) = {planes[i].data, chroma_stride, planes[i].length_bytes};
             if (planes[i].data == nullptr) {
@@ -75,7 +76,7 @@ core::Result<RawImage> describeBuffer(PixelFormat format, int width_px, int heig
     }
     // The same checks as every frame's conversion; a buffer that fails them
     // would fail every frame, so it is an error of the configuration.
-    auto checked = checkRawImage(raw, name);
+    auto checked = camera::checkRawImage(raw, name);
     if (!checked) {
         return makeError(ErrorCode::kInvalidArgument, checked.error().message);
     }

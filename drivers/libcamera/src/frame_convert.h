@@ -15,8 +15,8 @@
 #include <span>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/pixel_convert.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/camera/pixel_convert.h>
 
 namespace scaled::drivers::libcam {
 
@@ -24,7 +24,7 @@ namespace scaled::drivers::libcam {
 // options leave the choice to it: YUV first (gray is the Y plane, no
 // arithmetic), then the RGB layouts: YUYV, NV12, YUV420, RGB888, BGR888,
 // XRGB8888, XBGR8888.
-std::span<const PixelFormat> preferredFormats();
+std::span<const camera::PixelFormat> preferredFormats();
 
 // One plane of a libcamera FrameBuffer, already mapped.
 struct BufferPlane {
@@ -41,8 +41,8 @@ struct BufferPlane {
 // layout, an unmapped plane or one shorter than its rows, a stride shorter
 // than a row, odd sizes for the subsampled formats. Called once per buffer
 // when the buffers are mapped; convertRawImage() checks the sizes again.
-core::Result<RawImage> describeBuffer(PixelFormat format, int width_px, int height_px,
-                                      std::size_t stride_bytes,
-                                      std::span<const BufferPlane> planes);
+core::Result<camera::RawImage> describeBuffer(camera::PixelFormat format, int width_px,
+                                              int height_px, std::size_t stride_bytes,
+                                              std::span<const BufferPlane> planes);
 
 }  // namespace scaled::drivers::libcam

@@ -46,19 +46,18 @@
 #include <utility>
 #include <vector>
 
-#include <scaled/drivers/libcamera_camera.h>
+#include <scaled/drivers/base/errno_text.h>
+#include <scaled/drivers/libcamera/libcamera_camera.h>
 
 #include "frame_convert.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::libcam {
 namespace {
 
 using core::ErrorCode;
 using core::makeError;
 
-std::string errnoText(int err) {
-    return std::error_code(err, std::generic_category()).message();
-}
+using base::errnoText;
 
 std::string quoted(const std::string& text) {
     return "\"" + text + "\"";
@@ -89,32 +88,32 @@ int64_t monotonicNowNs() {
 
 // scaled's formats and libcamera's constants for them (an invalid
 // libcamera::PixelFormat for those the driver does not convert).
-libcamera::PixelFormat libcameraFormat(PixelFormat format) {
+libcamera::PixelFormat libcameraFormat(camera::PixelFormat format) {
     switch (format) {
-        case PixelFormat::kYuyv:
+        case camera::PixelFormat::kYuyv:
             return libcamera::formats::YUYV;
-        case PixelFormat::kNv12:
+        case camera::PixelFormat::kNv12:
             return libcamera::formats::NV12;
-        case PixelFormat::kYuv420:
+        case camera::PixelFormat::kYuv420:
             return libcamera::formats::YUV420;
-        case PixelFormat::kRgb888:
+        case camera::PixelFormat::kRgb888:
             return libcamera::formats::RGB888;
-        case PixelFormat::kBgr888:
+        case camera::PixelFormat::kBgr888:
             return libcamera::formats::BGR888;
-        case PixelFormat::kXrgb8888:
+        case camera::PixelFormat::kXrgb8888:
             return libcamera::formats::XRGB8888;
-        case PixelFormat::kXbgr8888:
+        case camera::PixelFormat::kXbgr8888:
             return libcamera::formats::XBGR8888;
-        case PixelFormat::kAuto:
-        case PixelFormat::kMjpeg:
-        case PixelFormat::kGrey:
+        case camera::PixelFormat::kAuto:
+        case camera::PixelFormat::kMjpeg:
+        case camera::PixelFormat::kGrey:
             break;
     }
     return {};
 }
 
-std::optional<PixelFormat> scaledFormat(const libcamera::PixelFormat& format) {
-    for (const PixelFormat f : libcam::preferredFormats()) {
+std::optional<camera::PixelFormat> scaledFormat(const libcamera::PixelFormat& format) {
+    for (const camera::PixelFormat f : libcam::preferredFormats()) {
         if (libcameraFormat(f) == format) {
             return f;
         }
@@ -310,10 +309,10 @@ std::unique_ptr<libcamera::CameraConfiguration> generateStreamConfiguration(
 
 // ---------------------------------------------------------------------------
 
-class LibcameraCamera final : public LiveCamera {
+class LibcameraCamera final : public camera::LiveCamera {
 public:
-    LibcameraCamera(CameraOptions options, std::shared_ptr<libcamera::CameraManager> manager,
-                    std::string id)
+    LibcameraCamera(camera::CameraOptions options,
+                    std::shared_ptr<libcamera::CameraManager> manager, std::string id)
         : options_(std::move(options)), manager_(std::move(manager)), id_(std::move(id)) {
         info_.name = id_;
         info_.frame_count = 0;  // live: no end
@@ -331,7 +330,7 @@ public:
     LibcameraCamera(LibcameraCamera&&) = delete;
     LibcameraCamera& operator=(LibcameraCamera&&) = delete;
 
-    [[nodiscard]] const SequenceInfo& info() const override { return info_; }
+    [[nodiscard]] const source::SequenceInfo& info() const override { return info_; }
 
     [[nodiscard]] std::string describe() const override {
         return "camera " + quoted(id_) + " (libcamera)";
@@ -366,7 +365,7 @@ public:
         return true;
     }
 
-    core::Result<bool> next(Frame& frame) override {
+    core::Result<bool> next(source::Frame& frame) override {
         std::unique_lock lock(mutex_);
         if (stopped_) {
             return false;
@@ -526,24 +525,24 @@ private:
 
     // Chooses the pixel format and validates the size; configures the camera.
     core::Result<bool> configureStream() {
-        std::vector<PixelFormat> wanted;
+        std::vector<camera::PixelFormat> wanted;
         switch (options_.pixel_format) {
-            case PixelFormat::kAuto: {
+            case camera::PixelFormat::kAuto: {
                 const auto preferred = libcam::preferredFormats();
                 wanted.assign(preferred.begin(), preferred.end());
                 break;
             }
-            case PixelFormat::kYuyv:
-            case PixelFormat::kNv12:
-            case PixelFormat::kYuv420:
-            case PixelFormat::kRgb888:
-            case PixelFormat::kBgr888:
-            case PixelFormat::kXrgb8888:
-            case PixelFormat::kXbgr8888:
+            case camera::PixelFormat::kYuyv:
+            case camera::PixelFormat::kNv12:
+            case camera::PixelFormat::kYuv420:
+            case camera::PixelFormat::kRgb888:
+            case camera::PixelFormat::kBgr888:
+            case camera::PixelFormat::kXrgb8888:
+            case camera::PixelFormat::kXbgr8888:
                 wanted = {options_.pixel_format};
                 break;
-            case PixelFormat::kMjpeg:
-            case PixelFormat::kGrey:
+            case camera::PixelFormat::kMjpeg:
+            case camera::PixelFormat::kGrey:
                 return error(ErrorCode::kInvalidArgument,
                              std::string("pixel format ") + toString(options_.pixel_format) +
                                  " is not supported by the libcamera driver (use auto, YUYV, "
@@ -561,7 +560,7 @@ private:
         const libcamera::Size asked(static_cast<unsigned>(options_.width_px),
                                     static_cast<unsigned>(options_.height_px));
         std::string rejected;
-        for (const PixelFormat candidate : wanted) {
+        for (const camera::PixelFormat candidate : wanted) {
             const libcamera::PixelFormat format = libcameraFormat(candidate);
             if (!offered.empty() &&
                 std::find(offered.begin(), offered.end(), format) == offered.end()) {
@@ -612,7 +611,7 @@ private:
             return true;
         }
         std::string scaled_formats;
-        for (const PixelFormat f : wanted) {
+        for (const camera::PixelFormat f : wanted) {
             scaled_formats += std::string(scaled_formats.empty() ? "" : ", ") + toString(f);
         }
         return error(ErrorCode::kInvalidArgument,
@@ -660,7 +659,7 @@ private:
 
     // Maps each dmabuf of `buffer` once (planes of one buffer often share
     // one dmabuf at different offsets) and lays the format's planes out.
-    core::Result<RawImage> mapBuffer(const libcamera::FrameBuffer& buffer) {
+    core::Result<camera::RawImage> mapBuffer(const libcamera::FrameBuffer& buffer) {
         std::map<int, std::size_t> extent;  // fd -> bytes the planes use
         for (const auto& plane : buffer.planes()) {
             const int fd = plane.fd.get();
@@ -747,7 +746,7 @@ private:
     // true: a frame; false: a cancelled request (nothing to deliver);
     // kUnavailable: the camera could not take the request back (closed);
     // other errors: one bad frame.
-    core::Result<bool> deliver(libcamera::Request* request, Frame& frame) {
+    core::Result<bool> deliver(libcamera::Request* request, source::Frame& frame) {
         const bool cancelled = request->status() == libcamera::Request::RequestCancelled;
         core::Result<bool> converted = true;
         int64_t t_ns = 0;
@@ -799,7 +798,7 @@ private:
         }
         // Into the caller's Mats, in place: no allocation once they have the
         // size (the pipeline hands the same Frames back).
-        auto converted = convertRawImage(views_[index], buffer_names_[index], gray, bgr);
+        auto converted = camera::convertRawImage(views_[index], buffer_names_[index], gray, bgr);
         if (!converted) {
             return converted.error();
         }
@@ -887,10 +886,10 @@ private:
         camera_.reset();
     }
 
-    CameraOptions options_;
+    camera::CameraOptions options_;
     std::shared_ptr<libcamera::CameraManager> manager_;
     std::string id_;
-    SequenceInfo info_;
+    source::SequenceInfo info_;
     std::vector<std::string> session_notes_;
 
     // The session (capture thread only).
@@ -903,9 +902,9 @@ private:
     std::unique_ptr<libcamera::FrameBufferAllocator> allocator_;
     std::vector<std::unique_ptr<libcamera::Request>> requests_;
     std::vector<Mapping> mappings_;
-    std::vector<RawImage> views_;            // the buffers' images, by request cookie
+    std::vector<camera::RawImage> views_;    // the buffers' images, by request cookie
     std::vector<std::string> buffer_names_;  // "<camera>: buffer <i>", by request cookie
-    PixelFormat format_ = PixelFormat::kYuyv;
+    camera::PixelFormat format_ = camera::PixelFormat::kYuyv;
     int width_px_ = 0;
     int height_px_ = 0;
     std::size_t stride_bytes_ = 0;
@@ -925,7 +924,7 @@ private:
     std::string mode_;
 };
 
-core::Result<bool> checkOptions(const CameraOptions& options, const std::string& who) {
+core::Result<bool> checkOptions(const camera::CameraOptions& options, const std::string& who) {
     const auto bad = [&](const std::string& what) {
         return makeError(ErrorCode::kInvalidArgument, who + ": " + what);
     };
@@ -953,7 +952,8 @@ bool libcameraAvailable() {
     return true;
 }
 
-core::Result<std::unique_ptr<LiveCamera>> openLibcameraCamera(const CameraOptions& options) {
+core::Result<std::unique_ptr<camera::LiveCamera>> openLibcameraCamera(
+    const camera::CameraOptions& options) {
     const std::string who = "libcamera camera " + quoted(options.device);
     auto valid = checkOptions(options, who);
     if (!valid) {
@@ -976,19 +976,19 @@ core::Result<std::unique_ptr<LiveCamera>> openLibcameraCamera(const CameraOption
     if (!opened) {
         return opened.error();
     }
-    return std::unique_ptr<LiveCamera>(std::move(camera));
+    return std::unique_ptr<camera::LiveCamera>(std::move(camera));
 }
 
-std::vector<CameraDescription> listLibcameraCameras() {
+std::vector<camera::CameraDescription> listLibcameraCameras() {
     auto manager = sharedManager();
     if (!manager) {
         return {};
     }
-    std::vector<CameraDescription> out;
+    std::vector<camera::CameraDescription> out;
     // Declared after the manager: destroyed (cameras released) before it.
     const std::vector<std::shared_ptr<libcamera::Camera>> cameras = (*manager)->cameras();
     for (const auto& camera : cameras) {
-        CameraDescription desc;
+        camera::CameraDescription desc;
         desc.backend = "libcamera";
         desc.device = camera->id();
         desc.name = modelOf(*camera);
@@ -1034,4 +1034,4 @@ std::vector<CameraDescription> listLibcameraCameras() {
     return out;
 }
 
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::libcam

@@ -8,12 +8,12 @@
 #include <utility>
 #include <vector>
 
-#include <scaled/sim/sim_source.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/synth/trajectory.h>
 
 #include "sim_internal.h"
 
-namespace scaled::sim {
+namespace scaled::drivers::sim {
 
 namespace {
 
@@ -26,16 +26,16 @@ constexpr Scalar kMinDepthM = Scalar(0.05);  // every corner must be this far in
 // The geometry is all the detector needs of the scene: coarse textures are cheap.
 constexpr Scalar kDetectorTexelM = Scalar(0.05);
 
-class SimDetector final : public detector::ObjectDetector {
+class SimDetector final : public drivers::detector::ObjectDetector {
 public:
-    SimDetector(const SimConfig& config, synth::Trajectory trajectory,
-                core::PinholeRadialCamera camera, synth::Scene scene)
+    SimDetector(const SimConfig& config, drivers::synth::Trajectory trajectory,
+                core::PinholeRadialCamera camera, drivers::synth::Scene scene)
         : config_(config),
           trajectory_(std::move(trajectory)),
           camera_(camera),
           scene_(std::move(scene)),
           objects_(simObjects(config)),
-          noise_seed_(synth::combineSeed(config.seed, 0x646574ULL)) {
+          noise_seed_(drivers::synth::combineSeed(config.seed, 0x646574ULL)) {
         for (const auto& o : objects_) {
             if (std::find(names_.begin(), names_.end(), o.class_name) == names_.end()) {
                 names_.push_back(o.class_name);
@@ -48,7 +48,7 @@ public:
     }
 
     core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                              detector::DetectionResult& out) override {
+                              drivers::detector::DetectionResult& out) override {
         const auto t0 = std::chrono::steady_clock::now();
         if (image.empty()) {
             return core::makeError(core::ErrorCode::kInvalidArgument, "sim detector: empty image");
@@ -72,10 +72,10 @@ public:
         out.detections.clear();
         const core::CameraPose pose = trajectory_.poseAt(static_cast<double>(t_ns) * 1e-9);
         const std::uint64_t frame_seed =
-            synth::combineSeed(noise_seed_, static_cast<std::uint64_t>(frame_id));
+            drivers::synth::combineSeed(noise_seed_, static_cast<std::uint64_t>(frame_id));
         for (std::size_t k = 0; k < objects_.size(); ++k) {
             // Draws in a fixed order per object, whatever is visible.
-            synth::SplitMix64 rng(synth::combineSeed(frame_seed, k));
+            drivers::synth::SplitMix64 rng(drivers::synth::combineSeed(frame_seed, k));
             const bool miss = rng.uniform() < config_.miss_probability;
             std::array<double, 4> jitter{};
             for (auto& j : jitter) {
@@ -96,7 +96,7 @@ public:
                 std::swap(box.y_min_px, box.y_max_px);
             }
             clip(box);
-            detector::ObjectDetection d;
+            drivers::detector::ObjectDetection d;
             d.box = box;
             d.class_id = class_ids_[k];
             d.class_name = names_[static_cast<std::size_t>(d.class_id)];
@@ -131,7 +131,7 @@ private:
     // Whether object k is mostly inside the image and mostly unoccluded; box:
     // its exact projected bounding box, clipped.
     bool seen(std::size_t k, const core::CameraPose& pose, core::BoundingBox& box) const {
-        const synth::Aabb& b = objects_[k].box;
+        const drivers::synth::Aabb& b = objects_[k].box;
         const core::Mat3 R_WtoC = pose.R_CtoW.transpose();
         Scalar x0 = std::numeric_limits<Scalar>::infinity();
         Scalar y0 = x0;
@@ -168,7 +168,7 @@ private:
     // the camera, among those inside the image, that are the first surface
     // their camera ray hits (0 when none is inside the image).
     [[nodiscard]] double visibleFraction(std::size_t k, const core::CameraPose& pose) const {
-        const synth::Aabb& b = objects_[k].box;
+        const drivers::synth::Aabb& b = objects_[k].box;
         const Vec3& o = pose.p_CinW;
         const core::Mat3 R_WtoC = pose.R_CtoW.transpose();
         const int first_surface = 6 + 6 * static_cast<int>(k);
@@ -212,9 +212,9 @@ private:
     }
 
     SimConfig config_;
-    synth::Trajectory trajectory_;
+    drivers::synth::Trajectory trajectory_;
     core::PinholeRadialCamera camera_;
-    synth::Scene scene_;
+    drivers::synth::Scene scene_;
     std::vector<SimObject> objects_;
     std::vector<std::string> names_;  // distinct classes, in object order
     std::vector<int> class_ids_;      // per object, into names_
@@ -223,15 +223,16 @@ private:
 
 }  // namespace
 
-core::Result<std::unique_ptr<detector::ObjectDetector>> createSimDetector(const SimConfig& config) {
-    synth::SceneConfig scene_config = simSceneConfig(config);
+core::Result<std::unique_ptr<drivers::detector::ObjectDetector>> createSimDetector(
+    const SimConfig& config) {
+    drivers::synth::SceneConfig scene_config = simSceneConfig(config);
     scene_config.texel_m = kDetectorTexelM;
     auto rig = detail::makeSimRig(config, scene_config);
     if (!rig) {
         return rig.error();
     }
-    return std::unique_ptr<detector::ObjectDetector>(std::make_unique<SimDetector>(
+    return std::unique_ptr<drivers::detector::ObjectDetector>(std::make_unique<SimDetector>(
         config, std::move(rig->trajectory), rig->camera, std::move(rig->scene)));
 }
 
-}  // namespace scaled::sim
+}  // namespace scaled::drivers::sim

@@ -8,28 +8,29 @@
 
 #include <scaled/core/camera/pinhole_radial.h>
 #include <scaled/core/result.h>
-#include <scaled/sim/sim_source.h>
-#include <scaled/synth/rng.h>
-#include <scaled/synth/scene.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/synth/rng.h>
+#include <scaled/drivers/synth/scene.h>
+#include <scaled/drivers/synth/trajectory.h>
 
-namespace scaled::sim::detail {
+namespace scaled::drivers::sim::detail {
 
 // The sim camera's trajectory (validated config).
-core::Result<synth::Trajectory> makeTrajectory(const SimConfig& config);
+core::Result<drivers::synth::Trajectory> makeTrajectory(const SimConfig& config);
 
 // What the source and the detector are built from.
 struct SimRig {
-    synth::Trajectory trajectory;
+    drivers::synth::Trajectory trajectory;
     core::PinholeRadialCamera camera;
-    synth::Scene scene;
+    drivers::synth::Scene scene;
 };
 
 // The trajectory, the camera (simIntrinsics) and the room (`scene_config`,
 // simSceneConfig(config) or a variant of it) of `config`.
-core::Result<SimRig> makeSimRig(const SimConfig& config, const synth::SceneConfig& scene_config);
+core::Result<SimRig> makeSimRig(const SimConfig& config,
+                                const drivers::synth::SceneConfig& scene_config);
 
 // Timestamp of frame i.
 std::int64_t frameTimeNs(std::int64_t index, double fps);
 
-}  // namespace scaled::sim::detail
+}  // namespace scaled::drivers::sim::detail

@@ -3,20 +3,20 @@
 #include <string>
 #include <utility>
 
-#include <scaled/sim/sim_source.h>
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/trajectory.h>
 
 #include "sim_internal.h"
 
-namespace scaled::sim {
+namespace scaled::drivers::sim {
 
 namespace {
 
-class SimSource final : public drivers::FrameSource {
+class SimSource final : public drivers::source::FrameSource {
 public:
-    SimSource(const SimConfig& config, synth::Trajectory trajectory,
-              core::PinholeRadialCamera camera, std::unique_ptr<synth::Scene> scene)
+    SimSource(const SimConfig& config, drivers::synth::Trajectory trajectory,
+              core::PinholeRadialCamera camera, std::unique_ptr<drivers::synth::Scene> scene)
         : config_(config),
           trajectory_(std::move(trajectory)),
           camera_(camera),
@@ -25,7 +25,7 @@ public:
         info_.name = "sim";
         info_.intrinsics = camera_.intrinsics();
         info_.has_intrinsics = true;
-        info_.gravity_down_W = synth::gravityDirectionW();
+        info_.gravity_down_W = drivers::synth::gravityDirectionW();
         info_.frame_count =
             config.duration_s > 0.0
                 ? static_cast<std::size_t>(std::lround(config.duration_s * config.fps))
@@ -36,9 +36,9 @@ public:
         }
     }
 
-    [[nodiscard]] const drivers::SequenceInfo& info() const override { return info_; }
+    [[nodiscard]] const drivers::source::SequenceInfo& info() const override { return info_; }
 
-    core::Result<bool> next(drivers::Frame& frame) override {
+    core::Result<bool> next(drivers::source::Frame& frame) override {
         if (bounded() && cursor_ >= info_.frame_count) {
             return false;
         }
@@ -53,7 +53,7 @@ public:
         frame.color = cv::Mat();
         cv::cvtColor(frame.gray, frame.color, cv::COLOR_GRAY2BGR);
         frame.T_CtoW_gt = pose;
-        frame.gravity_down_C = pose.R_CtoW.transpose() * synth::gravityDirectionW();
+        frame.gravity_down_C = pose.R_CtoW.transpose() * drivers::synth::gravityDirectionW();
         frame.depth_path.reset();
         frame.image_path = "sim:" + std::to_string(id);
         frame.accel_C.reset();
@@ -72,34 +72,34 @@ public:
     }
 
 private:
-    static synth::RenderOptions renderOptions(const SimConfig& config) {
-        synth::RenderOptions o;
+    static drivers::synth::RenderOptions renderOptions(const SimConfig& config) {
+        drivers::synth::RenderOptions o;
         o.antialias = config.antialias;
         o.noise_sigma = config.pixel_noise;
-        o.noise_seed = synth::combineSeed(config.seed, 0x72656e64ULL);
+        o.noise_seed = drivers::synth::combineSeed(config.seed, 0x72656e64ULL);
         return o;
     }
     [[nodiscard]] bool bounded() const { return info_.frame_count > 0; }
 
     SimConfig config_;
-    synth::Trajectory trajectory_;
+    drivers::synth::Trajectory trajectory_;
     core::PinholeRadialCamera camera_;
-    std::unique_ptr<synth::Scene> scene_;  // stable address: the renderer points to it
-    synth::Renderer renderer_;
-    drivers::SequenceInfo info_;
+    std::unique_ptr<drivers::synth::Scene> scene_;  // stable address: the renderer points to it
+    drivers::synth::Renderer renderer_;
+    drivers::source::SequenceInfo info_;
     std::size_t cursor_ = 0;
 };
 
 }  // namespace
 
-core::Result<std::unique_ptr<drivers::FrameSource>> openSimSource(const SimConfig& config) {
+core::Result<std::unique_ptr<drivers::source::FrameSource>> openSimSource(const SimConfig& config) {
     auto rig = detail::makeSimRig(config, simSceneConfig(config));
     if (!rig) {
         return rig.error();
     }
-    return std::unique_ptr<drivers::FrameSource>(
-        std::make_unique<SimSource>(config, std::move(rig->trajectory), rig->camera,
-                                    std::make_unique<synth::Scene>(std::move(rig->scene))));
+    return std::unique_ptr<drivers::source::FrameSource>(std::make_unique<SimSource>(
+        config, std::move(rig->trajectory), rig->camera,
+        std::make_unique<drivers::synth::Scene>(std::move(rig->scene))));
 }
 
-}  // namespace scaled::sim
+}  // namespace scaled::drivers::sim

@@ -5,11 +5,11 @@
 #include <string>
 #include <utility>
 
-#include <scaled/sim/sim_source.h>
+#include <scaled/drivers/sim/sim_source.h>
 
 #include "sim_internal.h"
 
-namespace scaled::sim {
+namespace scaled::drivers::sim {
 
 namespace {
 
@@ -45,9 +45,9 @@ bool inRange(double v, double lo, double hi) {
     return std::isfinite(v) && v >= lo && v <= hi;
 }
 
-synth::Aabb floorBox(double x0, double y0, double x1, double y1, double height_m) {
-    return synth::Aabb{Vec3(Scalar(x0), Scalar(y0), Scalar(0)),
-                       Vec3(Scalar(x1), Scalar(y1), Scalar(height_m))};
+drivers::synth::Aabb floorBox(double x0, double y0, double x1, double y1, double height_m) {
+    return drivers::synth::Aabb{Vec3(Scalar(x0), Scalar(y0), Scalar(0)),
+                                Vec3(Scalar(x1), Scalar(y1), Scalar(height_m))};
 }
 
 }  // namespace
@@ -121,10 +121,10 @@ core::CameraIntrinsics simIntrinsics(const SimConfig& config) {
     return k;
 }
 
-synth::SceneConfig simSceneConfig(const SimConfig& config) {
-    synth::SceneConfig s;
-    s.room = synth::Aabb{Vec3(Scalar(-4.5), Scalar(-4), Scalar(0)),
-                         Vec3(Scalar(4.5), Scalar(4), Scalar(3))};
+drivers::synth::SceneConfig simSceneConfig(const SimConfig& config) {
+    drivers::synth::SceneConfig s;
+    s.room = drivers::synth::Aabb{Vec3(Scalar(-4.5), Scalar(-4), Scalar(0)),
+                                  Vec3(Scalar(4.5), Scalar(4), Scalar(3))};
     s.furniture.clear();
     for (const auto& o : simObjects(config)) {
         s.furniture.push_back(o.box);
@@ -144,18 +144,19 @@ core::Result<core::CameraPose> simPoseAt(const SimConfig& config, std::int64_t t
 
 namespace detail {
 
-core::Result<synth::Trajectory> makeTrajectory(const SimConfig& config) {
+core::Result<drivers::synth::Trajectory> makeTrajectory(const SimConfig& config) {
     if (auto v = validate(config); !v) {
         return v.error();
     }
-    synth::TrajectoryConfig t;
+    drivers::synth::TrajectoryConfig t;
     t.seed = config.seed;
     // Only frameCount() reads the duration; poses are defined for any time.
     t.duration_s = config.duration_s > 0.0 ? config.duration_s : 60.0;
-    return synth::Trajectory::create(t);
+    return drivers::synth::Trajectory::create(t);
 }
 
-core::Result<SimRig> makeSimRig(const SimConfig& config, const synth::SceneConfig& scene_config) {
+core::Result<SimRig> makeSimRig(const SimConfig& config,
+                                const drivers::synth::SceneConfig& scene_config) {
     auto trajectory = makeTrajectory(config);
     if (!trajectory) {
         return trajectory.error();
@@ -164,7 +165,7 @@ core::Result<SimRig> makeSimRig(const SimConfig& config, const synth::SceneConfi
     if (!camera) {
         return camera.error();
     }
-    auto scene = synth::Scene::create(scene_config);
+    auto scene = drivers::synth::Scene::create(scene_config);
     if (!scene) {
         return scene.error();
     }
@@ -177,4 +178,4 @@ std::int64_t frameTimeNs(std::int64_t index, double fps) {
 
 }  // namespace detail
 
-}  // namespace scaled::sim
+}  // namespace scaled::drivers::sim

@@ -9,9 +9,9 @@
 #include <limits>
 #include <vector>
 
-#include <scaled/synth/scene.h>
+#include <scaled/drivers/synth/scene.h>
 
-namespace scaled::synth::detail {
+namespace scaled::drivers::synth::detail {
 
 struct BoxD {
     double lo[3] = {0, 0, 0};
@@ -154,4 +154,4 @@ inline float sampleFace(const FaceView& f, const double p[3]) {
     return top + fv * (bottom - top);
 }
 
-}  // namespace scaled::synth::detail
+}  // namespace scaled::drivers::synth::detail

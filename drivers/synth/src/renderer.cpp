@@ -6,12 +6,12 @@
 
 #include <Eigen/Core>
 
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/rng.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/rng.h>
 
 #include "raycast.h"
 
-namespace scaled::synth {
+namespace scaled::drivers::synth {
 
 namespace {
 
@@ -377,4 +377,4 @@ void Renderer::render(const core::PinholeRadialCamera& cam, const core::CameraPo
     }
 }
 
-}  // namespace scaled::synth
+}  // namespace scaled::drivers::synth

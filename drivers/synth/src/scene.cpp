@@ -2,13 +2,13 @@
 #include <cstddef>
 #include <string>
 
-#include <scaled/synth/rng.h>
-#include <scaled/synth/scene.h>
+#include <scaled/drivers/synth/rng.h>
+#include <scaled/drivers/synth/scene.h>
 
 #include "raycast.h"
 #include "texture.h"
 
-namespace scaled::synth {
+namespace scaled::drivers::synth {
 
 namespace {
 
@@ -175,4 +175,4 @@ std::optional<Scalar> Scene::depthAt(const core::PinholeRadialCamera& cam,
     return hit ? std::optional<Scalar>(hit->t) : std::nullopt;
 }
 
-}  // namespace scaled::synth
+}  // namespace scaled::drivers::synth

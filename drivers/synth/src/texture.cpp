@@ -7,9 +7,9 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-#include <scaled/synth/rng.h>
+#include <scaled/drivers/synth/rng.h>
 
-namespace scaled::synth::detail {
+namespace scaled::drivers::synth::detail {
 
 namespace {
 
@@ -167,4 +167,4 @@ cv::Mat makeTexture(int cols, int rows, double texel_m, std::uint64_t seed) {
     return out;
 }
 
-}  // namespace scaled::synth::detail
+}  // namespace scaled::drivers::synth::detail

@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <opencv2/core.hpp>
 
-namespace scaled::synth::detail {
+namespace scaled::drivers::synth::detail {
 
 // A cols x rows CV_8UC1 texture at texel_m metres per texel: multi-octave value
 // noise (features from 1 cm to 32 cm) under random filled rectangles, rotated
@@ -14,4 +14,4 @@ namespace scaled::synth::detail {
 // brightness offset. Deterministic in the seed; no pattern repeats.
 cv::Mat makeTexture(int cols, int rows, double texel_m, std::uint64_t seed);
 
-}  // namespace scaled::synth::detail
+}  // namespace scaled::drivers::synth::detail

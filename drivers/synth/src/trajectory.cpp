@@ -4,10 +4,10 @@
 
 #include <Eigen/Geometry>
 
-#include <scaled/synth/rng.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/synth/rng.h>
+#include <scaled/drivers/synth/trajectory.h>
 
-namespace scaled::synth {
+namespace scaled::drivers::synth {
 
 namespace {
 
@@ -125,4 +125,4 @@ core::Scalar pathLength(const std::vector<Frame>& sequence) {
     return length;
 }
 
-}  // namespace scaled::synth
+}  // namespace scaled::drivers::synth

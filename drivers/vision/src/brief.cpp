@@ -1,9 +1,9 @@
 #include <bit>
 #include <cmath>
 
-#include <scaled/vision/brief.h>
+#include <scaled/drivers/vision/brief.h>
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 
 namespace {
 
@@ -79,4 +79,4 @@ int briefDistance(const BriefDescriptor& a, const BriefDescriptor& b) {
     return d;
 }
 
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

@@ -3,9 +3,9 @@
 #include <cstdint>
 #include <vector>
 
-#include <scaled/vision/corner_detector.h>
+#include <scaled/drivers/vision/corner_detector.h>
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 
 using core::Scalar;
 using core::Vec2;
@@ -368,4 +368,4 @@ void makeFreeMask(cv::Size size, std::span<const Vec2> occupied_px, int radius_p
     }
 }
 
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

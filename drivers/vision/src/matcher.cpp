@@ -4,9 +4,9 @@
 #include <cstdint>
 #include <opencv2/core/hal/intrin.hpp>
 
-#include <scaled/vision/matcher.h>
+#include <scaled/drivers/vision/matcher.h>
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 
 using core::Mat2;
 using core::Scalar;
@@ -419,4 +419,4 @@ std::optional<Match> matchInEllipse(const cv::Mat& gray, const Patch& patch, con
     return matcher.match(gray, patch, center_px, S, cfg);
 }
 
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

@@ -9,9 +9,9 @@
 
 #include <scaled/core/slam/feature_model.h>
 #include <scaled/core/slam/quaternion.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 
 using core::Scalar;
 using core::Vec2;
@@ -750,4 +750,4 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     return stats;
 }
 
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

@@ -1,9 +1,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include <scaled/vision/patch.h>
+#include <scaled/drivers/vision/patch.h>
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 
 using core::Mat2;
 using core::Vec2;
@@ -133,4 +133,4 @@ void warpTemplate(Patch& patch, const Mat2& A) {
     }
 }
 
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

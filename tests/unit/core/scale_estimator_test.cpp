@@ -94,7 +94,7 @@ TEST(ScaleEstimator, SetPriorsKeepsThePosterior) {
     taller.add(HeightPrior::fromHistogram("bottle", std::vector<Scalar>{0.60},
                                           std::vector<Scalar>{1}, 0, true)
                    .value());
-    est->setPriors(std::move(taller));
+    ASSERT_TRUE(est->setPriors(std::move(taller)).ok());
     ASSERT_NE(est->priors().find("bottle"), nullptr);
     EXPECT_EQ(est->priors().find("dining table"), nullptr);
     EXPECT_EQ(est->summary().observations, 4);

@@ -194,7 +194,7 @@ period_s = 0.5
     ASSERT_TRUE(r.ok()) << r.error().message;
     EXPECT_EQ(c.source.kind, SourceKind::kReplay);
     EXPECT_EQ(c.source.replay_path, std::filesystem::path("/etc/scaled/data/rk"));
-    EXPECT_EQ(c.source.pacing, drivers::PacingMode::kAsFastAsPossible);
+    EXPECT_EQ(c.source.pacing, drivers::source::PacingMode::kAsFastAsPossible);
     EXPECT_DOUBLE_EQ(c.source.speed, 2.5);
     EXPECT_EQ(c.source.at_end, AtEnd::kExit);
     EXPECT_EQ(c.source.max_frames, 300);
@@ -251,7 +251,7 @@ consumer = "scaled-leds"
     EXPECT_EQ(c.camera.width_px, 1280);
     EXPECT_EQ(c.camera.height_px, 720);
     EXPECT_DOUBLE_EQ(c.camera.fps, 60);
-    EXPECT_EQ(c.camera.pixel_format, drivers::PixelFormat::kMjpeg);
+    EXPECT_EQ(c.camera.pixel_format, drivers::camera::PixelFormat::kMjpeg);
     EXPECT_EQ(c.camera.buffers, 6);
     EXPECT_DOUBLE_EQ(c.camera.frame_timeout_s, 1.5);
     EXPECT_DOUBLE_EQ(c.camera.retry_initial_s, 0.25);
@@ -485,7 +485,7 @@ TEST(DaemonConfig, ToTomlRoundTrips) {
     a.camera.fx_px = a.camera.fy_px = 500;
     a.camera.cx_px = 320;
     a.camera.cy_px = 240;
-    a.camera.pixel_format = drivers::PixelFormat::kNv12;
+    a.camera.pixel_format = drivers::camera::PixelFormat::kNv12;
     a.gpio.chip = "gpiochip4";
     a.gpio.heartbeat_line = 3;
     a.source.at_end = AtEnd::kLoop;
@@ -703,7 +703,7 @@ TEST(DaemonLoad, FileThenSetThenDedicatedOptions) {
     EXPECT_EQ(c->socket.max_clients, 7);
     EXPECT_EQ(c->log.dir, std::filesystem::path("/cli/logs"));
     EXPECT_EQ(c->socket.path, std::filesystem::path("/cli/s.sock"));
-    EXPECT_EQ(c->source.pacing, drivers::PacingMode::kAsFastAsPossible);
+    EXPECT_EQ(c->source.pacing, drivers::source::PacingMode::kAsFastAsPossible);
     EXPECT_EQ(c->source.kind, SourceKind::kV4l2);
     EXPECT_EQ(c->source.device, "/dev/video1");
 

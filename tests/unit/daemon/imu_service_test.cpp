@@ -20,8 +20,8 @@
 #include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/report.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/sim/sim_source.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
 
 #include "fake_iio.h"
 #include "hub_wait.h"
@@ -207,20 +207,20 @@ TEST_F(ImuServiceTest, ThePipelineStartsItsMapWithTheAccelerometersVertical) {
 
     DaemonConfig c = defaultDaemonConfig();
     c.source.kind = SourceKind::kSim;
-    c.source.pacing = drivers::PacingMode::kAsFastAsPossible;
+    c.source.pacing = drivers::source::PacingMode::kAsFastAsPossible;
     c.source.at_end = AtEnd::kExit;
     c.log.frame_every = 0;
     c.imu = config_;
     PipelineParts p;
-    sim::SimConfig sc;
+    drivers::sim::SimConfig sc;
     sc.duration_s = 1.0;
-    auto src = sim::openSimSource(sc);
+    auto src = drivers::sim::openSimSource(sc);
     ASSERT_TRUE(src) << src.error().message;
     p.source = std::move(*src);
-    auto det = sim::createSimDetector(sc);
+    auto det = drivers::sim::createSimDetector(sc);
     ASSERT_TRUE(det) << det.error().message;
     p.detector = std::move(*det);
-    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    auto priors = drivers::priors::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
     ASSERT_TRUE(priors) << priors.error().message;
     p.priors = std::move(*priors);
     p.source_name = "sim";

@@ -18,8 +18,8 @@
 #include <gtest/gtest.h>
 
 #include <scaled/daemon/pipeline.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/sim/sim_source.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
 
 #include "../../../daemon/src/live_source.h"
 #include "hub_wait.h"
@@ -35,13 +35,15 @@ using core::makeError;
 // Frames from the sim; after `lose_after` frames the device is "unplugged":
 // next() fails with kUnavailable and reopen() fails until the test plugs it
 // back in.
-class ScriptedCamera final : public drivers::LiveCamera {
+class ScriptedCamera final : public drivers::camera::LiveCamera {
 public:
-    ScriptedCamera(std::unique_ptr<drivers::FrameSource> inner, int lose_after)
+    ScriptedCamera(std::unique_ptr<drivers::source::FrameSource> inner, int lose_after)
         : inner_(std::move(inner)), lose_after_(lose_after) {}
 
-    [[nodiscard]] const drivers::SequenceInfo& info() const override { return inner_->info(); }
-    core::Result<bool> next(drivers::Frame& frame) override {
+    [[nodiscard]] const drivers::source::SequenceInfo& info() const override {
+        return inner_->info();
+    }
+    core::Result<bool> next(drivers::source::Frame& frame) override {
         if (stopped_) {
             return false;
         }
@@ -93,7 +95,7 @@ public:
     }
 
 private:
-    std::unique_ptr<drivers::FrameSource> inner_;
+    std::unique_ptr<drivers::source::FrameSource> inner_;
     std::mutex mutex_;
     std::condition_variable changed_;
     int lose_after_;
@@ -109,7 +111,7 @@ private:
 class Events final : public PipelineEvents {
 public:
     void onFrame(const Frame& /*frame*/) override {}
-    void onDetection(const detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
+    void onDetection(const drivers::detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
                      double /*latency_ms*/) override {}
     void onScale(const Scale& /*scale*/) override {}
     void onPose(const Pose& /*pose*/) override {}
@@ -156,19 +158,19 @@ std::unique_ptr<Rig> makeRig(int lose_after, double retry_initial_s) {
     rig.config.camera.retry_max_s = retry_initial_s * 4;
     rig.hub = std::make_unique<ReportHub>(
         static_cast<std::size_t>(rig.config.pipeline.estimator.posterior.grid.bins));
-    sim::SimConfig sim;
+    drivers::sim::SimConfig sim;
     sim.duration_s = 0;  // unbounded, like a camera
     PipelineParts parts;
-    auto src = sim::openSimSource(sim);
+    auto src = drivers::sim::openSimSource(sim);
     EXPECT_TRUE(src.ok()) << src.error().message;
     auto camera = std::make_unique<ScriptedCamera>(std::move(*src), lose_after);
     rig.camera = camera.get();
     parts.live = camera.get();
     parts.source = std::move(camera);
-    auto det = sim::createSimDetector(sim);
+    auto det = drivers::sim::createSimDetector(sim);
     EXPECT_TRUE(det.ok()) << det.error().message;
     parts.detector = std::move(*det);
-    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    auto priors = drivers::priors::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
     EXPECT_TRUE(priors.ok()) << priors.error().message;
     parts.priors = std::move(*priors);
     parts.source_name = "v4l2:scripted";
@@ -265,8 +267,8 @@ TEST(LiveSource, StartsWithoutTheCameraAndOpensItWhenItAppears) {
     c.camera.cy_px = 240;
     int attempts = 0;
     bool present = false;
-    CameraOpener opener =
-        [&](const drivers::CameraOptions& o) -> core::Result<std::unique_ptr<drivers::LiveCamera>> {
+    CameraOpener opener = [&](const drivers::camera::CameraOptions& o)
+        -> core::Result<std::unique_ptr<drivers::camera::LiveCamera>> {
         ++attempts;
         EXPECT_EQ(o.device, "usbcam");
         EXPECT_EQ(o.width_px, 640);
@@ -274,13 +276,13 @@ TEST(LiveSource, StartsWithoutTheCameraAndOpensItWhenItAppears) {
         if (!present) {
             return makeError(ErrorCode::kNotFound, "no V4L2 capture device named \"usbcam\"");
         }
-        sim::SimConfig sim;
+        drivers::sim::SimConfig sim;
         sim.duration_s = 0;
-        auto src = sim::openSimSource(sim);
+        auto src = drivers::sim::openSimSource(sim);
         if (!src) {
             return src.error();
         }
-        return std::unique_ptr<drivers::LiveCamera>(
+        return std::unique_ptr<drivers::camera::LiveCamera>(
             std::make_unique<ScriptedCamera>(std::move(*src), 1000));
     };
     LiveSource source(opener, cameraOptions(c), "v4l2:usbcam", nullptr,
@@ -289,7 +291,7 @@ TEST(LiveSource, StartsWithoutTheCameraAndOpensItWhenItAppears) {
     EXPECT_TRUE(source.info().has_intrinsics);
     EXPECT_FLOAT_EQ(static_cast<float>(source.info().intrinsics.fx), 500.0F);
     EXPECT_EQ(source.describe(), "v4l2:usbcam (not found)");
-    drivers::Frame frame;
+    drivers::source::Frame frame;
     auto got = source.next(frame);
     ASSERT_FALSE(got.ok());
     EXPECT_EQ(got.error().code, ErrorCode::kUnavailable);

@@ -20,7 +20,8 @@
 #include <scaled/daemon/log_service.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/protocol.h>
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/base/unique_fd.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 #include "log_events.h"
 #include "temp_dir.h"
@@ -56,10 +57,10 @@ json parse(const std::string& line) {
     return j;
 }
 
-drivers::FieldLogContents readAll(const fs::path& dir) {
-    auto r = drivers::readFieldLog(dir);
+drivers::fieldlog::FieldLogContents readAll(const fs::path& dir) {
+    auto r = drivers::fieldlog::readFieldLog(dir);
     EXPECT_TRUE(r) << r.error().message;
-    return r ? std::move(*r) : drivers::FieldLogContents{};
+    return r ? std::move(*r) : drivers::fieldlog::FieldLogContents{};
 }
 
 TEST(LogService, LinesAreCompleteAfterStop) {
@@ -228,7 +229,8 @@ TEST(LogService, NoSpaceLeftOnRotationThroughASymlink) {
     hooks.utc_now_s = [] { return std::int64_t{1700000000}; };
     auto log = make(c, hub, hooks);
     ASSERT_NE(log, nullptr);
-    fs::create_symlink("/dev/full", tmp.path() / drivers::fieldLogFileName(1700000000, 2));
+    fs::create_symlink("/dev/full",
+                       tmp.path() / drivers::fieldlog::fieldLogFileName(1700000000, 2));
     ASSERT_TRUE(log->append("{\"pad\":\"" + std::string(40, 'x') + "\"}"));
     ASSERT_TRUE(log->flush());
     ASSERT_TRUE(log->append("{\"pad\":\"" + std::string(40, 'y') + "\"}"));
@@ -237,7 +239,7 @@ TEST(LogService, NoSpaceLeftOnRotationThroughASymlink) {
     (void)testing::internal::GetCapturedStderr();
     const LogStatus st = hub.logStatus();
     EXPECT_EQ(st.state, LogStatus::State::kFault);
-    EXPECT_NE(st.error.find(drivers::fieldLogFileName(1700000000, 2)), std::string::npos)
+    EXPECT_NE(st.error.find(drivers::fieldlog::fieldLogFileName(1700000000, 2)), std::string::npos)
         << st.error;
     EXPECT_NE(st.error.find("No space left on device"), std::string::npos) << st.error;
     EXPECT_EQ(st.lines_written, 1u);
@@ -599,7 +601,7 @@ TEST(LogService, TextIsEscapedIntoValidJson) {
                               std::string(1, '\0') + "\xed\xa0\x80";
     formatEvent(ErrorEvent{.where = nasty, .message = "\xe2\x82\xac ok"}, out);
     EXPECT_EQ(out.find('\n'), std::string::npos);
-    EXPECT_TRUE(drivers::isJsonObjectLine(out)) << out;
+    EXPECT_TRUE(drivers::fieldlog::isJsonObjectLine(out)) << out;
     const json j = parse(out);
     EXPECT_EQ(j["message"], "\xe2\x82\xac ok");
     EXPECT_EQ(j["where"].get<std::string>().substr(0, 7), "a\"b\\c\nd");
@@ -650,10 +652,12 @@ TEST(LogService, SigkillLeavesOnlyWholeLinesButTheLast) {
     TempDir tmp("log_service");
     std::array<int, 2> ready{};
     ASSERT_EQ(::pipe(ready.data()), 0);
+    drivers::base::UniqueFd ready_read(ready[0]);
+    drivers::base::UniqueFd ready_write(ready[1]);
     const pid_t child = ::fork();
     ASSERT_GE(child, 0);
     if (child == 0) {
-        ::close(ready[0]);
+        ready_read.reset();
         ReportHub hub(16);
         LogConfig c = configIn(tmp.path());
         c.fsync_interval_ms = 1;
@@ -676,14 +680,14 @@ TEST(LogService, SigkillLeavesOnlyWholeLinesButTheLast) {
             }
             if (i == 1000) {
                 const char byte = 'r';
-                (void)!::write(ready[1], &byte, 1);
+                (void)!::write(ready_write.get(), &byte, 1);
             }
         }
     }
-    ::close(ready[1]);
+    ready_write.reset();
     char byte = 0;
-    ASSERT_EQ(::read(ready[0], &byte, 1), 1);  // the child has written >= 1001 lines
-    ::close(ready[0]);
+    ASSERT_EQ(::read(ready_read.get(), &byte, 1), 1);  // the child has written >= 1001 lines
+    ready_read.reset();
     ASSERT_EQ(::kill(child, SIGKILL), 0);
     int status = 0;
     ASSERT_EQ(::waitpid(child, &status, 0), child);

@@ -270,7 +270,7 @@ seed = 7
     EXPECT_FALSE(c.estimator.likelihood.robust);
     EXPECT_DOUBLE_EQ(static_cast<double>(c.estimator.likelihood.outlier_weight), 0.1);
     EXPECT_EQ(c.priors_path, std::filesystem::path("/etc/scaled/priors/x.toml"));
-    EXPECT_EQ(c.detector.family, detector::ModelFamily::kDarknet);
+    EXPECT_EQ(c.detector.family, drivers::detector::ModelFamily::kDarknet);
     EXPECT_EQ(c.detector.model_path, std::filesystem::path("/m/yolo.cfg"));
     ASSERT_EQ(c.detector.classes.size(), 2U);
     EXPECT_EQ(c.detector.classes[1], "chair");

@@ -28,9 +28,10 @@
 #include <scaled/daemon/pipeline.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/protocol.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/sim/sim_source.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "hub_wait.h"
 #include "temp_dir.h"
@@ -50,7 +51,7 @@ bool waitFinished(ReportHub& hub, const Pipeline& pipeline, std::chrono::seconds
 class Recorder final : public PipelineEvents {
 public:
     void onFrame(const Frame& /*frame*/) override {}
-    void onDetection(const detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
+    void onDetection(const drivers::detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
                      double /*latency_ms*/) override {}
     void onScale(const Scale& s) override {
         const std::lock_guard lock(mutex_);
@@ -150,12 +151,12 @@ private:
 
 // A detector that runs the sim detector only when the test lets it: it
 // stands for a slow network, to show that tracking goes on meanwhile.
-class GatedDetector final : public detector::ObjectDetector {
+class GatedDetector final : public drivers::detector::ObjectDetector {
 public:
-    explicit GatedDetector(std::unique_ptr<detector::ObjectDetector> inner)
+    explicit GatedDetector(std::unique_ptr<drivers::detector::ObjectDetector> inner)
         : inner_(std::move(inner)) {}
     core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                              detector::DetectionResult& out) override {
+                              drivers::detector::DetectionResult& out) override {
         gate_->pass();
         return inner_->detect(image, frame_id, t_ns, out);
     }
@@ -165,12 +166,12 @@ public:
     [[nodiscard]] std::shared_ptr<Gate> gate() const { return gate_; }
 
 private:
-    std::unique_ptr<detector::ObjectDetector> inner_;
+    std::unique_ptr<drivers::detector::ObjectDetector> inner_;
     std::shared_ptr<Gate> gate_ = std::make_shared<Gate>();
 };
 
-sim::SimConfig simConfig(double duration_s) {
-    sim::SimConfig c;
+drivers::sim::SimConfig simConfig(double duration_s) {
+    drivers::sim::SimConfig c;
     c.duration_s = duration_s;
     return c;
 }
@@ -185,7 +186,7 @@ std::int64_t firstObserved(const std::vector<ScaleReport>& scales) {
 DaemonConfig config(AtEnd at_end) {
     DaemonConfig c = defaultDaemonConfig();
     c.source.kind = SourceKind::kSim;
-    c.source.pacing = drivers::PacingMode::kAsFastAsPossible;
+    c.source.pacing = drivers::source::PacingMode::kAsFastAsPossible;
     c.source.at_end = at_end;
     c.log.frame_every = 0;
     return c;
@@ -193,13 +194,13 @@ DaemonConfig config(AtEnd at_end) {
 
 PipelineParts parts(double duration_s, bool lossless) {
     PipelineParts p;
-    auto src = sim::openSimSource(simConfig(duration_s));
+    auto src = drivers::sim::openSimSource(simConfig(duration_s));
     EXPECT_TRUE(src.ok()) << src.error().message;
     p.source = std::move(*src);
-    auto det = sim::createSimDetector(simConfig(duration_s));
+    auto det = drivers::sim::createSimDetector(simConfig(duration_s));
     EXPECT_TRUE(det.ok()) << det.error().message;
     p.detector = std::move(*det);
-    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    auto priors = drivers::priors::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
     EXPECT_TRUE(priors.ok()) << priors.error().message;
     p.priors = std::move(*priors);
     p.source_name = "sim";
@@ -334,11 +335,11 @@ TEST(Pipeline, PosesFollowTheGroundTruthWithinTheirCovariance) {
     const auto states = rec.states();
     ASSERT_FALSE(states.empty());
     const std::int64_t first = states[0].frame_id;
-    const sim::SimConfig sc = simConfig(kObservedRunS);
+    const drivers::sim::SimConfig sc = simConfig(kObservedRunS);
     const auto tOf = [&](std::int64_t frame) {
         return static_cast<std::int64_t>(std::llround(static_cast<double>(frame) * 1e9 / sc.fps));
     };
-    const auto T0 = sim::simPoseAt(sc, tOf(first));
+    const auto T0 = drivers::sim::simPoseAt(sc, tOf(first));
     ASSERT_TRUE(T0.ok());
     const Eigen::Vector3d up(0, 0, 1);  // the sim's world: z up, metres
     const Eigen::Vector3d axis = T0->R_CtoW.cast<double>() * Eigen::Vector3d::UnitZ();
@@ -357,7 +358,7 @@ TEST(Pipeline, PosesFollowTheGroundTruthWithinTheirCovariance) {
         if (!s.metric.has_scale) {
             continue;
         }
-        const auto T = sim::simPoseAt(sc, s.pose.t_ns);
+        const auto T = drivers::sim::simPoseAt(sc, s.pose.t_ns);
         ASSERT_TRUE(T.ok());
         const Eigen::Vector3d truth =
             R_WtoG * (T->p_CinW.cast<double>() - T0->p_CinW.cast<double>());
@@ -634,7 +635,7 @@ public:
         ++tracked_;
         changed_.notify_all();
     }
-    void onDetection(const detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
+    void onDetection(const drivers::detector::DetectionResult& /*result*/, std::uint64_t /*epoch*/,
                      double /*latency_ms*/) override {}
     void onScale(const Scale& /*s*/) override {}
     void onState(DaemonState /*from*/, DaemonState /*to*/, std::uint64_t /*epoch*/,
@@ -657,12 +658,14 @@ private:
 // most one frame waits in the capture ring, so a slow machine (ThreadSanitizer
 // on a loaded CI runner) drops nothing, while the pipeline itself stays in its
 // live, not-lossless mode (a stalled detector must not hold tracking).
-class LockstepSource final : public drivers::FrameSource {
+class LockstepSource final : public drivers::source::FrameSource {
 public:
-    LockstepSource(std::unique_ptr<drivers::FrameSource> inner, TrackedCounter& counter)
+    LockstepSource(std::unique_ptr<drivers::source::FrameSource> inner, TrackedCounter& counter)
         : inner_(std::move(inner)), counter_(counter) {}
-    [[nodiscard]] const drivers::SequenceInfo& info() const override { return inner_->info(); }
-    core::Result<bool> next(drivers::Frame& frame) override {
+    [[nodiscard]] const drivers::source::SequenceInfo& info() const override {
+        return inner_->info();
+    }
+    core::Result<bool> next(drivers::source::Frame& frame) override {
         if (given_ >= 2 && !counter_.waitTracked(given_ - 1, std::chrono::seconds(120))) {
             return core::Error{core::ErrorCode::kUnavailable,
                                "tracking did not take frame " + std::to_string(given_ - 2)};
@@ -676,7 +679,7 @@ public:
     core::Result<bool> seek(std::size_t index) override { return inner_->seek(index); }
 
 private:
-    std::unique_ptr<drivers::FrameSource> inner_;
+    std::unique_ptr<drivers::source::FrameSource> inner_;
     TrackedCounter& counter_;
     std::uint64_t given_ = 0;
 };
@@ -752,9 +755,9 @@ TEST(Pipeline, ReloadKeepsThePosterior) {
     // The reloaded table must know the sim's classes (refrigerator, couch,
     // chair, suitcase) for later updates to add evidence; priors-redkitchen.toml
     // knows only the chair.
-    auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+    auto priors = drivers::priors::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
     ASSERT_TRUE(priors.ok()) << priors.error().message;
-    auto det = sim::createSimDetector(simConfig(kObservedRunS));
+    auto det = drivers::sim::createSimDetector(simConfig(kObservedRunS));
     ASSERT_TRUE(det.ok());
     DetectionSchedule every5;
     every5.every_frames = 5;
@@ -830,7 +833,7 @@ TEST(Pipeline, AReplayedGyroLogFeedsTheGyroPrior) {
     c.source.kind = SourceKind::kReplay;
     c.source.replay_path = seq;
     PipelineParts p = parts(1.0, true);
-    auto src = drivers::openDataset(seq);
+    auto src = drivers::dataset::openDataset(seq);
     ASSERT_TRUE(src.ok()) << src.error().message;
     p.source = std::move(*src);
     p.source_name = "replay:" + seq.string();

@@ -29,7 +29,8 @@
 #include <gtest/gtest.h>
 
 #include <scaled/daemon/socket_service.h>
-#include <scaled/drivers/unix_socket.h>
+#include <scaled/drivers/base/unique_fd.h>
+#include <scaled/drivers/ipc/unix_socket.h>
 
 #include "temp_dir.h"
 
@@ -45,7 +46,7 @@ constexpr int kTimeoutMs = 5000;
 class TestClient {
 public:
     explicit TestClient(const fs::path& path) {
-        auto fd = drivers::connectUnix(path);
+        auto fd = drivers::ipc::connectUnix(path);
         if (fd) {
             fd_ = std::move(*fd);
         } else {
@@ -124,7 +125,7 @@ public:
     }
 
 private:
-    drivers::UniqueFd fd_;
+    drivers::base::UniqueFd fd_;
     std::string buffer_;
     bool eof_ = false;
 };
@@ -1080,7 +1081,7 @@ TEST_F(SocketServiceTest, StopRemovesTheSocketFileAndClosesClients) {
 TEST_F(SocketServiceTest, StaleSocketFileIsReplaced) {
     {
         // A socket file nobody listens on any more (a crashed daemon's).
-        auto stale = drivers::listenUnix({config_.path, 0600, ""});
+        auto stale = drivers::ipc::listenUnix({config_.path, 0600, ""});
         ASSERT_TRUE(stale.ok()) << stale.error().message;
     }
     ASSERT_TRUE(fs::is_socket(config_.path));
@@ -1176,9 +1177,9 @@ public:
     ~Fd3Guard() {
         if (saved_ >= 0) {
             ::dup2(saved_, 3);
-            ::close(saved_);
+            drivers::base::UniqueFd(saved_).reset();
         } else {
-            ::close(3);
+            drivers::base::UniqueFd(3).reset();
         }
     }
     Fd3Guard(const Fd3Guard&) = delete;
@@ -1200,7 +1201,7 @@ void setActivationEnv(long pid, int fds) {
 
 TEST_F(SocketServiceTest, AdoptsTheSocketFromListenFds) {
     const fs::path real = dir_.path() / "activated.sock";
-    auto made = drivers::listenUnix({real, 0660, ""});
+    auto made = drivers::ipc::listenUnix({real, 0660, ""});
     ASSERT_TRUE(made.ok()) << made.error().message;
     {
         // The adopted descriptor is number 3; the service closes it in stop().
@@ -1244,9 +1245,9 @@ TEST_F(SocketServiceTest, ActivationWithAnUnusableDescriptorIsAnError) {
     // A connected (not listening) socket at an injected descriptor number.
     int pair[2] = {-1, -1};
     ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, pair), 0);
-    const drivers::UniqueFd other(pair[1]);
+    const drivers::base::UniqueFd other(pair[1]);
     setActivationEnv(::getpid(), 1);
-    auto r = drivers::takeActivatedSocket(pair[0]);  // owns pair[0] now
+    auto r = drivers::ipc::takeActivatedSocket(pair[0]);  // owns pair[0] now
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().message, "socket activation (LISTEN_FDS=1): inherited socket (fd " +
                                      std::to_string(pair[0]) + "): is not listening");
@@ -1255,12 +1256,12 @@ TEST_F(SocketServiceTest, ActivationWithAnUnusableDescriptorIsAnError) {
     const int file = ::open(dir_.path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     ASSERT_GE(file, 0);
     setActivationEnv(::getpid(), 1);
-    r = drivers::takeActivatedSocket(file);
+    r = drivers::ipc::takeActivatedSocket(file);
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message.find("is not a socket"), std::string::npos) << r.error().message;
 
     // Not activated at all: nothing adopted.
-    auto none = drivers::takeActivatedSocket(3);
+    auto none = drivers::ipc::takeActivatedSocket(3);
     ASSERT_TRUE(none.ok());
     EXPECT_FALSE(none->has_value());
 }

@@ -178,7 +178,7 @@ struct FakeLog {
     }
 };
 
-class FakeOutputs final : public drivers::GpioOutputs {
+class FakeOutputs final : public drivers::gpio::GpioOutputs {
 public:
     FakeOutputs(std::shared_ptr<FakeLog> log, std::size_t lines)
         : log_(std::move(log)), lines_(lines) {}

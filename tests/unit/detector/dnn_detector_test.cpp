@@ -11,7 +11,7 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/detector/dnn_detector.h>
+#include <scaled/drivers/detector/dnn_detector.h>
 
 #include "shared_data.h"
 #include "temp_dir.h"
@@ -21,11 +21,11 @@ namespace {
 namespace fs = std::filesystem;
 using scaled::core::BoundingBox;
 using scaled::core::ErrorCode;
-using scaled::detector::DetectionResult;
-using scaled::detector::DetectorConfig;
-using scaled::detector::DnnDetector;
-using scaled::detector::ModelFamily;
-using scaled::detector::ObjectDetection;
+using scaled::drivers::detector::DetectionResult;
+using scaled::drivers::detector::DetectorConfig;
+using scaled::drivers::detector::DnnDetector;
+using scaled::drivers::detector::ModelFamily;
+using scaled::drivers::detector::ObjectDetection;
 using scaled::test::TempDir;
 
 // A file with `content` in the test's temporary directory.
@@ -148,48 +148,50 @@ TEST(DetectorConfig, EveryRangeErrorNamesItsField) {
     c.model_path.clear();
     cases.push_back({c, "model_path"});
     for (const Case& k : cases) {
-        auto r = scaled::detector::validate(k.config);
+        auto r = scaled::drivers::detector::validate(k.config);
         ASSERT_FALSE(r.ok()) << k.field;
         EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
         EXPECT_NE(r.error().message.find(k.field), std::string::npos) << r.error().message;
     }
-    EXPECT_TRUE(scaled::detector::validate(base).ok());
+    EXPECT_TRUE(scaled::drivers::detector::validate(base).ok());
 }
 
 TEST(DetectorConfig, FamilyFromTextAndPath) {
-    EXPECT_EQ(*scaled::detector::parseModelFamily("yolox"), ModelFamily::kYolox);
-    EXPECT_EQ(*scaled::detector::parseModelFamily("darknet"), ModelFamily::kDarknet);
-    auto bad = scaled::detector::parseModelFamily("yolov8");
+    EXPECT_EQ(*scaled::drivers::detector::parseModelFamily("yolox"), ModelFamily::kYolox);
+    EXPECT_EQ(*scaled::drivers::detector::parseModelFamily("darknet"), ModelFamily::kDarknet);
+    auto bad = scaled::drivers::detector::parseModelFamily("yolov8");
     ASSERT_FALSE(bad.ok());
     EXPECT_NE(bad.error().message.find("yolov8"), std::string::npos);
-    EXPECT_EQ(scaled::detector::familyFromPath("a/yolo-fastest.CFG"), ModelFamily::kDarknet);
-    EXPECT_EQ(scaled::detector::familyFromPath("a/yolox_nano.onnx"), ModelFamily::kYolox);
+    EXPECT_EQ(scaled::drivers::detector::familyFromPath("a/yolo-fastest.CFG"),
+              ModelFamily::kDarknet);
+    EXPECT_EQ(scaled::drivers::detector::familyFromPath("a/yolox_nano.onnx"), ModelFamily::kYolox);
 }
 
 TEST(ClassNames, ReadsLinesAndNamesFileAndLineOfProblems) {
     TempDir tmp("detector");
-    auto ok =
-        scaled::detector::readClassNames(writeFile(tmp, "ok.names", "person\r\ndining table\n\n"));
+    auto ok = scaled::drivers::detector::readClassNames(
+        writeFile(tmp, "ok.names", "person\r\ndining table\n\n"));
     ASSERT_TRUE(ok.ok()) << ok.error().message;
     EXPECT_EQ(*ok, (std::vector<std::string>{"person", "dining table"}));
 
-    auto gap = scaled::detector::readClassNames(writeFile(tmp, "gap.names", "a\n\nb\n"));
+    auto gap = scaled::drivers::detector::readClassNames(writeFile(tmp, "gap.names", "a\n\nb\n"));
     ASSERT_FALSE(gap.ok());
     EXPECT_NE(gap.error().message.find("gap.names:2:"), std::string::npos) << gap.error().message;
 
-    auto empty = scaled::detector::readClassNames(writeFile(tmp, "empty.names", ""));
+    auto empty = scaled::drivers::detector::readClassNames(writeFile(tmp, "empty.names", ""));
     ASSERT_FALSE(empty.ok());
     EXPECT_NE(empty.error().message.find("empty.names"), std::string::npos);
 
-    auto blank = scaled::detector::readClassNames(writeFile(tmp, "blank.names", "\n\n"));
+    auto blank = scaled::drivers::detector::readClassNames(writeFile(tmp, "blank.names", "\n\n"));
     ASSERT_FALSE(blank.ok());
     EXPECT_NE(blank.error().message.find("no class names"), std::string::npos);
 
-    auto ctrl = scaled::detector::readClassNames(writeFile(tmp, "ctrl.names", "a\nb\x01\n"));
+    auto ctrl =
+        scaled::drivers::detector::readClassNames(writeFile(tmp, "ctrl.names", "a\nb\x01\n"));
     ASSERT_FALSE(ctrl.ok());
     EXPECT_NE(ctrl.error().message.find("ctrl.names:2:"), std::string::npos);
 
-    auto missing = scaled::detector::readClassNames(tmp.path() / "nope.names");
+    auto missing = scaled::drivers::detector::readClassNames(tmp.path() / "nope.names");
     ASSERT_FALSE(missing.ok());
     EXPECT_EQ(missing.error().code, ErrorCode::kNotFound);
     EXPECT_NE(missing.error().message.find("nope.names"), std::string::npos);
@@ -264,7 +266,7 @@ TEST(DnnDetectorFiles, ClassCountMismatchNamesModelAndNamesFile) {
     SCALED_REQUIRE_MODEL(onnx, "yolox_nano.onnx");
     SCALED_REQUIRE_MODEL(cfg, "yolo-fastest-1.1-xl.cfg");
     TempDir tmp("detector");
-    auto names = scaled::detector::readClassNames(onnx.parent_path() / "coco.names");
+    auto names = scaled::drivers::detector::readClassNames(onnx.parent_path() / "coco.names");
     ASSERT_TRUE(names.ok());
     ASSERT_EQ(names->size(), 80U);
     std::string text;
@@ -468,7 +470,7 @@ TEST(DnnDetectorReal, EstimatorDetectionsViewTheDetectorsNames) {
     ASSERT_TRUE((*det)->detect(readImage(dir / "rgb" / "000000.jpg"), 0, 0, r).ok());
     ASSERT_GE(r.detections.size(), 2U);
     std::vector<scaled::core::Detection> out(1);
-    EXPECT_EQ(scaled::detector::toEstimatorDetections(r, out), 1U);
+    EXPECT_EQ(scaled::drivers::detector::toEstimatorDetections(r, out), 1U);
     EXPECT_EQ(out[0].class_name, r.detections[0].class_name);
     EXPECT_EQ(out[0].box.x_min_px, r.detections[0].box.x_min_px);
     EXPECT_FLOAT_EQ(static_cast<float>(out[0].score), r.detections[0].score);

@@ -15,7 +15,7 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/detector/thread_priority.h>
+#include <scaled/drivers/detector/thread_priority.h>
 
 namespace {
 
@@ -69,7 +69,7 @@ TEST(ThreadPriority, OpenCvWorkersInheritTheNiceValueOfTheirStarter) {
     for (const auto& t : tasks()) {
         before.insert(t.tid);
     }
-    auto threads = scaled::detector::startOpenCvWorkersAtNice(7);
+    auto threads = scaled::drivers::detector::startOpenCvWorkersAtNice(7);
     ASSERT_TRUE(threads) << threads.error().message;
     if (*threads < 2) {
         GTEST_SKIP() << "OpenCV runs on " << *threads << " thread: no workers to check";
@@ -90,12 +90,12 @@ TEST(ThreadPriority, OpenCvWorkersInheritTheNiceValueOfTheirStarter) {
         EXPECT_EQ(t.name, "scaled-dnn") << "thread " << t.tid;
     }
     EXPECT_GE(workers, 1) << "OpenCV reports " << *threads << " threads but made no worker";
-    EXPECT_EQ(scaled::detector::threadNice(), 0);
+    EXPECT_EQ(scaled::drivers::detector::threadNice(), 0);
 }
 
 TEST(ThreadPriority, NiceOutsideItsRangeIsRefusedAndNamed) {
     for (const int bad : {-1, 20}) {
-        auto r = scaled::detector::setThreadNice(bad);
+        auto r = scaled::drivers::detector::setThreadNice(bad);
         ASSERT_FALSE(r);
         EXPECT_NE(r.error().message.find("detector.nice: must be an integer in [0, 19] (got " +
                                          std::to_string(bad) + ")"),
@@ -107,12 +107,12 @@ TEST(ThreadPriority, NiceOutsideItsRangeIsRefusedAndNamed) {
 TEST(ThreadPriority, AThreadCanLowerItsOwnPriority) {
     int seen = -1;
     std::thread t([&] {
-        ASSERT_TRUE(scaled::detector::setThreadNice(12));
-        seen = scaled::detector::threadNice();
+        ASSERT_TRUE(scaled::drivers::detector::setThreadNice(12));
+        seen = scaled::drivers::detector::threadNice();
     });
     t.join();
     EXPECT_EQ(seen, 12);
-    EXPECT_EQ(scaled::detector::threadNice(), 0) << "only the thread that asked";
+    EXPECT_EQ(scaled::drivers::detector::threadNice(), 0) << "only the thread that asked";
 }
 
 }  // namespace

@@ -11,14 +11,14 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/detector/yolo_decode.h>
+#include <scaled/drivers/detector/yolo_decode.h>
 
 namespace {
 
-using scaled::detector::DetectionResult;
-using scaled::detector::makeYoloxGrid;
-using scaled::detector::YoloDecoder;
-using scaled::detector::YoloxCell;
+using scaled::drivers::detector::DetectionResult;
+using scaled::drivers::detector::makeYoloxGrid;
+using scaled::drivers::detector::YoloDecoder;
+using scaled::drivers::detector::YoloxCell;
 
 constexpr int kClasses = 3;
 constexpr std::size_t kCols = 5 + kClasses;

@@ -14,13 +14,14 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/depth_image.h>
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/dataset/depth_image.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "dataset_test_util.h"
 #include "shared_data.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::dataset {
 namespace {
 
 namespace fs = std::filesystem;
@@ -38,8 +39,8 @@ cv::Mat rawDepth() {
     return d;
 }
 
-Frame frameWithDepth(const fs::path& depth) {
-    Frame f;
+source::Frame frameWithDepth(const fs::path& depth) {
+    source::Frame f;
     f.id = 7;
     f.image_path = "rgb/7.png";
     f.depth_path = depth;
@@ -50,7 +51,7 @@ TEST(DatasetDepth, ConvertsSixteenBitUnitsToMetres) {
     TempDir tmp("depth");
     const fs::path file = tmp.path() / "d.png";
     ASSERT_TRUE(cv::imwrite(file.string(), rawDepth()));
-    SequenceInfo info;
+    source::SequenceInfo info;
     info.depth_scale_m = 0.001;  // millimetres
     auto m = loadDepthMetres(frameWithDepth(file), info);
     ASSERT_TRUE(m) << m.error().message;
@@ -70,10 +71,10 @@ TEST(DatasetDepth, ConvertsSixteenBitUnitsToMetres) {
 TEST(DatasetDepth, ErrorsNameTheFrameOrTheFile) {
     cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
     TempDir tmp("depth_bad");
-    SequenceInfo info;
+    source::SequenceInfo info;
     info.depth_scale_m = 0.001;
 
-    Frame none;
+    source::Frame none;
     none.id = 3;
     none.image_path = "rgb/3.png";
     auto r = loadDepthMetres(none, info);
@@ -112,7 +113,7 @@ TEST(DatasetDepth, ErrorsNameTheFrameOrTheFile) {
 
     const fs::path good = tmp.path() / "good.png";
     ASSERT_TRUE(cv::imwrite(good.string(), rawDepth()));
-    SequenceInfo no_scale;
+    source::SequenceInfo no_scale;
     r = loadDepthMetres(frameWithDepth(good), no_scale);
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("no depth scale"), std::string::npos) << r.error().message;
@@ -130,7 +131,7 @@ TEST(DatasetDepth, WorksThroughATumDepthList) {
     writeFile(dir / "depth.txt", "0.001 depth/0.png\n");
     auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     auto m = loadDepthMetres(f, (*src)->info());
     ASSERT_TRUE(m) << m.error().message;
@@ -141,7 +142,7 @@ TEST(DatasetDepth, RedkitchenFrameZeroHasPlausibleMetricDepth) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     auto m = loadDepthMetres(f, (*src)->info());
     ASSERT_TRUE(m) << m.error().message;
@@ -169,4 +170,4 @@ TEST(DatasetDepth, RedkitchenFrameZeroHasPlausibleMetricDepth) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::dataset

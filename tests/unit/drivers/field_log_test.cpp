@@ -12,11 +12,11 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 #include "temp_dir.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::fieldlog {
 namespace {
 
 using test::TempDir;
@@ -376,4 +376,4 @@ TEST(FieldLogReader, AnEmptyFileHasNoLines) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::fieldlog

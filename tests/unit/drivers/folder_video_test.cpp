@@ -19,14 +19,15 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/dataset_folder.h>
-#include <scaled/drivers/dataset_video.h>
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/dataset/dataset_folder.h>
+#include <scaled/drivers/dataset/dataset_video.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "dataset_test_util.h"
 #include "shared_data.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::dataset {
 namespace {
 
 namespace fs = std::filesystem;
@@ -36,7 +37,7 @@ using test::TempDir;
 using test::tinyImage;
 using test::writeFile;
 
-bool anyNoteContains(const SequenceInfo& info, const std::string& text) {
+bool anyNoteContains(const source::SequenceInfo& info, const std::string& text) {
     return std::any_of(info.notes.begin(), info.notes.end(),
                        [&](const std::string& n) { return n.find(text) != std::string::npos; });
 }
@@ -89,7 +90,7 @@ TEST(DatasetFolder, ReadsImagesInNaturalOrderAndIgnoresOtherFiles) {
 
     auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 5U);
     EXPECT_EQ(info.listed_count, 5U);
     EXPECT_FALSE(info.has_intrinsics);
@@ -99,7 +100,7 @@ TEST(DatasetFolder, ReadsImagesInNaturalOrderAndIgnoresOtherFiles) {
     EXPECT_DOUBLE_EQ(info.depth_scale_m, 0.0);
 
     const std::vector<int> order = {1, 2, 3, 10, 20};
-    Frame f;
+    source::Frame f;
     for (std::size_t i = 0; i < order.size(); ++i) {
         auto r = (*src)->next(f);
         ASSERT_TRUE(r) << r.error().message;
@@ -131,7 +132,7 @@ TEST(DatasetFolder, FpsOptionSetsTheTimestampsAndIsValidated) {
     opt.folder_fps = 10;
     auto src = openDataset(tmp.path(), opt);
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     for (int i = 0; i < 3; ++i) {
         ASSERT_TRUE((*src)->next(f).ok());
         EXPECT_EQ(f.t_ns, int64_t{100000000} * i);
@@ -153,7 +154,7 @@ TEST(DatasetFolder, TimesFileGivesTheTimestamps) {
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
     EXPECT_FALSE(anyNoteContains((*src)->info(), "Hz"));
-    Frame f;
+    source::Frame f;
     const int64_t expected[] = {1500000000, 1600000000, 1750000000};
     for (const int64_t t : expected) {
         ASSERT_TRUE((*src)->next(f).ok());
@@ -208,7 +209,7 @@ TEST(DatasetFolder, CameraFileAndIntrinsicsOverride) {
     writeFile(tmp.path() / "camera.txt", "16 12 10 11 8 6\n");
     auto wrong = openDataset(tmp.path());
     ASSERT_TRUE(wrong) << wrong.error().message;
-    Frame f;
+    source::Frame f;
     auto r = (*wrong)->next(f);
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("img0.png: image is 8x6"), std::string::npos)
@@ -253,7 +254,7 @@ TEST(DatasetFolder, CorruptImageIsAnErrorOfNextNamingTheFile) {
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
     EXPECT_EQ((*src)->info().frame_count, 4U);
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     auto r = (*src)->next(f);
     ASSERT_FALSE(r);
@@ -283,11 +284,11 @@ TEST(DatasetFolder, RedkitchenRgbFolderOpensAsAnImageFolder) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     auto src = openDataset(dir / "rgb");
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.name, "rgb");
     EXPECT_EQ(info.frame_count, 600U);
     EXPECT_FALSE(info.has_intrinsics);  // camera.txt is one level up
-    Frame f;
+    source::Frame f;
     auto r = (*src)->next(f);
     ASSERT_TRUE(r && *r);
     EXPECT_EQ(f.image_path.filename(), "000000.jpg");
@@ -303,7 +304,7 @@ TEST(DatasetFolder, RedkitchenRgbFolderOpensAsAnImageFolder) {
     // Same pixels as the TUM reader gives for that frame.
     auto tum = openDataset(dir);
     ASSERT_TRUE(tum);
-    Frame g;
+    source::Frame g;
     ASSERT_TRUE((*tum)->seek(599).ok());
     ASSERT_TRUE((*tum)->next(g).ok());
     EXPECT_EQ(cv::norm(f.gray, g.gray, cv::NORM_INF), 0.0);
@@ -355,13 +356,13 @@ TEST(DatasetVideo, ReadsBackAnMjpgAviWithCountTimestampsPixelsAndSeek) {
 
     auto src = openDataset(file);  // a regular file: detected as a video
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.name, "clip.avi");
     EXPECT_EQ(info.frame_count, static_cast<std::size_t>(kVideoFrames));
     EXPECT_FALSE(info.has_intrinsics);
 
-    std::vector<Frame> frames;
-    Frame f;
+    std::vector<source::Frame> frames;
+    source::Frame f;
     while (true) {
         auto r = (*src)->next(f);
         ASSERT_TRUE(r) << r.error().message;
@@ -372,7 +373,7 @@ TEST(DatasetVideo, ReadsBackAnMjpgAviWithCountTimestampsPixelsAndSeek) {
     }
     ASSERT_EQ(frames.size(), static_cast<std::size_t>(kVideoFrames));
     for (int i = 0; i < kVideoFrames; ++i) {
-        const Frame& fr = frames[static_cast<std::size_t>(i)];
+        const source::Frame& fr = frames[static_cast<std::size_t>(i)];
         EXPECT_EQ(fr.id, i);
         EXPECT_EQ(fr.image_path, file);
         EXPECT_EQ(fr.color.type(), CV_8UC3);
@@ -448,7 +449,7 @@ TEST(DatasetVideo, IntrinsicsFromCameraFileNextToTheVideoOrOptions) {
     writeFile(tmp.path() / "camera.txt", "640 480 500 500 320 240\n");
     auto wrong = openDataset(file);
     ASSERT_TRUE(wrong) << wrong.error().message;
-    Frame f;
+    source::Frame f;
     auto r = (*wrong)->next(f);
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("clip.avi: frame 0: image is 96x64"), std::string::npos)
@@ -515,7 +516,7 @@ TEST(DatasetVideo, FrameThatFailsToDecodeNamesFileAndIndexAndReadingGoesOn) {
 
     auto src = openDataset(file);
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     std::vector<int64_t> ids;
     std::vector<std::string> errors;
     std::optional<int64_t> prev_t;
@@ -556,7 +557,7 @@ TEST(DatasetOpen, DetectsFoldersAndVideosNextToTumAndKitti) {
     writeFile(folder / "times.txt", "0\n0.5\n");
     auto src = openDataset(folder);
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->seek(1).ok());
     ASSERT_TRUE((*src)->next(f).ok());
     EXPECT_EQ(f.t_ns, 500000000);
@@ -575,4 +576,4 @@ TEST(DatasetOpen, DetectsFoldersAndVideosNextToTumAndKitti) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::dataset

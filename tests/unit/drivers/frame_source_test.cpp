@@ -26,16 +26,17 @@
 
 #include <scaled/core/result.h>
 #include <scaled/core/types.h>
-#include <scaled/drivers/dataset_kitti.h>
-#include <scaled/drivers/dataset_tum.h>
-#include <scaled/drivers/frame_selection.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/trajectory_io.h>
+#include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/dataset/dataset_kitti.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
+#include <scaled/drivers/dataset/trajectory_io.h>
+#include <scaled/drivers/source/frame_selection.h>
+#include <scaled/drivers/source/frame_source.h>
 
 #include "dataset_test_util.h"
 #include "shared_data.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::dataset {
 namespace {
 
 namespace fs = std::filesystem;
@@ -105,9 +106,9 @@ struct ReadAll {
     std::size_t frames = 0;
     std::optional<core::Error> error;
 };
-ReadAll readAll(FrameSource& src) {
+ReadAll readAll(source::FrameSource& src) {
     ReadAll out;
-    Frame f;
+    source::Frame f;
     while (true) {
         auto r = src.next(f);
         if (!r) {
@@ -135,7 +136,7 @@ TEST(DatasetReal, RedkitchenOpensWithIntrinsicsGravityAndGroundTruth) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.name, "redkitchen");
     EXPECT_EQ(info.frame_count, 600U);
     EXPECT_EQ(info.listed_count, 600U);
@@ -151,7 +152,7 @@ TEST(DatasetReal, RedkitchenOpensWithIntrinsicsGravityAndGroundTruth) {
     EXPECT_NEAR(static_cast<double>(info.gravity_down_W->y()), 0.904425559, 1e-4);
     EXPECT_DOUBLE_EQ(info.depth_scale_m, 0.001);  // depth.txt says millimetres
 
-    Frame f;
+    source::Frame f;
     auto r = (*src)->next(f);
     ASSERT_TRUE(r) << r.error().message;
     ASSERT_TRUE(*r);
@@ -208,7 +209,7 @@ TEST(DatasetReal, Kitti00HasCalibIntrinsicsTenHertzAndPoses) {
     SCALED_REQUIRE_DATASET(dir, "kitti00");
     auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 160U);
     ASSERT_TRUE(info.has_intrinsics);
     // calib.txt P0: 718.856 0 607.1928 0 0 718.856 185.2157 0 0 0 1 0
@@ -221,7 +222,7 @@ TEST(DatasetReal, Kitti00HasCalibIntrinsicsTenHertzAndPoses) {
     EXPECT_FALSE(info.gravity_down_W.has_value());  // only when asked
     EXPECT_DOUBLE_EQ(info.depth_scale_m, 0.0);
 
-    Frame f;
+    source::Frame f;
     int64_t prev_t = -1;
     std::size_t n = 0;
     while (true) {
@@ -277,7 +278,7 @@ TEST(DatasetReal, TumOfficePartialDownloadReplaysTheImagesThatExist) {
     SCALED_REQUIRE_DATASET(dir, "tum-fr3-office");
     auto src = openDataset(dir);
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 16U);
     EXPECT_GT(info.listed_count, 16U);
     EXPECT_FALSE(info.has_intrinsics);  // no camera.txt: the caller supplies them
@@ -288,7 +289,7 @@ TEST(DatasetReal, TumOfficePartialDownloadReplaysTheImagesThatExist) {
     });
     EXPECT_TRUE(noted);
 
-    Frame f;
+    source::Frame f;
     for (std::size_t i = 0; i < 16; ++i) {
         auto r = (*src)->next(f);
         ASSERT_TRUE(r) << r.error().message;
@@ -364,7 +365,7 @@ TEST(DatasetTum, ReadsASmallDataset) {
     makeTumDataset(tmp.path());
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 3U);
     ASSERT_TRUE(info.has_intrinsics);
     EXPECT_EQ(info.intrinsics.width_px, 8);
@@ -373,7 +374,7 @@ TEST(DatasetTum, ReadsASmallDataset) {
     EXPECT_FALSE(info.gravity_down_W.has_value());
     EXPECT_DOUBLE_EQ(info.depth_scale_m, 0.0);
 
-    Frame f;
+    source::Frame f;
     for (int i = 0; i < 3; ++i) {
         auto r = (*src)->next(f);
         ASSERT_TRUE(r) << r.error().message;
@@ -396,13 +397,13 @@ TEST(FrameSelection, StrideReadsEveryNthFrameAndBlankedFramesAreBlack) {
     makeTumDataset(tmp.path());
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
-    FrameSelection sel;
+    source::FrameSelection sel;
     sel.stride = 2;
     sel.blank.push_back({2, 3});
-    Frame f;
+    source::Frame f;
     std::vector<std::int64_t> ids;
     for (std::size_t i = 0; i < (*src)->info().frame_count; i += sel.stride) {
-        auto r = readSelected(**src, sel, i, f);
+        auto r = source::readSelected(**src, sel, i, f);
         ASSERT_TRUE(r) << r.error().message;
         ASSERT_TRUE(*r);
         ids.push_back(f.id);
@@ -415,17 +416,17 @@ TEST(FrameSelection, StrideReadsEveryNthFrameAndBlankedFramesAreBlack) {
     EXPECT_EQ(f.color.size(), tinyImage(0).size());
     EXPECT_EQ(cv::norm(f.color, cv::NORM_INF), 0.0);
     // Past the end: false, as next() says.
-    auto end = readSelected(**src, sel, 3, f);
+    auto end = source::readSelected(**src, sel, 3, f);
     ASSERT_TRUE(end);
     EXPECT_FALSE(*end);
 }
 
 TEST(FrameSelection, BlankRangesParseAndBadOnesAreNamed) {
-    auto r = parseBlankRange("300:320");
+    auto r = source::parseBlankRange("300:320");
     ASSERT_TRUE(r) << r.error().message;
     EXPECT_EQ(r->first, 300U);
     EXPECT_EQ(r->end, 320U);
-    FrameSelection sel;
+    source::FrameSelection sel;
     sel.blank.push_back(*r);
     EXPECT_FALSE(sel.blanked(299));
     EXPECT_TRUE(sel.blanked(300));
@@ -433,7 +434,7 @@ TEST(FrameSelection, BlankRangesParseAndBadOnesAreNamed) {
     EXPECT_FALSE(sel.blanked(320));
     EXPECT_FALSE(sel.blanked(-1));
     for (const char* bad : {"", ":", "5", "5:", ":5", "5:5", "6:5", "a:9", "1:2x", "-1:3"}) {
-        const auto e = parseBlankRange(bad);
+        const auto e = source::parseBlankRange(bad);
         ASSERT_FALSE(e) << bad;
         EXPECT_NE(e.error().message.find(std::string("'") + bad + "'"), std::string::npos)
             << e.error().message;
@@ -456,7 +457,7 @@ TEST(DatasetTum, AssociatesGroundTruthAndDepthByNearestTimestamp) {
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
     EXPECT_DOUBLE_EQ((*src)->info().depth_scale_m, 1.0 / 5000.0);
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     ASSERT_TRUE(f.T_CtoW_gt.has_value());
     EXPECT_NEAR(static_cast<double>(f.T_CtoW_gt->p_CinW.x()), 1.0, kReadTol);
@@ -515,7 +516,7 @@ TEST(DatasetTum, AccelerometerIsAssociatedByNearestTimestampAndKeptRaw) {
     EXPECT_TRUE(std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
         return n.find("accelerometer.txt: 1 of 3 frames have no sample") != std::string::npos;
     }));
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     ASSERT_TRUE(f.accel_C.has_value());
     EXPECT_NEAR(static_cast<double>(f.accel_C->x()), 0.1, kReadTol);
@@ -551,7 +552,7 @@ TEST(DatasetTum, GravityInTheCameraFrameComesFromGroundTruthEvenWithAnAccelerome
               "0.066667 0 0 0 0 0 0.7071068 0.7071068\n");
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     // Frame 0: identity pose, down_C = down_W; the accelerometer is there too
     // but is not used for gravity.
     ASSERT_TRUE((*src)->next(f).ok());
@@ -581,7 +582,7 @@ TEST(DatasetKitti, GravityFromGroundTruthGivesGravityInEveryCameraFrame) {
     opt.gravity_from_groundtruth = true;
     auto src = openDataset(tmp.path(), opt);
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     for (int i = 0; i < 3; ++i) {
         ASSERT_TRUE((*src)->next(f).ok());
         ASSERT_TRUE(f.gravity_down_C.has_value()) << i;
@@ -601,7 +602,7 @@ TEST(DatasetTum, MissingImageInTheMiddleIsAnErrorOfNextWithIndexLine) {
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
     EXPECT_EQ((*src)->info().frame_count, 3U);  // the last image exists: nothing dropped
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     auto r = (*src)->next(f);
     ASSERT_FALSE(r);
@@ -650,7 +651,7 @@ TEST(DatasetTum, CorruptImageAndWrongSizeNameTheFile) {
     cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
-    Frame f;
+    source::Frame f;
     ASSERT_TRUE((*src)->next(f).ok());
     auto r = (*src)->next(f);
     ASSERT_FALSE(r);
@@ -686,7 +687,7 @@ TEST(DatasetKitti, ReadsASmallSequence) {
     makeKittiDataset(tmp.path());
     auto src = openDataset(tmp.path());
     ASSERT_TRUE(src) << src.error().message;
-    const SequenceInfo& info = (*src)->info();
+    const source::SequenceInfo& info = (*src)->info();
     EXPECT_EQ(info.frame_count, 3U);
     ASSERT_TRUE(info.has_intrinsics);
     EXPECT_DOUBLE_EQ(static_cast<double>(info.intrinsics.fx), 10.0);
@@ -695,7 +696,7 @@ TEST(DatasetKitti, ReadsASmallSequence) {
     EXPECT_DOUBLE_EQ(static_cast<double>(info.intrinsics.cy), 3.0);
     EXPECT_EQ(info.intrinsics.width_px, 8);
     EXPECT_EQ(info.intrinsics.height_px, 6);
-    Frame f;
+    source::Frame f;
     for (int i = 0; i < 3; ++i) {
         auto r = (*src)->next(f);
         ASSERT_TRUE(r) << r.error().message;
@@ -863,8 +864,8 @@ TEST(DatasetFuzz, MutatedIndexFilesNeverCrash) {
             continue;
         }
         ++opened;
-        FrameSource& fsrc = **src;
-        const SequenceInfo& info = fsrc.info();
+        source::FrameSource& fsrc = **src;
+        const source::SequenceInfo& info = fsrc.info();
         ASSERT_GE(info.frame_count, 1U);
         ASSERT_LE(info.frame_count, info.listed_count);
         if (info.has_intrinsics) {
@@ -880,7 +881,7 @@ TEST(DatasetFuzz, MutatedIndexFilesNeverCrash) {
                 ASSERT_FALSE(s.error().message.empty());
             }
         }
-        Frame f;
+        source::Frame f;
         std::optional<int64_t> prev_t;
         for (std::size_t guard = 0; guard <= info.frame_count; ++guard) {
             auto r = fsrc.next(f);
@@ -971,9 +972,9 @@ TEST(DatasetFuzz, MutatedFolderTimesNeverCrash) {
             continue;
         }
         ++opened;
-        FrameSource& fsrc = **src;
+        source::FrameSource& fsrc = **src;
         ASSERT_EQ(fsrc.info().frame_count, 3U);
-        Frame f;
+        source::Frame f;
         std::optional<int64_t> prev_t;
         for (std::size_t guard = 0; guard <= 3; ++guard) {
             auto r = fsrc.next(f);
@@ -1142,4 +1143,4 @@ TEST(TrajectoryIo, WriteRejectsBadInputAndNamesTheFile) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::dataset

@@ -12,10 +12,10 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/frame_source.h>
-#include <scaled/drivers/paced_source.h>
+#include <scaled/drivers/source/frame_source.h>
+#include <scaled/drivers/source/paced_source.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::source {
 namespace {
 
 using core::ErrorCode;
@@ -261,4 +261,4 @@ TEST(DatasetPacing, RejectsBadOptions) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::source

@@ -15,11 +15,11 @@
 
 #include <scaled/core/result.h>
 #include <scaled/core/scale/height_prior.h>
-#include <scaled/drivers/priors_toml.h>
+#include <scaled/drivers/priors/priors_toml.h>
 
 #include "temp_dir.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::priors {
 namespace {
 
 using core::ErrorCode;
@@ -887,4 +887,4 @@ TEST(BuiltinPriors, AreTheShippedFileAndParse) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::priors

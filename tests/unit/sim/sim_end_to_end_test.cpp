@@ -22,14 +22,14 @@
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/detector/object_detector.h>
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/sim/sim_source.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/detector/object_detector.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 #include "sim_priors.h"
 
-namespace scaled::sim {
+namespace scaled::drivers::sim {
 namespace {
 
 using core::Vec3;
@@ -133,7 +133,7 @@ EndToEnd runEndToEnd(const SimConfig& config, int max_frames,
     if (!camera) {
         return r;
     }
-    auto tracker = vision::MonoTracker::create(*camera, pc.tracker);
+    auto tracker = drivers::vision::MonoTracker::create(*camera, pc.tracker);
     EXPECT_TRUE(tracker.ok()) << tracker.error().message;
     std::vector<core::ScaleEstimator> estimators;
     for (const auto& s : setups) {
@@ -156,12 +156,12 @@ EndToEnd runEndToEnd(const SimConfig& config, int max_frames,
     std::vector<core::slam::MapPoint> points;
     std::vector<core::MapFeature> features;
     std::vector<core::Detection> dets(64);
-    detector::DetectionResult boxes;
+    drivers::detector::DetectionResult boxes;
     std::vector<Vec3> est;
     std::vector<Vec3> gt;
     int frames_in_map = 0;
     bool need_gravity = true;
-    drivers::Frame frame;
+    drivers::source::Frame frame;
     for (int i = 0; i < max_frames; ++i) {
         const double c0 = threadCpuMs();
         auto got = (*source)->next(frame);
@@ -208,7 +208,7 @@ EndToEnd runEndToEnd(const SimConfig& config, int max_frames,
             auto det = (*detector)->detect(frame.color, frame.id, frame.t_ns, boxes);
             r.detector_ms += ms(t2, Clock::now());
             EXPECT_TRUE(det.ok());
-            const std::size_t n = detector::toEstimatorDetections(boxes, dets);
+            const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
             slam.mapPoints(points);
             features.clear();
             for (const auto& m : points) {
@@ -339,9 +339,9 @@ protected:
     // daemon's defaults, and the same with priors that know the sim's objects
     // and objects.map_rel_sigma = 0.
     static void SetUpTestSuite() {
-        auto priors = drivers::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
+        auto priors = drivers::priors::loadPriorsFile(SCALED_SOURCE_DIR "/config/priors.toml");
         ASSERT_TRUE(priors.ok()) << priors.error().message;
-        auto exact = drivers::parsePriors(test::kSimExactPriorsToml, "kSimExactPriorsToml");
+        auto exact = drivers::priors::parsePriors(test::kSimExactPriorsToml, "kSimExactPriorsToml");
         ASSERT_TRUE(exact.ok()) << exact.error().message;
         const daemon::PipelineConfig pc = daemon::defaultPipelineConfig();
         // The daemon's map_rel_sigma (0.1) stands for the real tracker's map,
@@ -425,4 +425,4 @@ TEST_F(SimEndToEnd, ExactPriorsNarrowTheIntervalAroundTheTrueScale) {
 }
 
 }  // namespace
-}  // namespace scaled::sim
+}  // namespace scaled::drivers::sim

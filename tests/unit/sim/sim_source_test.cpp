@@ -12,25 +12,25 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/drivers/priors_toml.h>
-#include <scaled/sim/sim_source.h>
+#include <scaled/drivers/priors/priors_toml.h>
+#include <scaled/drivers/sim/sim_source.h>
 
 #include "sim_priors.h"
 
-namespace scaled::sim {
+namespace scaled::drivers::sim {
 namespace {
 
 using core::Scalar;
 using core::Vec2;
 using core::Vec3;
 
-std::unique_ptr<drivers::FrameSource> open(const SimConfig& config) {
+std::unique_ptr<drivers::source::FrameSource> open(const SimConfig& config) {
     auto s = openSimSource(config);
     EXPECT_TRUE(s.ok()) << s.error().message;
     return s ? std::move(*s) : nullptr;
 }
 
-std::unique_ptr<detector::ObjectDetector> detectorFor(const SimConfig& config) {
+std::unique_ptr<drivers::detector::ObjectDetector> detectorFor(const SimConfig& config) {
     auto d = createSimDetector(config);
     EXPECT_TRUE(d.ok()) << d.error().message;
     return d ? std::move(*d) : nullptr;
@@ -67,7 +67,7 @@ TEST(SimSource, FramesHaveTheConfiguredFormatTimesAndGravity) {
     ASSERT_TRUE(info.gravity_down_W.has_value());
     EXPECT_TRUE(info.gravity_down_W->isApprox(Vec3(0, 0, -1)));
 
-    drivers::Frame f;
+    drivers::source::Frame f;
     for (int i = 0; i < 20; ++i) {
         auto got = src->next(f);
         ASSERT_TRUE(got.ok() && *got) << i;
@@ -105,9 +105,9 @@ TEST(SimSource, SameConfigGivesTheSameBytesAndSeedsDiffer) {
     config.seed = 2;
     auto c = open(config);
     ASSERT_TRUE(a && b && c);
-    drivers::Frame fa;
-    drivers::Frame fb;
-    drivers::Frame fc;
+    drivers::source::Frame fa;
+    drivers::source::Frame fb;
+    drivers::source::Frame fc;
     for (int i = 0; i < 3; ++i) {
         ASSERT_TRUE(a->next(fa).ok());
         ASSERT_TRUE(b->next(fb).ok());
@@ -126,17 +126,17 @@ TEST(SimSource, UnboundedWhenDurationIsZeroAndSeekWorks) {
     auto s = src->seek(100000);  // an hour in: still frames
     ASSERT_TRUE(s.ok());
     EXPECT_TRUE(*s);
-    drivers::Frame far;
+    drivers::source::Frame far;
     ASSERT_TRUE(src->next(far).ok());
     EXPECT_EQ(far.id, 100000);
     EXPECT_EQ(far.t_ns, std::llround(100000 * 1e9 / 30.0));
 
     // Seeking back gives the bytes of a fresh read.
-    drivers::Frame first;
+    drivers::source::Frame first;
     ASSERT_TRUE(src->seek(7).ok());
     ASSERT_TRUE(src->next(first).ok());
     auto fresh = open(config);
-    drivers::Frame f;
+    drivers::source::Frame f;
     for (int i = 0; i <= 7; ++i) {
         ASSERT_TRUE(fresh->next(f).ok());
     }
@@ -192,7 +192,7 @@ TEST(SimSource, ObjectsHaveThePriorMeansAndStandOnTheFloor) {
 // The test priors that know the sim's objects (tests/support/sim_priors.h):
 // one upright class per upright sim object, its mean the object's height.
 TEST(SimSource, ExactTestPriorsAreTheObjectsHeights) {
-    auto priors = drivers::parsePriors(test::kSimExactPriorsToml, "kSimExactPriorsToml");
+    auto priors = drivers::priors::parsePriors(test::kSimExactPriorsToml, "kSimExactPriorsToml");
     ASSERT_TRUE(priors.ok()) << priors.error().message;
     int known = 0;
     for (const auto& o : simObjects(SimConfig{})) {
@@ -225,8 +225,8 @@ TEST(SimDetector, BoxesContainTheProjectedObjects) {
     const auto names = det->classNames();
     EXPECT_EQ(names.size(), objects.size());
     std::vector<int> seen(objects.size(), 0);
-    drivers::Frame f;
-    detector::DetectionResult r;
+    drivers::source::Frame f;
+    drivers::detector::DetectionResult r;
     const double jitter_margin = 5 * config.box_jitter_px;
     for (int i = 0; i < 450; i += 5) {  // 15 s: a whole loop
         ASSERT_TRUE(src->seek(static_cast<std::size_t>(i)).ok());
@@ -278,8 +278,8 @@ TEST(SimDetector, SameFrameGivesTheSameBoxesAndMissesAreDrawn) {
     auto b = detectorFor(config);
     ASSERT_TRUE(a && b);
     const cv::Mat image(240, 320, CV_8UC1, cv::Scalar(0));
-    detector::DetectionResult ra;
-    detector::DetectionResult rb;
+    drivers::detector::DetectionResult ra;
+    drivers::detector::DetectionResult rb;
     int reported = 0;
     for (int i = 0; i < 450; i += 3) {
         const std::int64_t t_ns = std::llround(i * 1e9 / 30.0);
@@ -317,11 +317,11 @@ TEST(SimDetector, OutOfViewObjectsAreNotReported) {
     ASSERT_NE(fridge, objects.end());
     // simPoseAt gives the trajectory; find a frame where the fridge is reported.
     const cv::Mat image(240, 320, CV_8UC1, cv::Scalar(0));
-    detector::DetectionResult r;
-    const auto has = [&](const detector::DetectionResult& res, const std::string& name) {
+    drivers::detector::DetectionResult r;
+    const auto has = [&](const drivers::detector::DetectionResult& res, const std::string& name) {
         return std::any_of(
             res.detections.begin(), res.detections.end(),
-            [&](const detector::ObjectDetection& d) { return d.class_name == name; });
+            [&](const drivers::detector::ObjectDetection& d) { return d.class_name == name; });
     };
     int with = 0;
     int without = 0;
@@ -357,8 +357,8 @@ TEST(SimDetector, StricterVisibilityReportsFewerObjects) {
     auto strict = detectorFor(config);
     ASSERT_TRUE(lenient && strict);
     const cv::Mat image(240, 320, CV_8UC1, cv::Scalar(0));
-    detector::DetectionResult a;
-    detector::DetectionResult b;
+    drivers::detector::DetectionResult a;
+    drivers::detector::DetectionResult b;
     int n_lenient = 0;
     int n_strict = 0;
     for (int i = 0; i < 450; i += 2) {
@@ -375,7 +375,7 @@ TEST(SimDetector, StricterVisibilityReportsFewerObjects) {
 TEST(SimDetector, RejectsImagesOfTheWrongSizeOrType) {
     auto det = detectorFor(SimConfig{});
     ASSERT_NE(det, nullptr);
-    detector::DetectionResult r;
+    drivers::detector::DetectionResult r;
     EXPECT_FALSE(det->detect(cv::Mat(), 0, 0, r).ok());
     EXPECT_FALSE(det->detect(cv::Mat(240, 320, CV_32FC1, cv::Scalar(0)), 0, 0, r).ok());
     auto wrong = det->detect(cv::Mat(480, 640, CV_8UC3, cv::Scalar(0)), 0, 0, r);
@@ -422,4 +422,4 @@ TEST(SimConfigCheck, BadFieldsAreNamed) {
 }
 
 }  // namespace
-}  // namespace scaled::sim
+}  // namespace scaled::drivers::sim

@@ -8,12 +8,12 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/trajectory.h>
 
 #include "synth_test_util.h"
 
-namespace scaled::synth {
+namespace scaled::drivers::synth {
 namespace {
 
 using test::defaultScene;
@@ -233,4 +233,4 @@ TEST(SynthRender, TimePerFrame) {
 }
 
 }  // namespace
-}  // namespace scaled::synth
+}  // namespace scaled::drivers::synth

@@ -3,11 +3,11 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/synth/scene.h>
+#include <scaled/drivers/synth/scene.h>
 
 #include "synth_test_util.h"
 
-namespace scaled::synth {
+namespace scaled::drivers::synth {
 namespace {
 
 using test::defaultScene;
@@ -166,4 +166,4 @@ TEST(SynthScene, DepthAtHonoursDistortion) {
 }
 
 }  // namespace
-}  // namespace scaled::synth
+}  // namespace scaled::drivers::synth

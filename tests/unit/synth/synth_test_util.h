@@ -5,9 +5,9 @@
 #include <Eigen/Geometry>
 
 #include <scaled/core/camera/pinhole_radial.h>
-#include <scaled/synth/scene.h>
+#include <scaled/drivers/synth/scene.h>
 
-namespace scaled::synth::test {
+namespace scaled::drivers::synth::test {
 
 inline core::PinholeRadialCamera makeCamera(int width = 640, int height = 480, Scalar f = 525,
                                             Scalar k1 = 0, Scalar k2 = 0) {
@@ -53,4 +53,4 @@ inline core::CameraPose lookAt(const Vec3& p, Scalar yaw, Scalar pitch = 0, Scal
     return pose;
 }
 
-}  // namespace scaled::synth::test
+}  // namespace scaled::drivers::synth::test

@@ -7,12 +7,12 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
-#include <scaled/synth/renderer.h>
-#include <scaled/synth/trajectory.h>
+#include <scaled/drivers/synth/renderer.h>
+#include <scaled/drivers/synth/trajectory.h>
 
 #include "synth_test_util.h"
 
-namespace scaled::synth {
+namespace scaled::drivers::synth {
 namespace {
 
 using test::defaultScene;
@@ -173,4 +173,4 @@ TEST(SynthTrajectory, EveryFrameSeesTexturedSurfacesAtUsableDepth) {
 }
 
 }  // namespace
-}  // namespace scaled::synth
+}  // namespace scaled::drivers::synth

@@ -13,7 +13,7 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/drivers/field_log.h>
+#include <scaled/drivers/fieldlog/field_log.h>
 
 #include "temp_dir.h"
 
@@ -87,7 +87,7 @@ TEST(FieldLogReport, PosesBecomeACsvAndMetricTrajectoriesPerEpoch) {
             // 9: a new epoch (a new map, a new frame G): its own trajectory.
             << pose(20, 700'000'000, 2, metricAt(2, "[0,0,1]")) << "\n";
     }
-    auto contents = drivers::readFieldLog(log);
+    auto contents = drivers::fieldlog::readFieldLog(log);
     ASSERT_TRUE(contents) << contents.error().message;
     const FieldLogAnalysis a = analyseFieldLog(*contents, log.string());
     EXPECT_EQ(a.classes.at("POSE"), 8U);
@@ -165,7 +165,7 @@ TEST(FieldLogReport, SeveralRunsNameTheRunAndNoScaleMeansNoTrajectory) {
             << pose(1, 100'000'000, 1, metricAt(1, "[1,0,0]")) << "\n"
             << pose(2, 200'000'000, 1, metricAt(1, "[2,0,0]")) << "\n";
     }
-    auto contents = drivers::readFieldLog(log);
+    auto contents = drivers::fieldlog::readFieldLog(log);
     ASSERT_TRUE(contents) << contents.error().message;
     const FieldLogAnalysis a = analyseFieldLog(*contents, log.string());
     EXPECT_TRUE(a.problems.empty());
@@ -180,7 +180,7 @@ TEST(FieldLogReport, SeveralRunsNameTheRunAndNoScaleMeansNoTrajectory) {
 
     const fs::path none = dir.path() / "b.jsonl";
     std::ofstream(none) << start << "\n" << pose(1, 100'000'000, 1, kNoScale) << "\n";
-    auto c2 = drivers::readFieldLog(none);
+    auto c2 = drivers::fieldlog::readFieldLog(none);
     ASSERT_TRUE(c2) << c2.error().message;
     const FieldLogAnalysis b = analyseFieldLog(*c2, none.string());
     EXPECT_EQ(b.pose_rows.size(), 1U);

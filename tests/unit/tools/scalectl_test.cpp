@@ -26,6 +26,8 @@
 
 #include <gtest/gtest.h>
 
+#include <scaled/drivers/base/unique_fd.h>
+
 #include "sysexits.h"
 #include "temp_dir.h"
 
@@ -447,26 +449,27 @@ public:
     using Script = std::function<void(FakeDaemon&, int fd)>;
 
     explicit FakeDaemon(Script script) : dir_("scalectl"), path_(dir_.path() / "s.sock") {
-        listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        listen_fd_.reset(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
         sockaddr_un addr{};
         addr.sun_family = AF_UNIX;
         const std::string sock = path_.string();
         EXPECT_LT(sock.size(), sizeof(addr.sun_path));
         std::memcpy(static_cast<void*>(addr.sun_path), sock.data(), sock.size());
         // NOLINTNEXTLINE(cppcoreguidelines-pro-type-reinterpret-cast): the sockets API
-        EXPECT_EQ(::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)), 0);
-        EXPECT_EQ(::listen(listen_fd_, 4), 0);
+        EXPECT_EQ(::bind(listen_fd_.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)),
+                  0);
+        EXPECT_EQ(::listen(listen_fd_.get(), 4), 0);
         thread_ = std::thread([this, script = std::move(script)] {
-            pollfd p{listen_fd_, POLLIN, 0};
+            pollfd p{listen_fd_.get(), POLLIN, 0};
             if (::poll(&p, 1, 5000) <= 0) {
                 return;
             }
-            const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-            if (fd < 0) {
+            const scaled::drivers::base::UniqueFd fd(
+                ::accept4(listen_fd_.get(), nullptr, nullptr, SOCK_CLOEXEC));
+            if (!fd.isValid()) {
                 return;
             }
-            script(*this, fd);
-            ::close(fd);
+            script(*this, fd.get());
         });
     }
     FakeDaemon(const FakeDaemon&) = delete;
@@ -477,7 +480,6 @@ public:
         if (thread_.joinable()) {
             thread_.join();
         }
-        ::close(listen_fd_);
     }
 
     [[nodiscard]] std::string path() const { return path_.string(); }
@@ -500,7 +502,7 @@ public:
 private:
     scaled::test::TempDir dir_;
     std::filesystem::path path_;
-    int listen_fd_ = -1;
+    scaled::drivers::base::UniqueFd listen_fd_;
     std::thread thread_;
     std::mutex mutex_;
     std::vector<std::string> requests_;
@@ -615,13 +617,14 @@ TEST(ScalectlClient, RefusedConnectionIsUnavailable) {
     // A socket file nobody listens on (bound, then closed): ECONNREFUSED.
     scaled::test::TempDir dir("scalectl");
     const std::string path = (dir.path() / "stale.sock").string();
-    const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::memcpy(static_cast<void*>(addr.sun_path), path.data(), path.size());
-    // NOLINTNEXTLINE(cppcoreguidelines-pro-type-reinterpret-cast): the sockets API
-    ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)), 0);
-    ::close(fd);
+    {
+        const scaled::drivers::base::UniqueFd fd(::socket(AF_UNIX, SOCK_STREAM, 0));
+        sockaddr_un addr{};
+        addr.sun_family = AF_UNIX;
+        std::memcpy(static_cast<void*>(addr.sun_path), path.data(), path.size());
+        // NOLINTNEXTLINE(cppcoreguidelines-pro-type-reinterpret-cast): the sockets API
+        ASSERT_EQ(::bind(fd.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)), 0);
+    }  // closed: nobody listens
     ctl::Options o;
     o.socket_path = path;
     const auto r = runCtl(o);
@@ -889,6 +892,8 @@ TEST(ScalectlClient, WatchWithoutTimeoutWaitsUntilInterrupted) {
     FakeDaemon daemon(answer(watchStream(1)));  // then silent until the client leaves
     std::array<int, 2> pipe_fds{-1, -1};
     ASSERT_EQ(::pipe2(pipe_fds.data(), O_CLOEXEC), 0);
+    const scaled::drivers::base::UniqueFd read_end(pipe_fds[0]);
+    const scaled::drivers::base::UniqueFd write_end(pipe_fds[1]);
     auto o = optionsFor(daemon, ctl::Command::kWatch);
     o.timeout_s.reset();  // no bound between lines
     o.interrupt_fd = pipe_fds[0];
@@ -899,8 +904,6 @@ TEST(ScalectlClient, WatchWithoutTimeoutWaitsUntilInterrupted) {
     });
     const auto r = runCtl(o);
     interrupter.join();
-    ::close(pipe_fds[0]);
-    ::close(pipe_fds[1]);
     EXPECT_EQ(r.code, 0) << r.err;
     EXPECT_EQ(r.out, "scale -  tracking  epoch 0  obs 0\n");
     EXPECT_GE(r.seconds, 0.25);

@@ -5,11 +5,11 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/vision/brief.h>
+#include <scaled/drivers/vision/brief.h>
 
 #include "vision_test_images.h"
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 namespace {
 
 using core::Scalar;
@@ -52,4 +52,4 @@ TEST(Brief, NeedsTheWholeWindowAndAnEightBitImage) {
 }
 
 }  // namespace
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

@@ -7,11 +7,11 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/vision/corner_detector.h>
+#include <scaled/drivers/vision/corner_detector.h>
 
 #include "vision_test_images.h"
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 namespace {
 
 using core::Scalar;
@@ -303,4 +303,4 @@ TEST(FreeMask, ZeroesAroundPoints) {
 }
 
 }  // namespace
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

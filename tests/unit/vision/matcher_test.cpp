@@ -9,13 +9,13 @@
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
-#include <scaled/vision/corner_detector.h>
-#include <scaled/vision/matcher.h>
-#include <scaled/vision/patch.h>
+#include <scaled/drivers/vision/corner_detector.h>
+#include <scaled/drivers/vision/matcher.h>
+#include <scaled/drivers/vision/patch.h>
 
 #include "vision_test_images.h"
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 namespace {
 
 using core::Mat2;
@@ -285,4 +285,4 @@ TEST(Matcher, WarpedTemplateMatchesScaledImage) {
 }
 
 }  // namespace
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

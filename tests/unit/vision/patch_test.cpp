@@ -5,11 +5,11 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/vision/patch.h>
+#include <scaled/drivers/vision/patch.h>
 
 #include "vision_test_images.h"
 
-namespace scaled::vision {
+namespace scaled::drivers::vision {
 namespace {
 
 using core::Mat2;
@@ -164,4 +164,4 @@ TEST(WarpTemplate, InvalidInputIsNoOp) {
 }
 
 }  // namespace
-}  // namespace scaled::vision
+}  // namespace scaled::drivers::vision

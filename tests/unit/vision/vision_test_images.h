@@ -6,7 +6,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-namespace scaled::vision::test {
+namespace scaled::drivers::vision::test {
 
 // Smooth random texture: uniform noise blurred with sigma_px, rescaled to mean
 // 128 and standard deviation 40 (CV_8UC1).
@@ -36,4 +36,4 @@ inline cv::Mat checkerboard(cv::Size size, int square_px, int offset_px) {
     return img;
 }
 
-}  // namespace scaled::vision::test
+}  // namespace scaled::drivers::vision::test

@@ -1,8 +1,11 @@
 #pragma once
 
-// Result<T>: a value or an Error. Module boundaries return these instead of
-// throwing. (std::expected is C++23; this is the small subset we need.)
+// Result<T>: a value or an Error; Status (Result<void>): ok or an Error.
+// Module boundaries return these instead of throwing. Both are [[nodiscard]]:
+// an error nobody looked at is a bug. (std::expected is C++23; this is the
+// small subset we need.)
 
+#include <optional>
 #include <string>
 #include <utility>
 #include <variant>
@@ -24,7 +27,7 @@ struct Error {
 };
 
 template <typename T>
-class Result {
+class [[nodiscard]] Result {
 public:
     Result(T value) : v_(std::move(value)) {}      // NOLINT(google-explicit-constructor)
     Result(Error error) : v_(std::move(error)) {}  // NOLINT(google-explicit-constructor)
@@ -45,6 +48,23 @@ public:
 private:
     std::variant<T, Error> v_;
 };
+
+// Ok or an Error, for operations that give nothing back but can fail.
+template <>
+class [[nodiscard]] Result<void> {
+public:
+    Result() = default;                                // ok
+    Result(Error error) : error_(std::move(error)) {}  // NOLINT(google-explicit-constructor)
+
+    [[nodiscard]] bool ok() const { return !error_.has_value(); }
+    explicit operator bool() const { return ok(); }
+    [[nodiscard]] const Error& error() const { return *error_; }
+
+private:
+    std::optional<Error> error_;
+};
+
+using Status = Result<void>;
 
 inline Error makeError(ErrorCode code, std::string message) {
     return Error{code, std::move(message)};

@@ -20,8 +20,8 @@
 
 #include <scaled/core/result.h>
 #include <scaled/daemon/pipeline_config.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/paced_source.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/source/paced_source.h>
 
 namespace scaled::daemon {
 
@@ -40,8 +40,8 @@ struct SourceConfig {
     SourceKind kind = SourceKind::kSim;
     std::filesystem::path replay_path;  // kReplay: dataset directory or video file
     std::string device;                 // kV4l2: /dev/videoN or card name; kLibcamera: id/index
-    drivers::PacingMode pacing = drivers::PacingMode::kRealTime;  // replay and sim
-    double speed = 1.0;                                           // real time: playback speed
+    drivers::source::PacingMode pacing = drivers::source::PacingMode::kRealTime;  // replay and sim
+    double speed = 1.0;  // real time: playback speed
     AtEnd at_end = AtEnd::kStay;
     std::int64_t max_frames = 0;  // stop the source after this many frames (0: no limit)
     // kSim: the synthetic room (drivers/sim).
@@ -56,7 +56,7 @@ struct CameraConfig {
     int width_px = 640;
     int height_px = 480;
     double fps = 30.0;
-    drivers::PixelFormat pixel_format = drivers::PixelFormat::kAuto;  // v4l2 only
+    drivers::camera::PixelFormat pixel_format = drivers::camera::PixelFormat::kAuto;  // v4l2 only
     int buffers = 4;               // mmap buffers / requests in flight, 2..32
     double frame_timeout_s = 2.0;  // no frame this long: fault, reopen
     double retry_initial_s = 0.5;  // first wait before reopening a lost camera

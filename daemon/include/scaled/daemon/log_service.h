@@ -34,7 +34,7 @@
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::fieldlog {
 class FieldLogWriter;
 }
 
@@ -70,7 +70,7 @@ struct FrameEvent {
     std::uint64_t dropped = 0;       // frames dropped so far
     std::int64_t mono_ns = 0;
     // The tracker's stages on this frame, microseconds ("stage_us"; see
-    // vision::TrackStats; 0: the stage did not run).
+    // drivers::vision::TrackStats; 0: the stage did not run).
     double predict_us = 0;
     double search_us = 0;
     double match_us = 0;
@@ -259,7 +259,7 @@ private:
 
     LogConfig config_;
     ReportHub& hub_;
-    std::unique_ptr<drivers::FieldLogWriter> writer_;  // null when off or not opened
+    std::unique_ptr<drivers::fieldlog::FieldLogWriter> writer_;  // null when off or not opened
 
     // The queue: two halves of queue_bytes; appends fill active_, the log
     // thread swaps and writes the other one.

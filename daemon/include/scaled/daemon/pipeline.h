@@ -46,12 +46,12 @@
 #include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
-#include <scaled/detector/object_detector.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/frame_source.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/detector/object_detector.h>
 #include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/source/frame_source.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 namespace scaled::daemon {
 
@@ -76,7 +76,7 @@ public:
         int tracked = 0;
         double ms = 0;
         std::uint64_t dropped = 0;
-        // This frame's tracker stages, microseconds (vision::TrackStats; 0:
+        // This frame's tracker stages, microseconds (drivers::vision::TrackStats; 0:
         // the stage did not run on this frame).
         double predict_us = 0;
         double search_us = 0;
@@ -109,7 +109,7 @@ public:
     // Every tracked frame, on the tracking thread (the receiver thins them:
     // LogEvents to LogConfig::pose_rate_hz). Must not block or allocate.
     virtual void onPose(const Pose& pose) = 0;
-    virtual void onDetection(const detector::DetectionResult& result, std::uint64_t epoch,
+    virtual void onDetection(const drivers::detector::DetectionResult& result, std::uint64_t epoch,
                              double latency_ms) = 0;
     virtual void onScale(const Scale& scale) = 0;
     virtual void onState(DaemonState from, DaemonState to, std::uint64_t epoch,
@@ -118,15 +118,15 @@ public:
 };
 
 struct PipelineParts {
-    std::unique_ptr<drivers::FrameSource> source;  // paced already when it should be
-    std::unique_ptr<detector::ObjectDetector> detector;
+    std::unique_ptr<drivers::source::FrameSource> source;  // paced already when it should be
+    std::unique_ptr<drivers::detector::ObjectDetector> detector;
     core::PriorTable priors;
     std::string source_name;  // for STATUS ("sim", "replay:/data/redkitchen")
     // Set when `source` is a live camera (it points into `source`): a
     // kUnavailable error of next() (device lost, no frame in time) is then a
     // fault the capture thread recovers from by calling reopen() with a
     // backoff (camera.retry_initial_s doubling to retry_max_s), not a failure.
-    drivers::LiveCamera* live = nullptr;
+    drivers::camera::LiveCamera* live = nullptr;
     // Fast replay: capture waits for tracking and tracking for the detector
     // (nothing dropped, deterministic). Else frames are dropped when late.
     bool lossless = false;
@@ -175,7 +175,8 @@ public:
 
     // SIGHUP: new priors and detector, new detection schedule. Applied by the
     // detection thread before its next run; the posterior is kept.
-    void reload(core::PriorTable priors, std::unique_ptr<detector::ObjectDetector> detector,
+    void reload(core::PriorTable priors,
+                std::unique_ptr<drivers::detector::ObjectDetector> detector,
                 const DetectionSchedule& schedule);
     // A problem outside the pipeline that clients should see in SCALE.fault
     // (e.g. the field log stopped); empty clears it.
@@ -186,7 +187,7 @@ private:
              PipelineEvents* events, const core::PinholeRadialCamera& camera);
 
     struct QueuedFrame {
-        drivers::Frame frame;
+        drivers::source::Frame frame;
         bool restart = false;  // first frame after a loop or a reconnect: a discontinuity
     };
     struct DetectionJob {
@@ -223,8 +224,8 @@ private:
     DaemonConfig config_;
     ReportHub& hub_;
     PipelineEvents* events_;
-    std::unique_ptr<drivers::FrameSource> source_;
-    drivers::LiveCamera* live_ = nullptr;  // source_ when it is a live camera
+    std::unique_ptr<drivers::source::FrameSource> source_;
+    drivers::camera::LiveCamera* live_ = nullptr;  // source_ when it is a live camera
     std::string source_name_;
     // The vertical of each new map (a replayed sequence's IMU log first).
     drivers::imu::MapGravitySelector gravity_selector_;
@@ -240,9 +241,9 @@ private:
     // Wakes the capture thread's reconnect backoff at stop().
     std::mutex stop_mutex_;
     std::condition_variable stop_cv_;
-    std::optional<vision::MonoTracker> tracker_;
+    std::optional<drivers::vision::MonoTracker> tracker_;
     std::optional<core::ScaleEstimator> estimator_;
-    std::unique_ptr<detector::ObjectDetector> detector_;
+    std::unique_ptr<drivers::detector::ObjectDetector> detector_;
 
     std::atomic<std::uint64_t> heartbeat_{0};
     std::int64_t start_mono_ns_ = 0;
@@ -262,7 +263,7 @@ private:
     DetectionJob pending_;
     // SIGHUP reload, applied by the detection thread.
     std::optional<core::PriorTable> reload_priors_;
-    std::unique_ptr<detector::ObjectDetector> reload_detector_;
+    std::unique_ptr<drivers::detector::ObjectDetector> reload_detector_;
     DetectionSchedule schedule_;  // job_mutex_
 
     // Report and state (both threads).

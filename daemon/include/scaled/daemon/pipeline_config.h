@@ -26,8 +26,8 @@
 
 #include <scaled/core/result.h>
 #include <scaled/core/scale/scale_estimator.h>
-#include <scaled/detector/dnn_detector.h>
-#include <scaled/vision/mono_tracker.h>
+#include <scaled/drivers/detector/dnn_detector.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 namespace scaled::daemon {
 
@@ -40,8 +40,8 @@ struct DetectionSchedule {
 };
 
 struct PipelineConfig {
-    vision::TrackerConfig tracker;
-    detector::DetectorConfig detector;
+    drivers::vision::TrackerConfig tracker;
+    drivers::detector::DetectorConfig detector;
     core::EstimatorConfig estimator;
     std::filesystem::path priors_path;  // empty: the caller's default (config/priors.toml)
     DetectionSchedule detection;

@@ -24,6 +24,7 @@
 #include <scaled/core/scale/object_evidence.h>
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/types.h>
+#include <scaled/drivers/base/unique_fd.h>
 
 namespace scaled::daemon {
 
@@ -96,7 +97,7 @@ struct StageTiming {
 // frame adds no sample), the detection thread the others on every detector
 // run (detect_*) and every scale update (scale_*).
 struct PipelineTiming {
-    StageTiming predict;         // EKF prediction (vision::TrackStats::predict_us)
+    StageTiming predict;         // EKF prediction (drivers::vision::TrackStats::predict_us)
     StageTiming search;          // predicted measurements, patch warping (search_us)
     StageTiming match;           // NCC matching (match_us)
     StageTiming update;          // 1-point RANSAC and EKF updates (update_us)
@@ -301,7 +302,7 @@ public:
     // (then readers must poll scaleSequence()). It has ONE reader, the socket
     // service: a second consumer would steal its wakes. Others (the main
     // loop, LEDs) poll scaleSequence().
-    [[nodiscard]] int wakeFd() const { return wake_fd_; }
+    [[nodiscard]] int wakeFd() const { return wake_fd_.get(); }
     void consumeWake() const;
 
     // --- commands from clients to the pipeline ------------------------------
@@ -323,7 +324,7 @@ private:
     std::optional<core::Vec3> gravity_request_;
     std::atomic<std::uint64_t> scale_seq_{0};
     std::atomic<std::uint64_t> pose_seq_{0};
-    int wake_fd_ = -1;
+    drivers::base::UniqueFd wake_fd_;
 };
 
 // CLOCK_MONOTONIC now, nanoseconds.

@@ -11,6 +11,8 @@
 #include <optional>
 #include <string_view>
 
+#include <scaled/drivers/base/unique_fd.h>
+
 namespace scaled::daemon {
 
 class SdNotifier {
@@ -29,7 +31,7 @@ public:
     // (false).
     bool notify(std::string_view state) const;
 
-    [[nodiscard]] bool enabled() const { return fd_ >= 0; }
+    [[nodiscard]] bool enabled() const { return fd_.isValid(); }
     // The watchdog timeout systemd expects WATCHDOG=1 within (WatchdogSec=),
     // when set for this process.
     [[nodiscard]] std::optional<std::chrono::microseconds> watchdogTimeout() const {
@@ -37,7 +39,7 @@ public:
     }
 
 private:
-    int fd_ = -1;
+    drivers::base::UniqueFd fd_;
     alignas(8) char address_[128] = {};  // a sockaddr_un (110 bytes)
     unsigned address_len_ = 0;
     std::optional<std::chrono::microseconds> watchdog_;

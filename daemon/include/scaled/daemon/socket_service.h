@@ -39,7 +39,7 @@
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
-#include <scaled/drivers/unix_socket.h>
+#include <scaled/drivers/ipc/unix_socket.h>
 
 namespace scaled::daemon {
 
@@ -88,15 +88,15 @@ private:
     struct Loop;  // the thread's state (clients, buffers)
 
     SocketService(const SocketConfig& config, ReportHub& hub, std::string release,
-                  drivers::ListeningSocket listener, drivers::UniqueFd stop_fd);
+                  drivers::ipc::ListeningSocket listener, drivers::base::UniqueFd stop_fd);
     void run();
 
     SocketConfig config_;
     ReportHub& hub_;
     std::string release_;
-    drivers::ListeningSocket listener_;
+    drivers::ipc::ListeningSocket listener_;
     std::filesystem::path path_;
-    drivers::UniqueFd stop_fd_;
+    drivers::base::UniqueFd stop_fd_;
     std::thread thread_;
     bool started_ = false;
     bool stopped_ = false;

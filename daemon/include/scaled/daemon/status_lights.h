@@ -35,7 +35,7 @@
 #include <scaled/core/result.h>
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/report.h>
-#include <scaled/drivers/gpio_lines.h>
+#include <scaled/drivers/gpio/gpio_lines.h>
 
 namespace scaled::daemon {
 
@@ -68,7 +68,7 @@ public:
     // The same on outputs the caller opened (tests: a fake). `outputs` must
     // hold the configured lines in open()'s order; config.chip is not used.
     static core::Result<std::unique_ptr<StatusLights>> create(
-        std::unique_ptr<drivers::GpioOutputs> outputs, const GpioConfig& config);
+        std::unique_ptr<drivers::gpio::GpioOutputs> outputs, const GpioConfig& config);
     ~StatusLights();  // stop()
     StatusLights(const StatusLights&) = delete;
     StatusLights& operator=(const StatusLights&) = delete;
@@ -107,7 +107,7 @@ public:
     [[nodiscard]] std::string describe() const;
 
 private:
-    StatusLights(std::unique_ptr<drivers::GpioOutputs> outputs, const GpioConfig& config,
+    StatusLights(std::unique_ptr<drivers::gpio::GpioOutputs> outputs, const GpioConfig& config,
                  std::int64_t now_ns);
     void run();
     core::Result<bool> renderLocked(std::int64_t now_ns);
@@ -119,7 +119,7 @@ private:
     // Level not driven yet (or its set failed): the next render sets it.
     static constexpr std::int8_t kUnknown = -1;
 
-    std::unique_ptr<drivers::GpioOutputs> outputs_;  // null once stopped
+    std::unique_ptr<drivers::gpio::GpioOutputs> outputs_;  // null once stopped
     GpioConfig config_;
     std::string description_;
     int status_index_ = kNoLine;                                 // index into outputs_

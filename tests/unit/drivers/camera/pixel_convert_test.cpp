@@ -16,10 +16,10 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/pixel_convert.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/camera/pixel_convert.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::camera {
 namespace {
 
 using core::ErrorCode;
@@ -511,4 +511,4 @@ TEST(PixelConvert, RawImageBytes) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::camera

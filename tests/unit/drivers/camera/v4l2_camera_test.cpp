@@ -13,10 +13,10 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/v4l2_camera.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/camera/v4l2_camera.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::camera {
 namespace {
 
 using core::ErrorCode;
@@ -163,15 +163,15 @@ TEST(V4l2Open, InvalidOptionsAreRejectedBeforeTouchingTheDevice) {
 // LiveCamera::seek is the same for every backend.
 class NamedCamera final : public LiveCamera {
 public:
-    [[nodiscard]] const SequenceInfo& info() const override { return info_; }
-    core::Result<bool> next(Frame& /*frame*/) override { return false; }
+    [[nodiscard]] const source::SequenceInfo& info() const override { return info_; }
+    core::Result<bool> next(source::Frame& /*frame*/) override { return false; }
     [[nodiscard]] std::string describe() const override { return "/dev/video9 (fake)"; }
     [[nodiscard]] std::string mode() const override { return "YUYV 640x480 @ 30"; }
     core::Result<bool> reopen() override { return true; }
     void stop() override {}
 
 private:
-    SequenceInfo info_;
+    source::SequenceInfo info_;
 };
 
 TEST(LiveCameraSeek, IsAnInvalidArgumentNamingTheCamera) {
@@ -195,4 +195,4 @@ TEST(V4l2List, NeverFailsAndListsOnlyVideoNodes) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::camera

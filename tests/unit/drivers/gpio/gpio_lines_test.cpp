@@ -9,11 +9,11 @@
 
 #include <gtest/gtest.h>
 
-#include <scaled/drivers/gpio_lines.h>
+#include <scaled/drivers/gpio/gpio_lines.h>
 
 #include "temp_dir.h"
 
-namespace scaled::drivers {
+namespace scaled::drivers::gpio {
 namespace {
 
 using core::ErrorCode;
@@ -107,4 +107,4 @@ TEST(GpioLinesTest, EmptyChipIsInvalid) {
 }
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::gpio

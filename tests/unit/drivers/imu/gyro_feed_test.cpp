@@ -59,7 +59,7 @@ TEST(GyroFeed, ASequenceGyroWithKnownAxesFeedsThePrior) {
     ASSERT_TRUE(feed.ok()) << feed.error().message;
     EXPECT_TRUE(feed->active());
     EXPECT_NE(feed->source().find("imu0/data.csv"), std::string::npos) << feed->source();
-    Frame frame;
+    source::Frame frame;
     frame.t_ns = 500'000'000;
     const core::slam::ImuWindow* w = feed->forFrame(frame);
     ASSERT_NE(w, nullptr);
@@ -83,7 +83,7 @@ TEST(GyroFeed, AGyroAboutUnknownAxesIsNotUsed) {
     EXPECT_FALSE(feed->active());
     EXPECT_EQ(feed->source().rfind("none (", 0), 0U) << feed->source();
     EXPECT_NE(feed->source().find("no camera-IMU rotation"), std::string::npos) << feed->source();
-    Frame frame;
+    source::Frame frame;
     frame.t_ns = 500'000'000;
     EXPECT_EQ(feed->forFrame(frame), nullptr);
 }
@@ -118,12 +118,12 @@ TEST(GyroFeed, TheSimulatedGyroIntegratesToTheGroundTruthsRotation) {
     const Vec3 bias = sim->bias();
     EXPECT_GT(bias.norm(), 0);
 
-    Frame a;
+    source::Frame a;
     a.t_ns = 1'000'000'000;
     a.T_CtoW_gt = core::CameraPose{};
     a.T_CtoW_gt->R_CtoW = rotationAbout(Vec3(0.2, 1, 0.1), 0.3);
     EXPECT_EQ(feed->forFrame(a), nullptr);  // the first frame has no interval
-    Frame b = a;
+    source::Frame b = a;
     b.t_ns = 1'100'000'000;
     const Mat3 R_rel = rotationAbout(Vec3(1, -0.5, 0.3), 0.12);
     b.T_CtoW_gt->R_CtoW = a.T_CtoW_gt->R_CtoW * R_rel;
@@ -141,10 +141,10 @@ TEST(GyroFeed, TheSimulatedGyroIntegratesToTheGroundTruthsRotation) {
 
     // A frame without ground truth breaks the chain: no window, and none for
     // the frame after it either.
-    Frame c;
+    source::Frame c;
     c.t_ns = 1'200'000'000;
     EXPECT_EQ(feed->forFrame(c), nullptr);
-    Frame d = b;
+    source::Frame d = b;
     d.t_ns = 1'300'000'000;
     EXPECT_EQ(feed->forFrame(d), nullptr);
 }

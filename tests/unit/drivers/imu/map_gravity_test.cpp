@@ -67,7 +67,7 @@ TEST(MapGravity, TheAccelerometerLogGivesTheVerticalWithinTwoDegrees) {
     ASSERT_TRUE(sel) << sel.error().message;
     EXPECT_TRUE(sel->hasImuLog());
 
-    Frame frame;
+    source::Frame frame;
     frame.t_ns = 1305031101'500'000'000LL;  // 1.5 s into the still part
     frame.gravity_down_C = Vec3(0, 1, 0);   // ground truth says otherwise: the IMU wins
     const MapGravity g = sel->atMapStart(frame);
@@ -91,7 +91,7 @@ TEST(MapGravity, WithoutALogTheDatasetOrALevelCamera) {
     auto sel = MapGravitySelector::forDataset(dir.path());
     ASSERT_TRUE(sel) << sel.error().message;
     EXPECT_FALSE(sel->hasImuLog());
-    Frame frame;
+    source::Frame frame;
     frame.gravity_down_C = Vec3(0, 0.6, 0.8);
     MapGravity g = sel->atMapStart(frame);
     EXPECT_EQ(g.down_C, Vec3(0, 0.6, 0.8));
@@ -134,7 +134,7 @@ TEST(MapGravity, ALiveAccelerometerComesFirst) {
     const auto samples = liveSamples(R_ItoC, down_C, now_ns, 1.0);
 
     MapGravitySelector sel;  // no log
-    Frame frame;
+    source::Frame frame;
     frame.gravity_down_C = Vec3(0, 1, 0);  // a dataset's: the accelerometer wins
     LiveAccelerometer live;
     live.samples = samples;
@@ -152,7 +152,7 @@ TEST(MapGravity, ALiveAccelerometerThatMovedOrIsSilentIsRefusedWithItsReason) {
     const core::Mat3 R_ItoC = core::Mat3::Identity();
     const std::int64_t now_ns = 5'000'000'000;
     MapGravitySelector sel;
-    Frame frame;
+    source::Frame frame;
     frame.gravity_down_C = Vec3(0, 0.6, 0.8);
     LiveAccelerometer live;
     live.R_ItoC = R_ItoC;

@@ -17,7 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/pixel_convert.h>
+#include <scaled/drivers/camera/pixel_convert.h>
 
 namespace scaled::drivers::libcam {
 namespace {
@@ -87,7 +87,7 @@ struct Converted {
 
 const std::string kSource = "libcamera camera 0 (test): buffer 1";
 
-Converted convertOk(PixelFormat format, const std::vector<BufferPlane>& planes,
+Converted convertOk(camera::PixelFormat format, const std::vector<BufferPlane>& planes,
                     std::size_t stride) {
     auto raw = describeBuffer(format, kW, kH, stride, planes);
     EXPECT_TRUE(raw.ok()) << (raw.ok() ? "" : raw.error().message);
@@ -95,7 +95,7 @@ Converted convertOk(PixelFormat format, const std::vector<BufferPlane>& planes,
     if (!raw.ok()) {
         return out;
     }
-    auto converted = convertRawImage(*raw, kSource, out.gray, out.bgr);
+    auto converted = camera::convertRawImage(*raw, kSource, out.gray, out.bgr);
     EXPECT_TRUE(converted.ok()) << (converted.ok() ? "" : converted.error().message);
     EXPECT_EQ(out.gray.type(), CV_8UC1);
     EXPECT_EQ(out.bgr.type(), CV_8UC3);
@@ -106,7 +106,8 @@ TEST(FrameConvert, Rgb888IsBgrInMemoryWithPaddedStride) {
     const cv::Mat image = testImage();
     const std::size_t stride = kWBytes * 3 + 8;
     const auto buffer = padded(image.data, kHRows, kWBytes * 3, stride);
-    const Converted out = convertOk(PixelFormat::kRgb888, {{buffer.data(), buffer.size()}}, stride);
+    const Converted out =
+        convertOk(camera::PixelFormat::kRgb888, {{buffer.data(), buffer.size()}}, stride);
     expectNear(out.bgr, image, 0);
     expectNear(out.gray, grayOf(image), 0);
 }
@@ -117,7 +118,8 @@ TEST(FrameConvert, Bgr888IsRgbInMemory) {
     cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
     const std::size_t stride = kWBytes * 3;
     const auto buffer = padded(rgb.data, kHRows, kWBytes * 3, stride);
-    const Converted out = convertOk(PixelFormat::kBgr888, {{buffer.data(), buffer.size()}}, stride);
+    const Converted out =
+        convertOk(camera::PixelFormat::kBgr888, {{buffer.data(), buffer.size()}}, stride);
     expectNear(out.bgr, image, 0);
     expectNear(out.gray, grayOf(image), 0);
 }
@@ -131,10 +133,10 @@ TEST(FrameConvert, Xrgb8888AndXbgr8888) {
     const std::size_t stride = kWBytes * 4 + 16;
     const auto xrgb = padded(bgra.data, kHRows, kWBytes * 4, stride);
     const auto xbgr = padded(rgba.data, kHRows, kWBytes * 4, stride);
-    expectNear(convertOk(PixelFormat::kXrgb8888, {{xrgb.data(), xrgb.size()}}, stride).bgr, image,
-               0);
-    expectNear(convertOk(PixelFormat::kXbgr8888, {{xbgr.data(), xbgr.size()}}, stride).bgr, image,
-               0);
+    expectNear(convertOk(camera::PixelFormat::kXrgb8888, {{xrgb.data(), xrgb.size()}}, stride).bgr,
+               image, 0);
+    expectNear(convertOk(camera::PixelFormat::kXbgr8888, {{xbgr.data(), xbgr.size()}}, stride).bgr,
+               image, 0);
 }
 
 TEST(FrameConvert, Yuv420ThreePlanesAndOnePlane) {
@@ -145,7 +147,7 @@ TEST(FrameConvert, Yuv420ThreePlanesAndOnePlane) {
     const auto u = padded(yuv.u.data(), kHRows / 2, kWBytes / 2, stride / 2);
     const auto v = padded(yuv.v.data(), kHRows / 2, kWBytes / 2, stride / 2);
     const Converted three =
-        convertOk(PixelFormat::kYuv420,
+        convertOk(camera::PixelFormat::kYuv420,
                   {{y.data(), y.size()}, {u.data(), u.size()}, {v.data(), v.size()}}, stride);
     expectNear(three.bgr, image, 6);
     expectNear(three.gray, cv::Mat(kH, kW, CV_8UC1, const_cast<std::uint8_t*>(yuv.y.data())), 0);
@@ -153,7 +155,8 @@ TEST(FrameConvert, Yuv420ThreePlanesAndOnePlane) {
     std::vector<std::uint8_t> one = y;
     one.insert(one.end(), u.begin(), u.end());
     one.insert(one.end(), v.begin(), v.end());
-    const Converted single = convertOk(PixelFormat::kYuv420, {{one.data(), one.size()}}, stride);
+    const Converted single =
+        convertOk(camera::PixelFormat::kYuv420, {{one.data(), one.size()}}, stride);
     expectNear(single.bgr, three.bgr, 0);
     expectNear(single.gray, three.gray, 0);
 }
@@ -169,13 +172,14 @@ TEST(FrameConvert, Nv12TwoPlanesAndOnePlane) {
     const std::size_t stride = kWBytes + 32;
     const auto y = padded(yuv.y.data(), kHRows, kWBytes, stride);
     const auto uvp = padded(uv.data(), kHRows / 2, kWBytes, stride);
-    const Converted two =
-        convertOk(PixelFormat::kNv12, {{y.data(), y.size()}, {uvp.data(), uvp.size()}}, stride);
+    const Converted two = convertOk(camera::PixelFormat::kNv12,
+                                    {{y.data(), y.size()}, {uvp.data(), uvp.size()}}, stride);
     expectNear(two.bgr, image, 6);
 
     std::vector<std::uint8_t> one = y;
     one.insert(one.end(), uvp.begin(), uvp.end());
-    const Converted single = convertOk(PixelFormat::kNv12, {{one.data(), one.size()}}, stride);
+    const Converted single =
+        convertOk(camera::PixelFormat::kNv12, {{one.data(), one.size()}}, stride);
     expectNear(single.bgr, two.bgr, 0);
     expectNear(single.gray, two.gray, 0);
 }
@@ -193,7 +197,8 @@ TEST(FrameConvert, YuyvWithPaddedStride) {
     }
     const std::size_t stride = kWBytes * 2 + 8;
     const auto buffer = padded(yuyv.data(), kHRows, kWBytes * 2, stride);
-    const Converted out = convertOk(PixelFormat::kYuyv, {{buffer.data(), buffer.size()}}, stride);
+    const Converted out =
+        convertOk(camera::PixelFormat::kYuyv, {{buffer.data(), buffer.size()}}, stride);
     expectNear(out.bgr, image, 6);
     expectNear(out.gray, cv::Mat(kH, kW, CV_8UC1, const_cast<std::uint8_t*>(yuv.y.data())), 0);
 }
@@ -206,16 +211,16 @@ TEST(FrameConvert, ConvertsInPlaceIntoTheGivenMats) {
     const std::size_t stride = kWBytes * 3;
     auto buffer = padded(image.data, kHRows, kWBytes * 3, stride);
     const std::vector<BufferPlane> planes{{buffer.data(), buffer.size()}};
-    auto raw = describeBuffer(PixelFormat::kRgb888, kW, kH, stride, planes);
+    auto raw = describeBuffer(camera::PixelFormat::kRgb888, kW, kH, stride, planes);
     ASSERT_TRUE(raw.ok());
     cv::Mat gray;
     cv::Mat bgr;
-    ASSERT_TRUE(convertRawImage(*raw, kSource, gray, bgr).ok());
+    ASSERT_TRUE(camera::convertRawImage(*raw, kSource, gray, bgr).ok());
     expectNear(bgr, image, 0);
     const std::uint8_t* gray_data = gray.data;
     const std::uint8_t* bgr_data = bgr.data;
     std::fill(buffer.begin(), buffer.end(), std::uint8_t{0});
-    ASSERT_TRUE(convertRawImage(*raw, kSource, gray, bgr).ok());
+    ASSERT_TRUE(camera::convertRawImage(*raw, kSource, gray, bgr).ok());
     EXPECT_EQ(gray.data, gray_data);
     EXPECT_EQ(bgr.data, bgr_data);
     EXPECT_EQ(cv::countNonZero(bgr.reshape(1)), 0);
@@ -233,11 +238,11 @@ TEST(FrameConvert, SteadyStateConversionMakesNoHeapAllocation) {
     std::vector<std::uint8_t> c1(stride * h / 2, 120);
     std::vector<std::uint8_t> c2(stride * h / 2, 140);
     std::vector<std::uint8_t> one(stride * h * 2, 100);
-    for (const PixelFormat f : preferredFormats()) {
+    for (const camera::PixelFormat f : preferredFormats()) {
         std::vector<std::vector<BufferPlane>> layouts{{{one.data(), one.size()}}};
-        if (f == PixelFormat::kNv12) {
+        if (f == camera::PixelFormat::kNv12) {
             layouts.push_back({{y_plane.data(), y_plane.size()}, {c1.data(), c1.size()}});
-        } else if (f == PixelFormat::kYuv420) {
+        } else if (f == camera::PixelFormat::kYuv420) {
             layouts.push_back(
                 {{y_plane.data(), y_plane.size()}, {c1.data(), c1.size()}, {c2.data(), c2.size()}});
         }
@@ -246,12 +251,12 @@ TEST(FrameConvert, SteadyStateConversionMakesNoHeapAllocation) {
             ASSERT_TRUE(raw.ok()) << toString(f) << ": " << raw.error().message;
             cv::Mat gray;
             cv::Mat bgr;
-            ASSERT_TRUE(convertRawImage(*raw, kSource, gray, bgr).ok()) << toString(f);
+            ASSERT_TRUE(camera::convertRawImage(*raw, kSource, gray, bgr).ok()) << toString(f);
             // The calling thread's count: cv::cvtColor runs on OpenCV's
             // thread pool, whose workers allocate their thread-local data
             // the first time they take part in a job, whichever call that is.
             const std::int64_t before = test::allocationCountThisThread();
-            const bool ok = convertRawImage(*raw, kSource, gray, bgr).ok();
+            const bool ok = camera::convertRawImage(*raw, kSource, gray, bgr).ok();
             const std::int64_t after = test::allocationCountThisThread();
             EXPECT_TRUE(ok) << toString(f);
             EXPECT_EQ(after - before, 0) << toString(f) << ", " << planes.size() << " plane(s)";
@@ -267,51 +272,55 @@ TEST(FrameConvert, RejectsShortPlanesOddSizesAndBadStrides) {
     using Planes = std::vector<BufferPlane>;
 
     // One byte short of the last row.
-    auto short_plane = describeBuffer(PixelFormat::kRgb888, kW, kH, kWBytes * 3,
+    auto short_plane = describeBuffer(camera::PixelFormat::kRgb888, kW, kH, kWBytes * 3,
                                       Planes{{buffer.data(), kWBytes * 3 * kHRows - 1}});
     ASSERT_FALSE(short_plane.ok());
     EXPECT_EQ(short_plane.error().code, ErrorCode::kInvalidArgument);
     EXPECT_NE(short_plane.error().message.find("RGB888"), std::string::npos);
 
     // NV12 in one plane that ends inside the chroma; in two, a short chroma plane.
-    EXPECT_FALSE(describeBuffer(PixelFormat::kNv12, kW, kH, kWBytes,
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kNv12, kW, kH, kWBytes,
                                 Planes{{buffer.data(), kWBytes * kHRows + 8}})
                      .ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kNv12, kW, kH, kWBytes,
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kNv12, kW, kH, kWBytes,
                                 Planes{whole, {buffer.data(), kWBytes * (kHRows / 2) - 1}})
                      .ok());
 
-    auto odd = describeBuffer(PixelFormat::kNv12, kW - 1, kH, kWBytes, Planes{whole});
+    auto odd = describeBuffer(camera::PixelFormat::kNv12, kW - 1, kH, kWBytes, Planes{whole});
     ASSERT_FALSE(odd.ok());
     EXPECT_NE(odd.error().message.find("even"), std::string::npos) << odd.error().message;
-    EXPECT_FALSE(describeBuffer(PixelFormat::kYuv420, kW, kH - 1, kWBytes, Planes{whole}).ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kYuyv, kW, kH, kWBytes, Planes{whole})
+    EXPECT_FALSE(
+        describeBuffer(camera::PixelFormat::kYuv420, kW, kH - 1, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kYuyv, kW, kH, kWBytes, Planes{whole})
                      .ok());  // stride < 2 * width
     EXPECT_FALSE(
-        describeBuffer(PixelFormat::kYuyv, kW, kH, kWBytes * 2, Planes{whole, whole}).ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kYuv420, kW, kH, kWBytes, Planes{whole, whole}).ok());
+        describeBuffer(camera::PixelFormat::kYuyv, kW, kH, kWBytes * 2, Planes{whole, whole}).ok());
     EXPECT_FALSE(
-        describeBuffer(PixelFormat::kYuv420, kW, kH, kWBytes, Planes{whole, whole, {nullptr, 100}})
+        describeBuffer(camera::PixelFormat::kYuv420, kW, kH, kWBytes, Planes{whole, whole}).ok());
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kYuv420, kW, kH, kWBytes,
+                                Planes{whole, whole, {nullptr, 100}})
+                     .ok());
+    EXPECT_FALSE(
+        describeBuffer(camera::PixelFormat::kRgb888, 0, kH, kWBytes * 3, Planes{whole}).ok());
+    EXPECT_FALSE(
+        describeBuffer(camera::PixelFormat::kRgb888, kW, kH, kWBytes * 3, Planes{{nullptr, 100000}})
             .ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kRgb888, 0, kH, kWBytes * 3, Planes{whole}).ok());
-    EXPECT_FALSE(
-        describeBuffer(PixelFormat::kRgb888, kW, kH, kWBytes * 3, Planes{{nullptr, 100000}}).ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kYuyv, kW, kH, kWBytes * 2, Planes{}).ok());
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kYuyv, kW, kH, kWBytes * 2, Planes{}).ok());
     // Formats the driver does not ask libcamera for.
-    EXPECT_FALSE(describeBuffer(PixelFormat::kGrey, kW, kH, kWBytes, Planes{whole}).ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kMjpeg, kW, kH, kWBytes, Planes{whole}).ok());
-    EXPECT_FALSE(describeBuffer(PixelFormat::kAuto, kW, kH, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kGrey, kW, kH, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kMjpeg, kW, kH, kWBytes, Planes{whole}).ok());
+    EXPECT_FALSE(describeBuffer(camera::PixelFormat::kAuto, kW, kH, kWBytes, Planes{whole}).ok());
 }
 
 TEST(FrameConvert, NamesAreLibcamerasAndEveryFormatIsPreferredOnce) {
     const auto formats = preferredFormats();
     ASSERT_EQ(formats.size(), 7U);
-    EXPECT_EQ(formats.front(), PixelFormat::kYuyv);
-    EXPECT_STREQ(toString(PixelFormat::kYuv420), "YUV420");
-    EXPECT_STREQ(toString(PixelFormat::kRgb888), "RGB888");
-    EXPECT_STREQ(toString(PixelFormat::kBgr888), "BGR888");
-    EXPECT_STREQ(toString(PixelFormat::kXrgb8888), "XRGB8888");
-    EXPECT_STREQ(toString(PixelFormat::kXbgr8888), "XBGR8888");
+    EXPECT_EQ(formats.front(), camera::PixelFormat::kYuyv);
+    EXPECT_STREQ(toString(camera::PixelFormat::kYuv420), "YUV420");
+    EXPECT_STREQ(toString(camera::PixelFormat::kRgb888), "RGB888");
+    EXPECT_STREQ(toString(camera::PixelFormat::kBgr888), "BGR888");
+    EXPECT_STREQ(toString(camera::PixelFormat::kXrgb8888), "XRGB8888");
+    EXPECT_STREQ(toString(camera::PixelFormat::kXbgr8888), "XBGR8888");
     for (std::size_t i = 0; i < formats.size(); ++i) {
         for (std::size_t j = i + 1; j < formats.size(); ++j) {
             EXPECT_NE(formats[i], formats[j]);

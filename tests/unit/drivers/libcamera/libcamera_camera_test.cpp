@@ -12,10 +12,10 @@
 #include <gtest/gtest.h>
 
 #include <scaled/core/result.h>
-#include <scaled/drivers/camera.h>
-#include <scaled/drivers/libcamera_camera.h>
+#include <scaled/drivers/camera/camera.h>
+#include <scaled/drivers/libcamera/libcamera_camera.h>
 
-namespace scaled::drivers {
+namespace scaled::drivers::libcam {
 namespace {
 
 using core::ErrorCode;
@@ -24,8 +24,8 @@ bool contains(const std::string& text, const std::string& part) {
     return text.find(part) != std::string::npos;
 }
 
-CameraOptions optionsFor(const std::string& device) {
-    CameraOptions options;
+camera::CameraOptions optionsFor(const std::string& device) {
+    camera::CameraOptions options;
     options.device = device;
     return options;
 }
@@ -74,7 +74,7 @@ TEST(LibcameraDriver, ListIsEmptyWithoutCameras) {
 TEST(LibcameraDriver, BadOptionsAreRejectedNamingTheCamera) {
     struct Case {
         const char* what;
-        CameraOptions options;
+        camera::CameraOptions options;
     };
     std::vector<Case> cases;
     cases.push_back({"buffers", optionsFor("0")});
@@ -149,4 +149,4 @@ TEST(LibcameraDriver, StubSaysTheBuildHasNoLibcamera) {
 #endif
 
 }  // namespace
-}  // namespace scaled::drivers
+}  // namespace scaled::drivers::libcam

@@ -13,9 +13,9 @@
 
 #include <scaled/core/result.h>
 #include <scaled/core/slam/gyro_prior.h>
-#include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/imu/map_gravity.h>
 #include <scaled/drivers/imu/simulated_gyro.h>
+#include <scaled/drivers/source/frame_source.h>
 
 namespace scaled::drivers::imu {
 
@@ -29,7 +29,7 @@ public:
     // The samples for this frame's prediction, or nullptr (then constant
     // velocity). Frames come in replay order; the simulated gyro needs this
     // frame's and the previous frame's ground truth.
-    const core::slam::ImuWindow* forFrame(const Frame& frame);
+    const core::slam::ImuWindow* forFrame(const source::Frame& frame);
 
     // Something feeds the prior (a log with a gyroscope and a known R_ItoC,
     // or the simulated gyro).

@@ -59,7 +59,7 @@
 
 #include <scaled/core/imu_sample.h>
 #include <scaled/core/result.h>
-#include <scaled/drivers/unix_socket.h>
+#include <scaled/drivers/base/unique_fd.h>
 
 namespace scaled::drivers::imu {
 
@@ -189,7 +189,7 @@ private:
     std::vector<IioChannel> channels_;
     int clock_id_ = 0;  // CLOCK_REALTIME
 
-    UniqueFd fd_;  // the character device while the buffer runs
+    base::UniqueFd fd_;  // the character device while the buffer runs
     std::vector<Element> elements_;
     std::vector<std::string> buffer_names_;
     std::size_t scan_bytes_ = 0;

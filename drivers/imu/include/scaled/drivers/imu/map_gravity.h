@@ -22,8 +22,8 @@
 #include <scaled/core/imu_sample.h>
 #include <scaled/core/result.h>
 #include <scaled/core/types.h>
-#include <scaled/drivers/frame_source.h>
 #include <scaled/drivers/imu/imu_log.h>
+#include <scaled/drivers/source/frame_source.h>
 
 namespace scaled::drivers::imu {
 
@@ -50,11 +50,12 @@ public:
         const std::filesystem::path& dir);
 
     // The vertical for a map that starts at this frame.
-    [[nodiscard]] MapGravity atMapStart(const Frame& frame) const;
+    [[nodiscard]] MapGravity atMapStart(const source::Frame& frame) const;
     // The live accelerometer first (its last window_s before now_ns), then
     // the order above; a refusal is named with its reason after the source
     // used. Allocates only the source text.
-    [[nodiscard]] MapGravity atMapStart(const Frame& frame, const LiveAccelerometer& live) const;
+    [[nodiscard]] MapGravity atMapStart(const source::Frame& frame,
+                                        const LiveAccelerometer& live) const;
 
     [[nodiscard]] bool hasImuLog() const { return log_.has_value(); }
     // The sequence's IMU log (also the gyro prior's samples when it has a

@@ -1,0 +1,268 @@
+#pragma once
+
+// MonoTracker: the EKF MonoSLAM (core/slam) driven by the image front end.
+//
+// Per frame: predict, search every predicted feature with its patch (warped
+// by the predicted change of appearance) inside its chi-square ellipse, hand
+// the matches to the filter (1-point RANSAC and updates), manage the map, and
+// initialise new features at corners in empty image regions when fewer than
+// min_visible are in view. The first frame (and the first after reset())
+// starts a new map: world = that camera frame, unit = the initial depth guess.
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include <scaled/core/result.h>
+#include <scaled/core/slam/ekf_slam.h>
+#include <scaled/drivers/vision/brief.h>
+#include <scaled/drivers/vision/corner_detector.h>
+#include <scaled/drivers/vision/matcher.h>
+#include <scaled/drivers/vision/patch.h>
+
+namespace scaled::drivers::vision {
+
+struct TrackerConfig {
+    core::slam::SlamConfig slam;
+    CornerConfig corners;
+    MatchConfig match;
+    int patch_size = 11;         // matching template side, pixels (odd)
+    int patch_source_size = 61;  // stored appearance the template is warped from
+    bool warp_patches = true;    // predict the patch's appearance (plane-induced affine)
+    int free_radius_px = 20;     // new corners keep this distance from features in view
+    // New features keep this distance from the image border (a feature born
+    // at the border leaves the view at once); the patch source may reach
+    // beyond the border (replicated pixels).
+    int feature_border_px = 20;
+    int max_new_per_frame = 10;
+    // Coarse-to-fine active search (issue 21): a feature whose gate ellipse
+    // holds more than match.max_search_pixels pixels (fast motion, a long
+    // frame gap) is searched at the first pyramid level (each level halves
+    // the image) where it fits, with the template rendered at that level's
+    // sampling, and the best coarse hit is refined at full resolution inside
+    // the original gate. 0: no pyramid; such features are not searched.
+    int pyramid_levels = 3;
+    double coarse_min_ncc = 0.7;          // a coarse hit below this is not refined
+    int coarse_max_search_pixels = 8000;  // the pixel budget at a pyramid level
+    // The pyramid is used on a frame only when at least this fraction of the
+    // searched features' ellipses outgrow the budget (the camera's motion is
+    // uncertain, not one feature's depth).
+    double coarse_min_fraction = 0.5;
+    // Relocalisation (issue 21): when the filter is lost, the map is kept and
+    // every frame is matched against it (each map feature's template against
+    // the image's corners, then a RANSAC PnP pose) for at most relocalise_s
+    // seconds; health is kRelocalising meanwhile. A pose with at least
+    // relocalise_min_inliers inliers within relocalise_reproj_px puts the
+    // camera back into the map (same map, same scale); after the time is up
+    // the health is kLost and the caller starts a new map. 0: no relocalisation.
+    double relocalise_s = 3.0;
+    int relocalise_min_inliers = 10;
+    double relocalise_reproj_px = 3.0;
+    int relocalise_corners = 600;            // corners of a frame the map is matched against
+    int relocalise_max_brief_distance = 64;  // of 256 bits: a descriptor match
+    int brief_refresh_frames = 5;  // a measured feature's descriptor is renewed this often
+    // The guided search: each feature looked for within this radius (pixels)
+    // of where the last well-tracked pose puts it, before the whole image.
+    double relocalise_search_px = 200;
+    // Map features whose position std exceeds this fraction of their distance
+    // from the camera are not used (their point is a guess along the ray).
+    double relocalise_max_rel_sigma = 0.1;
+    // The gyro motion prior (issue 21, core/slam/gyro_prior.h): a frame
+    // given IMU samples with a gyroscope that cover its interval is predicted
+    // with the gyro's rotation; otherwise (no gyro, a gap, another clock) the
+    // constant-velocity model runs. false: never.
+    bool use_gyro = true;
+    double gyro_noise_density = 2e-4;     // rad/s/sqrt(Hz), white rate noise
+    double gyro_bias_sigma_radps = 0.02;  // what is left of the bias (1 sigma)
+    double gyro_max_gap_s = 0.05;         // a longer silence gives no gyro rate
+    // The gyro's bias, estimated on line: on every well-tracked frame
+    // predicted with the gyro, the gyro's rate (less the estimate) minus the
+    // map's own rotation rate over the interval is averaged with this time
+    // constant (seconds) into the estimate the next frames subtract. 0: none.
+    double gyro_bias_time_s = 10;
+};
+
+core::Result<bool> validate(const TrackerConfig& config);
+
+struct TrackStats {
+    core::slam::SlamHealth health = core::slam::SlamHealth::kUninitialised;
+    bool new_map = false;        // this frame started a new map
+    int predicted = 0;           // features searched
+    int matched = 0;             // found by NCC
+    int inliers = 0;             // low-innovation inliers of 1-point RANSAC
+    int rescued = 0;             // high-innovation inliers rescued
+    int added = 0;               // new features initialised
+    int features = 0;            // map size after the frame
+    int visible = 0;             // predicted in view
+    int search_evaluations = 0;  // NCC evaluations (front-end cost)
+    int coarse_searches = 0;     // features searched coarse-to-fine (pyramid_levels)
+    int coarse_matches = 0;      // of which matched at full resolution
+    bool relocalised = false;    // this frame put the camera back into the lost map
+    // The gyro prior on this frame: kOk when the prediction used it; unset
+    // when no IMU samples were given (or use_gyro is off, or no prediction ran).
+    std::optional<core::slam::GyroCoverage> gyro;
+    int relocalise_candidates = 0;  // map features matched to corners (relocalising frames)
+    int relocalise_inliers = 0;     // of which the PnP pose kept
+    // The update's normalised innovations by feature age (UpdateReport).
+    std::array<core::Scalar, core::slam::UpdateReport::kAgeBins> nis_sum{};
+    std::array<int, core::slam::UpdateReport::kAgeBins> nis_count{};
+
+    // Wall time of each stage of processFrame() on this frame, microseconds
+    // (std::chrono::steady_clock; core stays clock-free, so the tracker times
+    // the calls it makes into it). A stage that did not run on this frame is
+    // 0: a new-map frame has only map_us, a frame whose prediction failed only
+    // predict_us, a frame with no feature to search no match_us. The stages
+    // are consecutive and do not overlap; their sum is the frame's time less
+    // a few hundred nanoseconds (argument checks, the clock reads).
+    double predict_us = 0;  // EkfSlam::predict: motion model, covariance propagation
+    // EkfSlam::predictMeasurements (projections, innovation covariances S)
+    // and, per predicted feature, the active-search setup outside the NCC
+    // matcher: finding its appearance, the predicted patch warp
+    // (predictedWarp) and warping the template (warpTemplate).
+    double search_us = 0;
+    double match_us = 0;   // Matcher::match calls: NCC search inside the chi-square ellipses
+    double update_us = 0;  // EkfSlam::update: 1-point RANSAC and both EKF updates
+    // EkfSlam::manageMap (deletion of bad features, inverse-depth to XYZ
+    // conversion), dropping the deleted features' appearances, and new
+    // features (free-region mask, corner detection, patch extraction,
+    // EkfSlam::addFeature); on a new-map frame, initialise plus the first
+    // features.
+    double map_us = 0;
+    // While relocalising: the attempt (corners, template scan, PnP, and on
+    // success the filter's reset); the frame's search and update follow.
+    double relocalise_us = 0;
+};
+
+class MonoTracker {
+public:
+    static core::Result<MonoTracker> create(const core::PinholeRadialCamera& camera,
+                                            const TrackerConfig& config);
+
+    // gravity_down_C: unit gravity direction in the frame of the camera that
+    // starts the next map (from the mount, the dataset or the robot).
+    void setGravityDownC(const core::Vec3& gravity_down_C) { gravity_down_C_ = gravity_down_C; }
+    // The next frame starts a new map.
+    void reset();
+
+    // Known depth for the features of a new map (distance along the ray, in
+    // the unit the map should have), e.g. from a depth sensor, a known target
+    // or, in simulation, the ground truth: it fixes the map's scale, as
+    // MonoSLAM's initialisation target did. rel_sigma: relative depth std.
+    // Without it (the default) new maps use slam.rho0 / slam.sigma_rho.
+    using DepthPrior = std::function<std::optional<core::Scalar>(const core::Vec2& px)>;
+    void setDepthPrior(DepthPrior prior, core::Scalar rel_sigma) {
+        depth_prior_ = std::move(prior);
+        depth_prior_rel_sigma_ = rel_sigma;
+    }
+
+    // gray: CV_8UC1 of the camera's size. t_ns strictly increasing. imu: the
+    // samples for the gyro prior, when the system has a gyroscope.
+    TrackStats processFrame(std::int64_t t_ns, const cv::Mat& gray,
+                            const core::slam::ImuWindow* imu = nullptr);
+
+    [[nodiscard]] const core::slam::EkfSlam& filter() const { return slam_; }
+    [[nodiscard]] bool hasMap() const { return has_map_; }
+    // The gyro bias estimate (gyro_bias_time_s), camera frame, rad/s: kept
+    // across maps (it belongs to the device, not the map).
+    [[nodiscard]] const core::Vec3& gyroBiasC() const { return gyro_bias_C_; }
+    [[nodiscard]] const TrackerConfig& config() const { return config_; }
+
+private:
+    struct FeatureAppearance {
+        std::uint64_t id = 0;
+        Patch patch;
+        core::CameraPose pose_at_init;  // camera that cut the patch (SLAM frame)
+        core::Vec2 px_at_init = core::Vec2::Zero();
+        // Its look where it was last measured (refreshed every few frames),
+        // for relocalisation.
+        BriefDescriptor brief{};
+        bool has_brief = false;
+        std::int64_t brief_frame = 0;
+    };
+
+    MonoTracker(core::slam::EkfSlam slam, const TrackerConfig& config);
+    // One step of the on-line gyro bias estimate (gyro_bias_time_s) after a
+    // good update of a frame predicted with `rate`.
+    void updateGyroBias(const core::slam::GyroRate& rate, const core::Mat3& R_prev_CtoW,
+                        std::int64_t t_prev_ns, std::int64_t t_ns);
+    FeatureAppearance* appearanceOf(std::uint64_t id);
+    void dropDeletedAppearances();
+    // Forgets every appearance, keeping the patch buffers for new features.
+    void clearAppearances();
+    // The predicted warp of a's patch at pixel h_px seen from camera pose cur.
+    bool predictedWarp(const core::slam::FeatureInfo& f, const FeatureAppearance& a,
+                       const core::Vec2& h_px, const core::CameraPose& cur, core::Mat2& A) const;
+    int addFeatures(const cv::Mat& gray, int wanted, bool new_map);
+    // One relocalisation attempt on this frame: true when the filter has the
+    // camera back (slam_.relocalise), its stats in `stats`. First the guided
+    // search around the last well-tracked pose, then the whole-image search.
+    bool tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats);
+    // The map point of a feature whose position is known well enough to
+    // relocalise against (relocalise_max_rel_sigma).
+    bool knownMapPoint(int slot, core::slam::MapPoint& mp) const;
+    void addRelocPoint(const core::Vec3& p_FinW, const core::Vec2& px);
+    void guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats);
+    void globalRelocCandidates(const cv::Mat& gray);
+    // Renews the descriptors of the features this frame's update accepted.
+    void refreshDescriptors(const cv::Mat& gray,
+                            std::span<const core::slam::FeaturePrediction> preds);
+    // RANSAC PnP over the candidates; the pose when enough inliers agree.
+    std::optional<core::CameraPose> solveRelocPose(TrackStats& stats);
+    // The pyramid level (1..pyramid_levels) whose gate ellipse fits the pixel
+    // budget, 0 when the full-resolution search does, -1 when none does.
+    [[nodiscard]] int searchLevel(const core::Mat2& S) const;
+    // Level `level` of this frame's pyramid, built on first use.
+    const cv::Mat& pyramidLevel(const cv::Mat& gray, int level);
+    // Coarse search at `level` with the template rendered at that level's
+    // sampling (A_full: the full-resolution warp), then the refinement at full
+    // resolution; leaves the full-resolution template in a.patch.
+    std::optional<Match> matchCoarseToFine(const cv::Mat& gray, int level, FeatureAppearance& a,
+                                           const core::Mat2& A_full, const core::Vec2& h_px,
+                                           const core::Mat2& S, TrackStats& stats);
+
+    core::slam::EkfSlam slam_;
+    TrackerConfig config_;
+    Matcher matcher_;
+    core::Vec3 gravity_down_C_ = core::Vec3(0, 1, 0);
+    bool has_map_ = false;
+    std::vector<FeatureAppearance> appearance_;
+    // Patch buffers not in use, max_features of them allocated at create():
+    // deleted features return theirs, new ones take one, so initialising
+    // features in steady state does not allocate.
+    std::vector<Patch> spare_patches_;
+    std::vector<core::slam::FeatureMatch> matches_;
+    std::vector<core::Vec2> occupied_;
+    std::vector<core::Vec2> corners_;
+    cv::Mat mask_;
+    std::array<cv::Mat, 4> pyramid_;  // levels 1.. of the current frame (buffers reused)
+    int pyramid_built_ = 0;           // levels of pyramid_ valid for the current frame
+    bool relocalising_ = false;
+    std::int64_t lost_t_ns_ = 0;  // when the filter was lost
+    // Relocalisation scratch (reserved at create()).
+    std::vector<cv::Point3f> reloc_points_W_;
+    std::vector<cv::Point2f> reloc_points_n_;  // normalised image coordinates
+    std::vector<core::Scalar> depth_scratch_;
+    struct RelocCandidate {
+        int slot = -1;
+        int corner = -1;
+        double ncc = -2;
+        core::Vec2 px = core::Vec2::Zero();
+    };
+    std::vector<RelocCandidate> reloc_candidates_;
+    std::vector<int> reloc_inliers_;
+    std::vector<BriefDescriptor> corner_briefs_;  // of corners_, while relocalising
+    std::vector<unsigned char> corner_has_brief_;
+    core::CameraPose last_good_pose_;  // the last frame that was not a bad frame
+    core::Vec3 gyro_bias_C_ = core::Vec3::Zero();
+    // The previous frame's updated pose was good (same map, not a bad frame):
+    // the reference the gyro bias is measured against.
+    bool previous_frame_good_ = false;
+    DepthPrior depth_prior_;
+    core::Scalar depth_prior_rel_sigma_ = 0;
+};
+
+}  // namespace scaled::drivers::vision
