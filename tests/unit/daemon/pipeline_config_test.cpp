@@ -179,6 +179,23 @@ TEST(PipelineConfig, ObjectModelKeysAreRangeChecked) {
               "0)");
 }
 
+// The configuration's bound is the tracker's own (EkfSlam::create refuses more
+// than 10000 hypotheses): a value the file accepts must not fail later, at
+// start-up, with a less precise message.
+TEST(PipelineConfig, RansacHypothesesStayWithinWhatTheTrackerAccepts) {
+    PipelineConfig c = defaultPipelineConfig();
+    auto bad = applyPipelineOverrides({"tracker.ransac_max_hypotheses=20000"}, c);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().message,
+              "--set tracker.ransac_max_hypotheses=20000: tracker.ransac_max_hypotheses: must be "
+              "an integer in [1, 10000] (got 20000)");
+    ASSERT_TRUE(
+        applyPipelineOverrides(
+            {"tracker.ransac_max_hypotheses=10000", "tracker.ransac_min_hypotheses=10000"}, c)
+            .ok());
+    EXPECT_TRUE(core::slam::validate(c.tracker.slam).ok());
+}
+
 TEST(PipelineConfig, EpipolarDepthMaxMustExceedMin) {
     PipelineConfig c = defaultPipelineConfig();
     // Equal is rejected, at the line of epipolar_depth_max.
