@@ -1,0 +1,159 @@
+#!/usr/bin/env bash
+# Behaviour unchanged across a restructuring: scale-eval, slam-run and the
+# daemon built at two revisions give byte-identical outputs on redkitchen.
+#
+#   scripts/same-outputs.sh BASE [HEAD] [--frames N]
+#
+# BASE and HEAD are git revisions (HEAD defaults to the working tree as it is,
+# built in build/release). Each revision is built (release preset, only the
+# three programs) in build/same-outputs/<rev>, then over the first N frames
+# (default 300):
+#   - slam-run --out: the trajectory file;
+#   - scale-eval --out --no-plots: frames.csv, updates.csv, observations.csv,
+#     posterior.csv, likelihoods.csv, and summary.json without its timings
+#     (the keys ending in _ms_per_frame / _ms_per_update);
+#   - scaled --source replay:... --pacing fast (lossless) until the replay ends:
+#     the field log's DETECTION, SCALE, OBJECT, POSE and STATE lines without
+#     their clock readings (mono_ns, ms, latency_ms).
+# Exit 0 when every output is the same to the byte, 1 with the differing files
+# named otherwise, 66 without the dataset or model, 64 on bad arguments.
+# Needs ../shared (SCALED_SHARED_DIR): data/redkitchen and models/yolox_nano.onnx.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+
+usage() { echo "usage: scripts/same-outputs.sh BASE [HEAD] [--frames N]" >&2; exit 64; }
+base=""
+head=""
+frames=300
+while [[ $# -gt 0 ]]; do
+  case $1 in
+    --frames) [[ $# -ge 2 && $2 =~ ^[1-9][0-9]*$ ]] || usage; frames=$2; shift 2 ;;
+    -*) usage ;;
+    *) if [[ -z $base ]]; then base=$1; elif [[ -z $head ]]; then head=$1; else usage; fi; shift ;;
+  esac
+done
+[[ -n $base ]] || usage
+
+shared=${SCALED_SHARED_DIR:-$root/../shared}
+dataset=$shared/data/redkitchen
+model=$shared/models/yolox_nano.onnx
+if [[ ! -d $dataset || ! -f $model ]]; then
+  echo "same-outputs: needs $dataset and $model (SCALED_SHARED_DIR)" >&2
+  exit 66
+fi
+
+targets=(scale-eval slam-run scaled)
+jobs=${SCALED_JOBS:-$(nproc)}
+
+# build REV -> prints the build directory holding bin/
+build() {
+  local rev=$1
+  if [[ -z $rev ]]; then
+    cmake --preset release > /dev/null
+    cmake --build build/release -j "$jobs" --target "${targets[@]}" > /dev/null
+    echo "$root/build/release"
+    return
+  fi
+  local sha
+  sha=$(git rev-parse --verify "$rev^{commit}") || { echo "same-outputs: no revision '$rev'" >&2; exit 64; }
+  local tree=$root/build/same-outputs/$sha
+  if [[ ! -d $tree/src ]]; then
+    mkdir -p "$tree"
+    git worktree add --detach "$tree/src" "$sha" > /dev/null 2>&1
+  fi
+  (cd "$tree/src" && cmake --preset release -B "$tree/build" > /dev/null &&
+     cmake --build "$tree/build" -j "$jobs" --target "${targets[@]}" > /dev/null)
+  echo "$tree/build"
+}
+
+# run BUILD_DIR SRC_DIR OUT_DIR
+run() {
+  local bin=$1/bin src=$2 out=$3
+  rm -rf "$out"
+  mkdir -p "$out/eval" "$out/daemon/log"
+  "$bin/slam-run" --dataset "$dataset" --frames "0:$frames" --out "$out/trajectory.txt" > /dev/null 2>&1
+  SCALED_SHARED_DIR=$shared "$bin/scale-eval" --dataset "$dataset" --frames "0:$frames" \
+    --set "estimator.priors=$src/config/priors.toml" --set "detector.model=$model" \
+    --out "$out/eval" --no-plots > /dev/null 2>&1
+  python3 - "$out/eval/summary.json" <<'PY'
+import json, sys
+p = sys.argv[1]
+doc = json.load(open(p))
+def strip(x):
+    if isinstance(x, dict):
+        return {k: strip(v) for k, v in x.items() if not k.endswith(("_ms_per_frame", "_ms_per_update"))}
+    if isinstance(x, list):
+        return [strip(v) for v in x]
+    return x
+json.dump(strip(doc), open(p, "w"), indent=1, sort_keys=True)
+PY
+  # The daemon: lossless replay of the same frames, exits at the end.
+  cat > "$out/daemon/scaled.toml" <<EOF
+[estimator]
+priors = "$src/config/priors.toml"
+
+[detector]
+model = "$model"
+
+[socket]
+path = "$out/daemon/scaled.sock"
+
+[log]
+dir = "$out/daemon/log"
+EOF
+  "$bin/scaled" --config "$out/daemon/scaled.toml" --no-tty \
+    --source "replay:$dataset" --pacing fast --set source.at_end=exit \
+    --set "source.max_frames=$frames" > /dev/null 2> "$out/daemon/stderr.txt" || true
+  python3 - "$out/daemon/log" "$out/daemon/lines.json" <<'PY'
+import json, os, sys
+src, dst = sys.argv[1], sys.argv[2]
+wall = {"mono_ns", "ms", "latency_ms"}  # clock readings and durations
+keep = []
+for name in sorted(os.listdir(src)):
+    for line in open(os.path.join(src, name)):
+        try:
+            doc = json.loads(line)
+        except ValueError:
+            continue
+        if doc.get("class") not in ("DETECTION", "SCALE", "OBJECT", "POSE", "STATE"):
+            continue
+        keep.append({k: v for k, v in doc.items() if k not in wall and not k.endswith("_us")})
+json.dump(keep, open(dst, "w"), indent=0, sort_keys=True)
+PY
+  rm -rf "$out/daemon/log" "$out/daemon/scaled.toml" "$out/daemon/scaled.sock"
+}
+
+echo "same-outputs: building ${base} and ${head:-the working tree}"
+base_build=$(build "$base")
+head_build=$(build "$head")
+base_src=$root/build/same-outputs/$(git rev-parse "$base^{commit}")/src
+head_src=$root
+[[ -n $head ]] && head_src=$root/build/same-outputs/$(git rev-parse "$head^{commit}")/src
+
+work=$root/build/same-outputs/runs
+echo "same-outputs: running both over the first $frames frames of redkitchen"
+run "$base_build" "$base_src" "$work/base"
+run "$head_build" "$head_src" "$work/head"
+
+status=0
+compared=0
+while IFS= read -r f; do
+  rel=${f#"$work/base/"}
+  [[ $rel == daemon/stderr.txt ]] && continue
+  compared=$((compared + 1))
+  if ! cmp -s "$f" "$work/head/$rel"; then
+    echo "DIFFERS: $rel" >&2
+    status=1
+  fi
+done < <(find "$work/base" -type f | sort)
+for f in eval/frames.csv eval/updates.csv eval/summary.json trajectory.txt daemon/lines.json; do
+  if [[ ! -s $work/base/$f ]]; then
+    echo "same-outputs: $f is missing or empty (see $work/base)" >&2
+    status=1
+  fi
+done
+if [[ $status -eq 0 ]]; then
+  echo "same-outputs: $compared files identical ($work/base vs $work/head)"
+fi
+exit $status
