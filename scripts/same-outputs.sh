@@ -10,8 +10,9 @@
 # (default 300):
 #   - slam-run --out: the trajectory file;
 #   - scale-eval --out --no-plots: frames.csv, updates.csv, observations.csv,
-#     posterior.csv, likelihoods.csv, and summary.json without its timings
-#     (the keys ending in _ms_per_frame / _ms_per_update);
+#     posterior.csv, likelihoods.csv, objects.csv, config.toml, and
+#     summary.json without its timings (keys ending in ms_per_frame or
+#     ms_per_update);
 #   - scaled --source replay:... --pacing fast (lossless) until the replay ends:
 #     the field log's DETECTION, SCALE, OBJECT, POSE and STATE lines without
 #     their clock readings (mono_ns, ms, latency_ms).
@@ -67,14 +68,14 @@ build() {
   echo "$tree/build"
 }
 
-# run BUILD_DIR SRC_DIR OUT_DIR
+# run BUILD_DIR OUT_DIR
 run() {
-  local bin=$1/bin src=$2 out=$3
+  local bin=$1/bin out=$2
   rm -rf "$out"
   mkdir -p "$out/eval" "$out/daemon/log"
   "$bin/slam-run" --dataset "$dataset" --frames "0:$frames" --out "$out/trajectory.txt" > /dev/null 2>&1
   SCALED_SHARED_DIR=$shared "$bin/scale-eval" --dataset "$dataset" --frames "0:$frames" \
-    --set "estimator.priors=$src/config/priors.toml" --set "detector.model=$model" \
+    --set "estimator.priors=$work/priors.toml" --set "detector.model=$model" \
     --out "$out/eval" --no-plots > /dev/null 2>&1
   python3 - "$out/eval/summary.json" <<'PY'
 import json, sys
@@ -82,7 +83,7 @@ p = sys.argv[1]
 doc = json.load(open(p))
 def strip(x):
     if isinstance(x, dict):
-        return {k: strip(v) for k, v in x.items() if not k.endswith(("_ms_per_frame", "_ms_per_update"))}
+        return {k: strip(v) for k, v in x.items() if not k.endswith(("ms_per_frame", "ms_per_update"))}
     if isinstance(x, list):
         return [strip(v) for v in x]
     return x
@@ -91,7 +92,7 @@ PY
   # The daemon: lossless replay of the same frames, exits at the end.
   cat > "$out/daemon/scaled.toml" <<EOF
 [estimator]
-priors = "$src/config/priors.toml"
+priors = "$work/priors.toml"
 
 [detector]
 model = "$model"
@@ -127,14 +128,15 @@ PY
 echo "same-outputs: building ${base} and ${head:-the working tree}"
 base_build=$(build "$base")
 head_build=$(build "$head")
-base_src=$root/build/same-outputs/$(git rev-parse "$base^{commit}")/src
-head_src=$root
-[[ -n $head ]] && head_src=$root/build/same-outputs/$(git rev-parse "$head^{commit}")/src
 
 work=$root/build/same-outputs/runs
+# Both runs read the same priors (BASE's), at the same path: the path is part
+# of scale-eval's config.toml.
+mkdir -p "$work"
+git show "$(git rev-parse "$base^{commit}"):config/priors.toml" > "$work/priors.toml"
 echo "same-outputs: running both over the first $frames frames of redkitchen"
-run "$base_build" "$base_src" "$work/base"
-run "$head_build" "$head_src" "$work/head"
+run "$base_build" "$work/base"
+run "$head_build" "$work/head"
 
 status=0
 compared=0
