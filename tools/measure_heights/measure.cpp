@@ -56,20 +56,6 @@ void appendHeights(const DepthView& view, int stride, std::vector<float>& height
     }
 }
 
-double median(std::vector<double> v) {
-    if (v.empty()) {
-        return 0;
-    }
-    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    if (v.size() % 2 == 1) {
-        return *mid;
-    }
-    const double hi = *mid;
-    const double lo = *std::max_element(v.begin(), mid);
-    return 0.5 * (lo + hi);
-}
-
 double mad(const std::vector<double>& v) {
     const double m = median(v);
     std::vector<double> d;

@@ -27,6 +27,8 @@
 #include <scaled/core/scale/vertical_extent.h>
 #include <scaled/core/types.h>
 
+#include "stats.h"
+
 namespace scaled::tools::heights {
 
 // How an object's bottom is found.
@@ -118,7 +120,7 @@ ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box,
                             bool keep_mask);
 
 // Robust statistics.
-double median(std::vector<double> v);
+using tools::median;                       // tools/common/stats.h
 double mad(const std::vector<double>& v);  // median absolute deviation x 1.4826
 double percentile(std::span<const float> values, double q);
 

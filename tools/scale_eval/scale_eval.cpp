@@ -17,6 +17,8 @@
 #include <scaled/drivers/imu/map_gravity.h>
 #include <scaled/drivers/vision/mono_tracker.h>
 
+#include "stats.h"
+
 namespace scaled::tools {
 
 using core::ErrorCode;
@@ -31,24 +33,6 @@ using Clock = std::chrono::steady_clock;
 
 double msSince(Clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-double median(std::vector<double> v) {
-    const std::size_t n = v.size();
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(n / 2), v.end());
-    double m = v[n / 2];
-    if (n % 2 == 0) {
-        m = (m + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(n / 2))) / 2;
-    }
-    return m;
-}
-
-double quantile(std::vector<double> v, double q) {
-    std::sort(v.begin(), v.end());
-    const double pos = q * static_cast<double>(v.size() - 1);
-    const auto i = static_cast<std::size_t>(pos);
-    const double f = pos - static_cast<double>(i);
-    return i + 1 < v.size() ? v[i] * (1 - f) + v[i + 1] * f : v[i];
 }
 
 // Per-frame trajectory of one epoch (map): SLAM and ground-truth camera

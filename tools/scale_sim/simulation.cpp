@@ -8,6 +8,8 @@
 
 #include <Eigen/Geometry>
 
+#include "stats.h"
+
 namespace scaled::papersim {
 
 using core::BoundingBox;
@@ -144,20 +146,6 @@ std::optional<BoundingBox> detect(const PinholeRadialCamera& cam, const CameraPo
     return b;
 }
 
-Scalar median(std::vector<Scalar> v) {
-    if (v.empty()) {
-        return 0;
-    }
-    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    if (v.size() % 2 == 1) {
-        return *mid;
-    }
-    const Scalar hi = *mid;
-    const Scalar lo = *std::max_element(v.begin(), mid);
-    return (lo + hi) / 2;
-}
-
 }  // namespace
 
 ExperimentResult runExperiment(const ExperimentSpec& spec) {
@@ -277,7 +265,7 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
             errors.push_back(up.rel_error);
             covered += (up.summary.ci95.lo <= d && d <= up.summary.ci95.hi) ? 1 : 0;
         }
-        result.median_rel_error = median(errors);
+        result.median_rel_error = tools::median(errors);
         Scalar mean = 0;
         for (const Scalar e : errors) {
             mean += e;
