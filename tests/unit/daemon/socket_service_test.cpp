@@ -1170,14 +1170,15 @@ public:
             return;
         }
         if (::fcntl(3, F_GETFD) >= 0) {
-            saved_ = ::fcntl(3, F_DUPFD_CLOEXEC, 10);
+            saved_.reset(::fcntl(3, F_DUPFD_CLOEXEC, 10));
         }
         ok_ = ::dup2(fd, 3) == 3;
     }
+    // Puts the saved descriptor back at 3 (saved_ then closes its copy), or
+    // closes 3 when there was none.
     ~Fd3Guard() {
-        if (saved_ >= 0) {
-            ::dup2(saved_, 3);
-            drivers::base::UniqueFd(saved_).reset();
+        if (saved_.isValid()) {
+            ::dup2(saved_.get(), 3);
         } else {
             drivers::base::UniqueFd(3).reset();
         }
@@ -1189,7 +1190,7 @@ public:
     [[nodiscard]] bool ok() const { return ok_; }
 
 private:
-    int saved_ = -1;
+    drivers::base::UniqueFd saved_;  // what was at 3 before, if anything
     bool ok_ = false;
 };
 
