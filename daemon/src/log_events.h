@@ -45,11 +45,7 @@ public:
         e.tracked = f.tracked;
         e.ms = f.ms;
         e.dropped = f.dropped;
-        e.predict_us = f.predict_us;
-        e.search_us = f.search_us;
-        e.match_us = f.match_us;
-        e.update_us = f.update_us;
-        e.map_us = f.map_us;
+        e.stage_us = f.stage_us;
         log_.frameEvent(e);
     }
 

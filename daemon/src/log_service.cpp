@@ -110,15 +110,15 @@ void formatEvent(const FrameEvent& event, std::string& out) {
     key(out, "dropped");
     appendJsonInt(out, event.dropped);
     out += R"(,"stage_us":{"predict":)";
-    appendJsonNumber(out, event.predict_us, 4);
+    appendJsonNumber(out, event.stage_us.predict, 4);
     key(out, "search");
-    appendJsonNumber(out, event.search_us, 4);
+    appendJsonNumber(out, event.stage_us.search, 4);
     key(out, "match");
-    appendJsonNumber(out, event.match_us, 4);
+    appendJsonNumber(out, event.stage_us.match, 4);
     key(out, "update");
-    appendJsonNumber(out, event.update_us, 4);
+    appendJsonNumber(out, event.stage_us.update, 4);
     key(out, "map");
-    appendJsonNumber(out, event.map_us, 4);
+    appendJsonNumber(out, event.stage_us.map, 4);
     out += "}}";
 }
 

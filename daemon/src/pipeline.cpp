@@ -487,27 +487,30 @@ void Pipeline::setSlamState(DaemonState state, std::int64_t frame_id, std::int64
     }
 }
 
+// The tracking thread's own state between frames.
+struct Pipeline::TrackingState {
+    explicit TrackingState(drivers::vision::MonoTracker& tracker) : step(tracker) {}
+
+    FrameStep step;
+    core::slam::SlamSnapshot staging;  // the next detection job, filled here, swapped in
+    cv::Mat staging_image;
+    std::optional<core::Vec3> gravity_override;  // a client's set_gravity
+    std::int64_t last_t_ns = 0;
+    bool have_last = false;
+    std::uint64_t tracked = 0;
+};
+
 void Pipeline::trackingLoop() {
-    QueuedFrame item;
-    core::slam::SlamSnapshot staging;
-    if (!staging.reserve(config_.pipeline.tracker.slam.max_features)) {
+    TrackingState state(*tracker_);
+    if (!state.staging.reserve(config_.pipeline.tracker.slam.max_features)) {
         fail(makeError(ErrorCode::kInvalidArgument, "cannot reserve the SLAM snapshot"));
         return;
     }
-    cv::Mat staging_image;
-    bool need_gravity = true;
-    std::optional<core::Vec3> gravity_override;
-    std::int64_t frames_in_map = 0;
-    std::int64_t last_t_ns = 0;
-    bool have_last = false;
-    std::int64_t last_detection_t_ns = 0;
-    std::uint64_t tracked = 0;
-    auto& tracker = *tracker_;
-
+    QueuedFrame item;
     while (!stop_.load()) {
         heartbeat_.fetch_add(1);
         if (auto g = hub_.takeGravityRequest()) {
-            gravity_override = *g;
+            state.gravity_override = *g;
         }
         if (!popFrame(item)) {
             // At the end of a replay with at_end = exit the loop ends; else it
@@ -523,187 +526,7 @@ void Pipeline::trackingLoop() {
             publishStatus(false);
             continue;
         }
-        drivers::source::Frame& frame = item.frame;
-        if (item.restart || (have_last && frame.t_ns <= last_t_ns)) {
-            // A discontinuity (replay loop): the map cannot continue.
-            tracker.reset();
-            need_gravity = true;
-            frames_in_map = 0;
-            setSlamState(DaemonState::kInitialising, frame.id, frame.t_ns,
-                         live_ != nullptr ? "camera reconnected" : "replay restarted", false);
-        }
-        // The gyro prior's samples for the interval since the previous frame:
-        // the live IMU's (on the frames' clock, CLOCK_MONOTONIC), else a
-        // replayed log's. Samples on another clock cover no interval: the
-        // tracker then predicts with constant velocity.
-        const core::slam::ImuWindow* imu_window = nullptr;
-        if (imu_ != nullptr) {
-            if (status_.gyro.present && have_last && config_.pipeline.tracker.use_gyro) {
-                imu_->copySince(last_t_ns, gyro_samples_);
-                imu_window_.samples = gyro_samples_;
-                imu_window_.R_ItoC = imu_->rotationImuToCamera();
-                imu_window = &imu_window_;
-            }
-        } else {
-            imu_window = gyro_feed_.forFrame(frame);
-        }
-        have_last = true;
-        last_t_ns = frame.t_ns;
-        if (need_gravity) {
-            drivers::imu::MapGravity g;
-            if (gravity_override) {
-                g.down_C = *gravity_override;
-                g.source = "set_gravity request";
-            } else if (imu_ != nullptr) {
-                imu_->copyRecent(imu_samples_);
-                drivers::imu::LiveAccelerometer live;
-                live.samples = imu_samples_;
-                live.R_ItoC = imu_->rotationImuToCamera();
-                live.label = imu_label_;
-                live.now_ns = imu_->nowNs();
-                live.window_s = imu_->windowS();
-                g = gravity_selector_.atMapStart(frame, live);
-            } else {
-                g = gravity_selector_.atMapStart(frame);
-            }
-            tracker.setGravityDownC(g.down_C);
-            {
-                const std::lock_guard lock(report_mutex_);
-                status_.gravity_source = g.source;
-                status_.gravity_down_C = std::array<double, 3>{static_cast<double>(g.down_C.x()),
-                                                               static_cast<double>(g.down_C.y()),
-                                                               static_cast<double>(g.down_C.z())};
-            }
-            need_gravity = false;
-        }
-        const std::int64_t t0 = monotonicNowNs();
-        const drivers::vision::TrackStats stats =
-            tracker.processFrame(frame.t_ns, frame.gray, imu_window);
-        const double ms = msBetween(t0, monotonicNowNs());
-        ++tracked;
-        const bool ok = stats.health == core::slam::SlamHealth::kOk;
-        if (ok && stats.new_map) {
-            frames_in_map = 0;
-            setSlamState(DaemonState::kTracking, frame.id, frame.t_ns, "new map", true);
-        } else if (ok) {
-            setSlamState(DaemonState::kTracking, frame.id, frame.t_ns,
-                         stats.relocalised ? "relocalised" : "tracking", false);
-        }
-        if (ok) {
-            ++frames_in_map;
-        }
-        std::uint64_t epoch = 0;
-        {
-            const std::lock_guard lock(report_mutex_);
-            epoch = report_.epoch;
-            status_.frame_id = frame.id;
-            status_.frames_tracked = tracked;
-            status_.features_in_map = stats.features;
-            status_.features_tracked = stats.inliers + stats.rescued;
-            if (stats.gyro == core::slam::GyroCoverage::kOk) {
-                ++status_.gyro.frames;
-                const core::Vec3& b = tracker.gyroBiasC();
-                status_.gyro.bias_C_radps = {static_cast<double>(b.x()), static_cast<double>(b.y()),
-                                             static_cast<double>(b.z())};
-            }
-            // Stage statistics live in status_ itself (a few flops under the
-            // lock taken anyway): publishStatus copies them to the hub.
-            PipelineTiming& timing = status_.timing;
-            addStage(timing.predict, stats.predict_us);
-            addStage(timing.search, stats.search_us);
-            addStage(timing.match, stats.match_us);
-            addStage(timing.update, stats.update_us);
-            addStage(timing.map, stats.map_us);
-            timing.tracking.add(ms);
-            status_.tracking_ms_mean = timing.tracking.mean_ms;
-            status_.epoch = epoch;
-        }
-        ++fps_window_frames_;
-        if (ok) {
-            // POSE: fixed-size arithmetic and a copy into the hub, no allocation.
-            const core::slam::EkfSlam& filter = tracker.filter();
-            const PoseReport pose =
-                makePoseReport(filter.pose(), filter.velocityW(), filter.poseCovariance(),
-                               filter.upW(), epoch, frame.id, frame.t_ns);
-            hub_.publishPose(pose);
-            if (events_ != nullptr) {
-                PipelineEvents::Pose e;
-                e.pose = &pose;
-                {
-                    // The scale as published (publishLocked keeps report_ and
-                    // the hub's in step under this lock).
-                    const std::lock_guard lock(report_mutex_);
-                    e.metric = metricPose(pose, report_);
-                    e.state = report_.state;
-                }
-                events_->onPose(e);
-            }
-        }
-
-        // Hand a frame to the detector: every Nth frame of a map, or by period.
-        if (ok && frames_in_map > 1) {
-            DetectionSchedule schedule;
-            {
-                const std::lock_guard lock(job_mutex_);
-                schedule = schedule_;
-            }
-            const bool due = schedule.period_s > 0
-                                 ? static_cast<double>(frame.t_ns - last_detection_t_ns) * 1e-9 >=
-                                       schedule.period_s
-                                 : (frames_in_map - 1) % schedule.every_frames == 0;
-            if (due) {
-                last_detection_t_ns = frame.t_ns;
-                staging.capture(tracker.filter(), frame.id, epoch);
-                frame.color.copyTo(staging_image);
-                std::unique_lock lock(job_mutex_);
-                if (lossless_) {
-                    job_taken_.wait(lock, [&] { return stop_.load() || !pending_full_; });
-                }
-                if (pending_full_) {
-                    const std::lock_guard slock(report_mutex_);
-                    ++status_.detections_skipped;
-                }
-                std::swap(pending_.snapshot, staging);
-                std::swap(pending_.image, staging_image);
-                pending_.t_ns = frame.t_ns;
-                pending_full_ = true;
-                lock.unlock();
-                job_ready_.notify_one();
-            }
-        }
-
-        if (events_ != nullptr && config_.log.frame_every > 0 &&
-            tracked % static_cast<std::uint64_t>(config_.log.frame_every) == 0) {
-            PipelineEvents::Frame e;
-            e.frame_id = frame.id;
-            e.t_ns = frame.t_ns;
-            e.epoch = epoch;
-            e.health = core::slam::toString(stats.health);
-            e.features = stats.features;
-            e.tracked = stats.inliers + stats.rescued;
-            e.ms = ms;
-            e.dropped = dropped_.load();
-            e.predict_us = stats.predict_us;
-            e.search_us = stats.search_us;
-            e.match_us = stats.match_us;
-            e.update_us = stats.update_us;
-            e.map_us = stats.map_us;
-            events_->onFrame(e);
-        }
-
-        if (stats.health == core::slam::SlamHealth::kRelocalising) {
-            // Lost, the map kept: the tracker looks for the camera in it for
-            // up to tracker.relocalise_s; the epoch and the scale stay.
-            setSlamState(DaemonState::kLost, frame.id, frame.t_ns, "relocalising", false);
-        } else if (!ok) {
-            // Lost or diverged: the next frame starts a new map with a new,
-            // unrelated scale; the epoch moves when it does.
-            setSlamState(DaemonState::kLost, frame.id, frame.t_ns,
-                         core::slam::toString(stats.health), false);
-            tracker.reset();
-            need_gravity = true;
-            frames_in_map = 0;
-        }
+        trackFrame(state, item);
         publishStatus(false);
     }
     {
@@ -712,6 +535,194 @@ void Pipeline::trackingLoop() {
     }
     job_ready_.notify_all();
     publishStatus(true);
+}
+
+void Pipeline::trackFrame(TrackingState& state, QueuedFrame& item) {
+    const drivers::source::Frame& frame = item.frame;
+    if (item.restart || (state.have_last && frame.t_ns <= state.last_t_ns)) {
+        // A discontinuity (replay loop): the map cannot continue.
+        state.step.restart();
+        setSlamState(DaemonState::kInitialising, frame.id, frame.t_ns,
+                     live_ != nullptr ? "camera reconnected" : "replay restarted", false);
+    }
+    const core::slam::ImuWindow* gyro = gyroWindow(frame, state);
+    state.have_last = true;
+    state.last_t_ns = frame.t_ns;
+    const FrameStepResult r = state.step.track(frame, gyro, [&](const drivers::source::Frame& f) {
+        return selectGravity(f, state.gravity_override);
+    });
+    if (r.gravity != nullptr) {
+        recordGravity(*r.gravity);
+    }
+    ++state.tracked;
+    const drivers::vision::TrackStats& stats = r.stats;
+    if (r.map_started) {
+        setSlamState(DaemonState::kTracking, frame.id, frame.t_ns, "new map", true);
+    } else if (r.ok) {
+        setSlamState(DaemonState::kTracking, frame.id, frame.t_ns,
+                     stats.relocalised ? "relocalised" : "tracking", false);
+    }
+    const std::uint64_t epoch = recordTracked(r, frame.id, state.tracked);
+    ++fps_window_frames_;
+    if (r.ok) {
+        publishPose(frame, epoch);
+    }
+    DetectionSchedule schedule;
+    {
+        const std::lock_guard lock(job_mutex_);
+        schedule = schedule_;
+    }
+    if (state.step.detectionDue(r, schedule, frame.t_ns)) {
+        handToDetector(state, item.frame, epoch);
+    }
+    if (events_ != nullptr && config_.log.frame_every > 0 &&
+        state.tracked % static_cast<std::uint64_t>(config_.log.frame_every) == 0) {
+        PipelineEvents::Frame e;
+        e.frame_id = frame.id;
+        e.t_ns = frame.t_ns;
+        e.epoch = epoch;
+        e.health = core::slam::toString(stats.health);
+        e.features = stats.features;
+        e.tracked = stats.inliers + stats.rescued;
+        e.ms = r.track_ms;
+        e.dropped = dropped_.load();
+        e.stage_us = stats.stage_us;
+        events_->onFrame(e);
+    }
+    if (stats.health == core::slam::SlamHealth::kRelocalising) {
+        // Lost, the map kept: the tracker looks for the camera in it for
+        // up to tracker.relocalise_s; the epoch and the scale stay.
+        setSlamState(DaemonState::kLost, frame.id, frame.t_ns, "relocalising", false);
+    } else if (r.map_lost) {
+        // Lost or diverged (the frame step reset the tracker): the next frame
+        // starts a new map with a new, unrelated scale; the epoch moves when
+        // it does.
+        setSlamState(DaemonState::kLost, frame.id, frame.t_ns, core::slam::toString(stats.health),
+                     false);
+    }
+}
+
+// The gyro prior's samples for the interval since the previous frame: the
+// live IMU's (on the frames' clock, CLOCK_MONOTONIC), else a replayed log's.
+// Samples on another clock cover no interval: the tracker then predicts with
+// constant velocity.
+const core::slam::ImuWindow* Pipeline::gyroWindow(const drivers::source::Frame& frame,
+                                                  const TrackingState& state) {
+    if (imu_ == nullptr) {
+        return gyro_feed_.forFrame(frame);
+    }
+    if (!status_.gyro.present || !state.have_last || !config_.pipeline.tracker.use_gyro) {
+        return nullptr;
+    }
+    imu_->copySince(state.last_t_ns, gyro_samples_);
+    imu_window_.samples = gyro_samples_;
+    imu_window_.R_ItoC = imu_->rotationImuToCamera();
+    return &imu_window_;
+}
+
+// The vertical of a map that starts at this frame: a client's set_gravity,
+// else the live accelerometer's last window, else the replayed sequence's.
+drivers::imu::MapGravity Pipeline::selectGravity(const drivers::source::Frame& frame,
+                                                 const std::optional<core::Vec3>& override_down_C) {
+    if (override_down_C) {
+        drivers::imu::MapGravity g;
+        g.down_C = *override_down_C;
+        g.source = "set_gravity request";
+        return g;
+    }
+    if (imu_ == nullptr) {
+        return gravity_selector_.atMapStart(frame);
+    }
+    imu_->copyRecent(imu_samples_);
+    drivers::imu::LiveAccelerometer live;
+    live.samples = imu_samples_;
+    live.R_ItoC = imu_->rotationImuToCamera();
+    live.label = imu_label_;
+    live.now_ns = imu_->nowNs();
+    live.window_s = imu_->windowS();
+    return gravity_selector_.atMapStart(frame, live);
+}
+
+void Pipeline::recordGravity(const drivers::imu::MapGravity& g) {
+    const std::lock_guard lock(report_mutex_);
+    status_.gravity_source = g.source;
+    status_.gravity_down_C =
+        std::array<double, 3>{static_cast<double>(g.down_C.x()), static_cast<double>(g.down_C.y()),
+                              static_cast<double>(g.down_C.z())};
+}
+
+// The frame's counters and stage times into status_; the map's epoch.
+std::uint64_t Pipeline::recordTracked(const FrameStepResult& r, std::int64_t frame_id,
+                                      std::uint64_t tracked) {
+    const drivers::vision::TrackStats& stats = r.stats;
+    const std::lock_guard lock(report_mutex_);
+    const std::uint64_t epoch = report_.epoch;
+    status_.frame_id = frame_id;
+    status_.frames_tracked = tracked;
+    status_.features_in_map = stats.features;
+    status_.features_tracked = stats.inliers + stats.rescued;
+    if (stats.gyro == core::slam::GyroCoverage::kOk) {
+        ++status_.gyro.frames;
+        const core::Vec3& b = tracker_->gyroBiasC();
+        status_.gyro.bias_C_radps = {static_cast<double>(b.x()), static_cast<double>(b.y()),
+                                     static_cast<double>(b.z())};
+    }
+    // Stage statistics live in status_ itself (a few flops under the lock
+    // taken anyway): publishStatus copies them to the hub.
+    PipelineTiming& timing = status_.timing;
+    addStage(timing.predict, stats.stage_us.predict);
+    addStage(timing.search, stats.stage_us.search);
+    addStage(timing.match, stats.stage_us.match);
+    addStage(timing.update, stats.stage_us.update);
+    addStage(timing.map, stats.stage_us.map);
+    timing.tracking.add(r.track_ms);
+    status_.tracking_ms_mean = timing.tracking.mean_ms;
+    status_.epoch = epoch;
+    return epoch;
+}
+
+// POSE: fixed-size arithmetic and a copy into the hub, no allocation.
+void Pipeline::publishPose(const drivers::source::Frame& frame, std::uint64_t epoch) {
+    const core::slam::EkfSlam& filter = tracker_->filter();
+    const PoseReport pose =
+        makePoseReport(filter.pose(), filter.velocityW(), filter.poseCovariance(), filter.upW(),
+                       epoch, frame.id, frame.t_ns);
+    hub_.publishPose(pose);
+    if (events_ == nullptr) {
+        return;
+    }
+    PipelineEvents::Pose e;
+    e.pose = &pose;
+    {
+        // The scale as published (publishLocked keeps report_ and the hub's
+        // in step under this lock).
+        const std::lock_guard lock(report_mutex_);
+        e.metric = metricPose(pose, report_);
+        e.state = report_.state;
+    }
+    events_->onPose(e);
+}
+
+// Into the detection mailbox (latest wins; lossless replays wait for the
+// detector to take the previous job).
+void Pipeline::handToDetector(TrackingState& state, const drivers::source::Frame& frame,
+                              std::uint64_t epoch) {
+    state.staging.capture(tracker_->filter(), frame.id, epoch);
+    frame.color.copyTo(state.staging_image);
+    std::unique_lock lock(job_mutex_);
+    if (lossless_) {
+        job_taken_.wait(lock, [&] { return stop_.load() || !pending_full_; });
+    }
+    if (pending_full_) {
+        const std::lock_guard slock(report_mutex_);
+        ++status_.detections_skipped;
+    }
+    std::swap(pending_.snapshot, state.staging);
+    std::swap(pending_.image, state.staging_image);
+    pending_.t_ns = frame.t_ns;
+    pending_full_ = true;
+    lock.unlock();
+    job_ready_.notify_one();
 }
 
 // --- detection and scale ----------------------------------------------------
@@ -797,6 +808,18 @@ bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t ep
     return true;
 }
 
+// The detection thread's own state between jobs.
+struct Pipeline::DetectionState {
+    DetectionJob job;
+    drivers::detector::DetectionResult boxes;
+    std::vector<core::Detection> dets;
+    std::vector<core::ObservationRecord> records;
+    std::uint64_t estimator_epoch = 0;
+    std::uint64_t runs = 0;
+    double latency_sum_ms = 0;
+    double latency_max_ms = 0;
+};
+
 void Pipeline::detectionLoop() {
     // Below the tracker and the socket (thread_priority.h); the daemon made
     // OpenCV's workers at this value before the pipeline started.
@@ -804,76 +827,21 @@ void Pipeline::detectionLoop() {
         !ok && events_ != nullptr) {
         events_->onError("detector priority", ok.error().message);
     }
-    DetectionJob job;
-    if (!job.snapshot.reserve(config_.pipeline.tracker.slam.max_features)) {
+    DetectionState state;
+    if (!state.job.snapshot.reserve(config_.pipeline.tracker.slam.max_features)) {
         return;
     }
-    drivers::detector::DetectionResult boxes;
-    std::vector<core::Detection> dets(
+    state.dets.resize(
         static_cast<std::size_t>(std::max(1, config_.pipeline.detector.max_detections)));
-    std::vector<core::ObservationRecord> records(kMaxRecords);
-    std::uint64_t estimator_epoch = 0;
-    std::uint64_t runs = 0;
-    double latency_sum_ms = 0;
-    double latency_max_ms = 0;
-    auto& estimator = *estimator_;
+    state.records.resize(kMaxRecords);
 
-    while (true) {
-        {
-            std::unique_lock lock(job_mutex_);
-            job_ready_.wait(lock, [&] { return stop_.load() || pending_full_ || tracking_done_; });
-            if (stop_.load() || (!pending_full_ && tracking_done_)) {
-                break;
-            }
-            std::swap(job.snapshot, pending_.snapshot);
-            std::swap(job.image, pending_.image);
-            job.t_ns = pending_.t_ns;
-            pending_full_ = false;
-            if (reload_priors_) {
-                if (auto ok = estimator.setPriors(std::move(*reload_priors_));
-                    !ok && events_ != nullptr) {
-                    // The old priors stay; the evidence is kept either way.
-                    events_->onError("priors reload", ok.error().message);
-                }
-                reload_priors_.reset();
-            }
-            if (reload_detector_) {
-                detector_ = std::move(reload_detector_);
-                dets.resize(static_cast<std::size_t>(
-                    std::max(1, config_.pipeline.detector.max_detections)));
-            }
-        }
+    while (takeJob(state)) {
         job_taken_.notify_one();
-
         const std::int64_t t0 = monotonicNowNs();
-        auto det = detector_->detect(job.image, job.snapshot.frameId(), job.t_ns, boxes);
+        auto det = detector_->detect(state.job.image, state.job.snapshot.frameId(), state.job.t_ns,
+                                     state.boxes);
         const double latency_ms = msBetween(t0, monotonicNowNs());
-        ++runs;
-        latency_sum_ms += latency_ms;
-        latency_max_ms = std::max(latency_max_ms, latency_ms);
-        {
-            const std::lock_guard lock(report_mutex_);
-            status_.detections_run = runs;
-            status_.detector_latency_ms_last = latency_ms;
-            status_.detector_latency_ms_mean = latency_sum_ms / static_cast<double>(runs);
-            status_.detector_latency_ms_max = latency_max_ms;
-            if (det) {
-                // The detector's own split of the call (a detector that does
-                // not measure a part reports 0 for it).
-                status_.timing.detect_pre.add(boxes.timing.pre_ms);
-                status_.timing.detect_forward.add(boxes.timing.forward_ms);
-                status_.timing.detect_post.add(boxes.timing.post_ms);
-            }
-            const bool had_fault = !detector_fault_.empty();
-            if (!det) {
-                detector_fault_ = "detector: " + det.error().message;
-            } else {
-                detector_fault_.clear();
-            }
-            if (had_fault != !detector_fault_.empty()) {
-                publishLocked({}, {});
-            }
-        }
+        recordDetectorRun(state, det ? std::optional<core::Error>() : det.error(), latency_ms);
         if (!det) {
             if (events_ != nullptr) {
                 events_->onError("detector", det.error().message);
@@ -881,48 +849,112 @@ void Pipeline::detectionLoop() {
             continue;
         }
         if (events_ != nullptr) {
-            events_->onDetection(boxes, job.snapshot.epoch(), latency_ms);
+            events_->onDetection(state.boxes, state.job.snapshot.epoch(), latency_ms);
         }
-        if (!job.snapshot.valid()) {
-            continue;
-        }
-        {
-            const std::lock_guard lock(report_mutex_);
-            if (job.snapshot.epoch() != report_.epoch) {
-                continue;  // the map this frame belongs to is gone
-            }
-        }
-        if (job.snapshot.epoch() != estimator_epoch) {
-            estimator.reset();
-            estimator_epoch = job.snapshot.epoch();
-        }
-        const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
-        const std::int64_t update_start_ns = monotonicNowNs();
-        const core::UpdateStats u =
-            estimator.update(job.snapshot.view(), std::span(dets.data(), n), records);
-        const std::int64_t publish_start_ns = monotonicNowNs();
-        const auto log_p = estimator.posterior().logDensity();
-        for (std::size_t j = 0; j < log_p.size() && j < log_p_.size(); ++j) {
-            log_p_[j] = static_cast<double>(log_p[j]);
-        }
-        const core::ScaleSummary summary = estimator.summary();
-        collectObjects(estimator, summary, objects_);
-        publishUpdate(summary, job.snapshot.epoch(), job.snapshot.frameId(),
-                      job.snapshot.timestampNs(), u.observations, static_cast<int>(n),
-                      std::span(records.data(), static_cast<std::size_t>(u.records_written)),
-                      std::span(dets.data(), n));
-        const std::int64_t publish_end_ns = monotonicNowNs();
-        {
-            const std::lock_guard lock(report_mutex_);
-            status_.timing.scale_update.add(msBetween(update_start_ns, publish_start_ns));
-            status_.timing.scale_publish.add(msBetween(publish_start_ns, publish_end_ns));
-        }
+        updateScale(state);
     }
     if (!stop_.load() && config_.source.at_end == AtEnd::kExit) {
         // Everything the source gave was tracked and detected: done.
         publishStatus(true);
         finished_.store(true);
     }
+}
+
+// Waits for the tracking thread's next job and takes it, with a SIGHUP
+// reload if one waits; false when stopping or when tracking ended and no
+// job is left.
+bool Pipeline::takeJob(DetectionState& state) {
+    std::unique_lock lock(job_mutex_);
+    job_ready_.wait(lock, [&] { return stop_.load() || pending_full_ || tracking_done_; });
+    if (stop_.load() || (!pending_full_ && tracking_done_)) {
+        return false;
+    }
+    std::swap(state.job.snapshot, pending_.snapshot);
+    std::swap(state.job.image, pending_.image);
+    state.job.t_ns = pending_.t_ns;
+    pending_full_ = false;
+    if (reload_priors_) {
+        if (auto ok = estimator_->setPriors(std::move(*reload_priors_));
+            !ok && events_ != nullptr) {
+            // The old priors stay; the evidence is kept either way.
+            events_->onError("priors reload", ok.error().message);
+        }
+        reload_priors_.reset();
+    }
+    if (reload_detector_) {
+        detector_ = std::move(reload_detector_);
+        state.dets.resize(
+            static_cast<std::size_t>(std::max(1, config_.pipeline.detector.max_detections)));
+    }
+    return true;
+}
+
+// The detector's latency and timing into status_; a failing detector is a
+// fault clients see (cleared by its next success).
+void Pipeline::recordDetectorRun(DetectionState& state, const std::optional<core::Error>& error,
+                                 double latency_ms) {
+    ++state.runs;
+    state.latency_sum_ms += latency_ms;
+    state.latency_max_ms = std::max(state.latency_max_ms, latency_ms);
+    const std::lock_guard lock(report_mutex_);
+    status_.detections_run = state.runs;
+    status_.detector_latency_ms_last = latency_ms;
+    status_.detector_latency_ms_mean = state.latency_sum_ms / static_cast<double>(state.runs);
+    status_.detector_latency_ms_max = state.latency_max_ms;
+    if (!error) {
+        // The detector's own split of the call (a detector that does not
+        // measure a part reports 0 for it).
+        status_.timing.detect_pre.add(state.boxes.timing.pre_ms);
+        status_.timing.detect_forward.add(state.boxes.timing.forward_ms);
+        status_.timing.detect_post.add(state.boxes.timing.post_ms);
+    }
+    const bool had_fault = !detector_fault_.empty();
+    if (error) {
+        detector_fault_ = "detector: " + error->message;
+    } else {
+        detector_fault_.clear();
+    }
+    if (had_fault != !detector_fault_.empty()) {
+        publishLocked({}, {});
+    }
+}
+
+// The job's detections into the estimator of its map, and the result out.
+void Pipeline::updateScale(DetectionState& state) {
+    const core::slam::SlamSnapshot& snapshot = state.job.snapshot;
+    if (!snapshot.valid()) {
+        return;
+    }
+    {
+        const std::lock_guard lock(report_mutex_);
+        if (snapshot.epoch() != report_.epoch) {
+            return;  // the map this frame belongs to is gone
+        }
+    }
+    auto& estimator = *estimator_;
+    if (snapshot.epoch() != state.estimator_epoch) {
+        estimator.reset();
+        state.estimator_epoch = snapshot.epoch();
+    }
+    const std::size_t n = drivers::detector::toEstimatorDetections(state.boxes, state.dets);
+    const std::int64_t update_start_ns = monotonicNowNs();
+    const core::UpdateStats u =
+        estimator.update(snapshot.view(), std::span(state.dets.data(), n), state.records);
+    const std::int64_t publish_start_ns = monotonicNowNs();
+    const auto log_p = estimator.posterior().logDensity();
+    for (std::size_t j = 0; j < log_p.size() && j < log_p_.size(); ++j) {
+        log_p_[j] = static_cast<double>(log_p[j]);
+    }
+    const core::ScaleSummary summary = estimator.summary();
+    collectObjects(estimator, summary, objects_);
+    publishUpdate(summary, snapshot.epoch(), snapshot.frameId(), snapshot.timestampNs(),
+                  u.observations, static_cast<int>(n),
+                  std::span(state.records.data(), static_cast<std::size_t>(u.records_written)),
+                  std::span(state.dets.data(), n));
+    const std::int64_t publish_end_ns = monotonicNowNs();
+    const std::lock_guard lock(report_mutex_);
+    status_.timing.scale_update.add(msBetween(update_start_ns, publish_start_ns));
+    status_.timing.scale_publish.add(msBetween(publish_start_ns, publish_end_ns));
 }
 
 void Pipeline::publishStatus(bool force) {

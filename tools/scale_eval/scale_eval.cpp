@@ -12,6 +12,7 @@
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/scale/likelihood.h>
 #include <scaled/core/slam/ekf_slam.h>
+#include <scaled/daemon/frame_step.h>
 #include <scaled/drivers/dataset/depth_image.h>
 #include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
@@ -294,6 +295,454 @@ std::optional<double> truthScale(std::span<const Vec3> est, std::span<const Vec3
     return static_cast<double>(a->scale);
 }
 
+namespace {
+
+// Distance errors between camera positions delta frames apart, both after
+// the converged update and in its epoch, with the estimate current at the
+// later one.
+DistanceErrors distanceErrorsAfter(const EvalResult& r, std::size_t converged_update,
+                                   const EvalOptions& options) {
+    const std::int64_t from_frame = r.updates[converged_update].frame;
+    const int epoch = r.updates[converged_update].epoch;
+    std::vector<double> abs_m;
+    std::vector<double> rel;
+    const auto delta = static_cast<std::size_t>(options.distance_delta_frames);
+    for (std::size_t j = delta; j < r.frame_rows.size(); ++j) {
+        const auto& a = r.frame_rows[j - delta];
+        const auto& b = r.frame_rows[j];
+        if (!a.has_position || !b.has_position || a.frame < from_frame || a.epoch != epoch ||
+            b.epoch != epoch || b.scale.state == core::ScaleState::kNoData) {
+            continue;
+        }
+        const double gt_dist = (b.p_gt - a.p_gt).norm();
+        if (gt_dist < options.min_distance_m) {
+            continue;
+        }
+        const double est_dist =
+            static_cast<double>(b.scale.map) * static_cast<double>((b.p_map - a.p_map).norm());
+        abs_m.push_back(std::abs(est_dist - gt_dist));
+        rel.push_back(std::abs(est_dist / gt_dist - 1));
+    }
+    return summariseDistances(abs_m, rel);
+}
+
+// One scale-eval run over a dataset: the daemon's frame step (frame_step.h)
+// and, on the frames it hands to the detector, the detector and the
+// estimator run synchronously; ground truth and the rows of the report
+// around them.
+class EvalRun {
+public:
+    EvalRun(drivers::source::FrameSource& source, drivers::detector::ObjectDetector& detector,
+            const core::PriorTable& priors, const EvalOptions& options,
+            drivers::vision::MonoTracker& tracker, core::ScaleEstimator& estimator,
+            const drivers::imu::MapGravitySelector& gravity, drivers::imu::GyroFeed& gyro_feed)
+        : source_(source),
+          detector_(detector),
+          priors_(priors),
+          options_(options),
+          config_(options.config),
+          tracker_(tracker),
+          estimator_(estimator),
+          gravity_(gravity),
+          gyro_feed_(gyro_feed),
+          step_(tracker),
+          dets_(static_cast<std::size_t>(options.config.detector.max_detections)),
+          records_(4096),
+          log_l_(estimator.posterior().grid().size()) {}
+
+    [[nodiscard]] core::Status run(std::size_t end, EvalResult& r);
+
+private:
+    [[nodiscard]] core::Status evaluateFrame(const drivers::source::Frame& frame, EvalResult& r);
+    void recordTruth(const drivers::source::Frame& frame, FrameRow& row, EvalResult& r);
+    [[nodiscard]] core::Status detectAndUpdate(const drivers::source::Frame& frame,
+                                               const FrameRow& row, EvalResult& r);
+    [[nodiscard]] core::FrameSnapshot snapshotOf(const drivers::source::Frame& frame);
+    void appendObjects(const UpdateRow& up, EvalResult& r) const;
+    void appendObservations(const UpdateRow& up, const core::UpdateStats& u, EvalResult& r);
+    void appendDepthErrors(const drivers::source::Frame& frame, const UpdateRow& up, EvalResult& r);
+    void endMap(EvalResult& r);
+    void summarise(EvalResult& r);
+
+    drivers::source::FrameSource& source_;
+    drivers::detector::ObjectDetector& detector_;
+    const core::PriorTable& priors_;
+    const EvalOptions& options_;
+    const daemon::PipelineConfig& config_;
+    drivers::vision::MonoTracker& tracker_;
+    core::ScaleEstimator& estimator_;
+    const drivers::imu::MapGravitySelector& gravity_;
+    drivers::imu::GyroFeed& gyro_feed_;
+    daemon::FrameStep step_;
+
+    std::vector<core::slam::MapPoint> points_;
+    std::vector<core::MapFeature> features_;
+    std::vector<core::Detection> dets_;
+    std::vector<core::ObservationRecord> records_;
+    std::vector<Scalar> log_l_;
+    drivers::detector::DetectionResult boxes_;
+    std::size_t detections_ = 0;  // dets_ used by the last update
+    std::size_t curve_step_ = 1;
+
+    // Per epoch: the trajectory, its frame rows, and the baselines.
+    Track track_;
+    std::optional<double> epoch_baseline_constant_;
+    std::optional<double> epoch_baseline_single_;
+    double epoch_t0_s_ = 0;
+
+    // Depth errors per update, filtered to the converged updates at the end.
+    std::vector<std::pair<std::size_t, double>> depth_rel_;
+    std::vector<std::pair<std::size_t, double>> depth_abs_;
+
+    double tracker_ms_ = 0;
+    double detector_ms_ = 0;
+    double estimator_ms_ = 0;
+};
+
+core::Status EvalRun::run(std::size_t end, EvalResult& r) {
+    const auto& grid = estimator_.posterior().grid();
+    curve_step_ =
+        std::max<std::size_t>(1, (grid.size() + static_cast<std::size_t>(options_.curve_bins) - 1) /
+                                     static_cast<std::size_t>(options_.curve_bins));
+    if (options_.keep_curves) {
+        for (std::size_t j = 0; j < grid.size(); j += curve_step_) {
+            r.curve_d.push_back(static_cast<double>(grid.d(j)));
+        }
+    }
+    r.gyro_source = gyro_feed_.source();
+
+    drivers::source::Frame frame;
+    const std::size_t stride = std::max<std::size_t>(options_.selection.stride, 1);
+    std::optional<std::string> first_read_error;
+    for (std::size_t i = options_.first_frame; i < end; i += stride) {
+        auto got = drivers::source::readSelected(source_, options_.selection, i, frame);
+        if (!got) {
+            // A frame that cannot be read is skipped (the reader moved past it);
+            // the tracker sees a longer frame gap.
+            ++r.unreadable_frames;
+            if (!first_read_error) {
+                first_read_error = got.error().message;
+            }
+            continue;
+        }
+        if (!*got) {
+            break;
+        }
+        if (auto s = evaluateFrame(frame, r); !s) {
+            return s;
+        }
+        if (options_.progress) {
+            options_.progress(i + 1 - options_.first_frame, end - options_.first_frame,
+                              r.frame_rows.back().scale);
+        }
+    }
+    if (r.frames == 0) {
+        std::string why = "no frame could be read";
+        if (first_read_error) {
+            why += " (" + std::to_string(r.unreadable_frames) +
+                   " unreadable; the first: " + *first_read_error + ")";
+        } else {
+            why += " (no frame in the selected range)";
+        }
+        return makeError(ErrorCode::kInvalidArgument, why);
+    }
+    summarise(r);
+    return {};
+}
+
+core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalResult& r) {
+    ++r.frames;
+    const daemon::FrameStepResult step =
+        step_.track(frame, gyro_feed_.forFrame(frame),
+                    [&](const drivers::source::Frame& f) { return gravity_.atMapStart(f); });
+    if (step.gravity != nullptr) {
+        r.gravity_source = step.gravity->source;
+    }
+    tracker_ms_ += step.track_ms;
+    const drivers::vision::TrackStats& stats = step.stats;
+    if (stats.gyro == core::slam::GyroCoverage::kOk) {
+        ++r.gyro_frames;
+    }
+
+    FrameRow row;
+    row.frame = frame.id;
+    row.t_s = static_cast<double>(frame.t_ns) * 1e-9;
+    row.epoch = r.epochs - 1;
+    row.features_measured = stats.inliers + stats.rescued;
+    row.tracked = step.ok && (!stats.new_map || r.frames == 1);
+    if (step.map_started) {
+        epoch_t0_s_ = row.t_s;
+    }
+    if (row.tracked) {
+        ++r.tracked_frames;
+    } else {
+        ++r.tracking_lost_frames;
+    }
+    if (step.ok && frame.T_CtoW_gt) {
+        recordTruth(frame, row, r);
+    }
+    // Synchronous detection on the frames the daemon would hand over.
+    if (step_.detectionDue(step, config_.detection, frame.t_ns)) {
+        if (auto s = detectAndUpdate(frame, row, r); !s) {
+            return s;
+        }
+    }
+    row.scale = estimator_.summary();
+    row.baseline_constant = epoch_baseline_constant_;
+    row.baseline_single = epoch_baseline_single_;
+    r.frame_rows.push_back(row);
+
+    if (stats.relocalised) {
+        ++r.relocalisations;  // back in the same map: same epoch, same evidence
+    }
+    if (step.map_lost) {
+        endMap(r);
+    }
+    return {};
+}
+
+// Ground truth over this epoch's tracked frames.
+void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, EvalResult& r) {
+    const core::slam::EkfSlam& slam = tracker_.filter();
+    r.has_ground_truth = true;
+    track_.est.push_back(slam.pose().p_CinW);
+    track_.gt.push_back(frame.T_CtoW_gt->p_CinW);
+    row.has_position = true;
+    row.p_map = slam.pose().p_CinW;
+    row.p_gt = frame.T_CtoW_gt->p_CinW;
+    track_.t_s.push_back(row.t_s);
+    row.scale_true = truthScale(track_.est, track_.gt, options_.min_truth_path_m);
+    if (options_.truth_geometry) {
+        row.scale_true = 1.0;  // the estimator sees metric poses
+    }
+    const std::size_t w =
+        std::min<std::size_t>(track_.est.size(), static_cast<std::size_t>(options_.window_frames));
+    const std::size_t from = track_.est.size() - w;
+    row.window_full = w == static_cast<std::size_t>(options_.window_frames);
+    row.scale_true_window =
+        options_.truth_geometry
+            ? std::optional<double>(1.0)
+            : truthScale(std::span(track_.est).subspan(from), std::span(track_.gt).subspan(from),
+                         options_.min_truth_path_m);
+    if (!epoch_baseline_constant_ && row.t_s - epoch_t0_s_ >= options_.baseline_seconds) {
+        epoch_baseline_constant_ = truthScale(track_.est, track_.gt, 0);
+        if (!r.baseline_constant_scale) {
+            r.baseline_constant_scale = epoch_baseline_constant_;
+        }
+    }
+}
+
+// The map as the detection thread sees it; with --truth-geometry, metric,
+// true geometry: no map features (the object model needs none), the true
+// camera and gravity.
+core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
+    const core::slam::EkfSlam& slam = tracker_.filter();
+    slam.mapPoints(points_);
+    features_.clear();
+    for (const auto& m : points_) {
+        features_.push_back({m.p_FinW, m.P_FinW});
+    }
+    core::FrameSnapshot snapshot{slam.pose(), slam.upW(), features_, frame.id};
+    if (options_.truth_geometry) {
+        snapshot.features = {};
+        if (frame.T_CtoW_gt && frame.gravity_down_C) {
+            snapshot.pose = *frame.T_CtoW_gt;
+            snapshot.up_W = -(frame.T_CtoW_gt->R_CtoW * *frame.gravity_down_C).normalized();
+        } else {
+            // No truth for this frame: no update from it.
+            snapshot.pose = slam.pose();
+        }
+    }
+    return snapshot;
+}
+
+core::Status EvalRun::detectAndUpdate(const drivers::source::Frame& frame, const FrameRow& row,
+                                      EvalResult& r) {
+    auto t0 = Clock::now();
+    auto det = detector_.detect(frame.color, frame.id, frame.t_ns, boxes_);
+    detector_ms_ += msSince(t0);
+    if (!det) {
+        return makeError(det.error().code,
+                         "frame " + std::to_string(frame.id) + ": " + det.error().message);
+    }
+    detections_ = drivers::detector::toEstimatorDetections(boxes_, dets_);
+    const core::FrameSnapshot snapshot = snapshotOf(frame);
+    t0 = Clock::now();
+    const bool usable = !options_.truth_geometry || (frame.T_CtoW_gt && frame.gravity_down_C);
+    const core::UpdateStats u =
+        usable ? estimator_.update(snapshot, std::span(dets_.data(), detections_), records_)
+               : core::UpdateStats{};
+    estimator_ms_ += msSince(t0);
+
+    UpdateRow up;
+    up.update = static_cast<int>(r.updates.size());
+    up.row = r.frame_rows.size();
+    up.frame = frame.id;
+    up.t_s = row.t_s;
+    up.t_in_map_s = row.t_s - epoch_t0_s_;
+    up.epoch = row.epoch;
+    up.detections = static_cast<int>(detections_);
+    up.observations = u.observations;
+    up.objects_used = u.objects_used;
+    up.views_used = u.views_used;
+    up.information_limit = static_cast<double>(estimator_.informationLimitRelWidth95());
+    up.scale = estimator_.summary();
+    up.scale_true = row.scale_true;
+    up.scale_true_window = row.scale_true_window;
+    appendObjects(up, r);
+    if (!epoch_baseline_single_ && u.observations > 0) {
+        epoch_baseline_single_ = static_cast<double>(up.scale.map);
+        if (!r.baseline_single_scale) {
+            r.baseline_single_scale = epoch_baseline_single_;
+        }
+    }
+    appendObservations(up, u, r);
+    if (options_.keep_curves) {
+        r.posterior_curves.push_back(decimate(estimator_.posterior().logDensity(), curve_step_));
+    }
+    appendDepthErrors(frame, up, r);
+    r.updates.push_back(up);
+    return {};
+}
+
+void EvalRun::appendObjects(const UpdateRow& up, EvalResult& r) const {
+    const core::ObjectEvidence* objs = estimator_.objects();
+    if (objs == nullptr) {
+        return;
+    }
+    for (int k = 0; k < objs->activeCount(); ++k) {
+        const core::ObjectSummary os = objs->summary(k, up.scale);
+        ObjectRow orow;
+        orow.update = up.update;
+        orow.frame = up.frame;
+        orow.id = os.id;
+        orow.class_name =
+            estimator_.priors().priors()[static_cast<std::size_t>(os.class_index)].className();
+        orow.state = core::toString(os.state);
+        orow.detections = os.detections;
+        orow.views_used = os.views_used;
+        orow.local_estimate = static_cast<double>(os.local_estimate);
+        orow.height_m = static_cast<double>(os.height_m);
+        orow.height_lo_m = static_cast<double>(os.height_ci95_m.lo);
+        orow.height_hi_m = static_cast<double>(os.height_ci95_m.hi);
+        orow.anchor = os.p_AinW;
+        orow.anchor_rel_sigma = static_cast<double>(os.anchor_rel_sigma);
+        r.objects.push_back(std::move(orow));
+    }
+}
+
+void EvalRun::appendObservations(const UpdateRow& up, const core::UpdateStats& u, EvalResult& r) {
+    const bool paper = config_.estimator.likelihood.variance_model == core::VarianceModel::kPaper;
+    const auto& grid = estimator_.posterior().grid();
+    for (int k = 0; k < u.records_written; ++k) {
+        const auto& rec = records_[static_cast<std::size_t>(k)];
+        const auto& d = dets_[static_cast<std::size_t>(rec.detection_index)];
+        ObservationRow o;
+        o.update = up.update;
+        o.frame = up.frame;
+        o.class_name = std::string(d.class_name);
+        o.score = static_cast<double>(d.score);
+        o.D = static_cast<double>(rec.D);
+        o.sigma_D = paper ? static_cast<double>(rec.sigma_D_paper)
+                          : std::hypot(static_cast<double>(rec.sigma_D_feature),
+                                       static_cast<double>(rec.sigma_D_box));
+        o.local_estimate = static_cast<double>(rec.local_estimate);
+        o.weight = static_cast<double>(rec.weight);
+        o.object_id = rec.object_id;
+        o.kappa = static_cast<double>(rec.kappa);
+        r.observations.push_back(std::move(o));
+        if (!options_.keep_curves) {
+            continue;
+        }
+        const core::HeightPrior* prior = priors_.find(d.class_name);
+        core::VerticalExtent ext;
+        ext.D = rec.D;
+        ext.sigma_D_paper = rec.sigma_D_paper;
+        ext.sigma_D_feature = rec.sigma_D_feature;
+        ext.sigma_D_box = rec.sigma_D_box;
+        if (prior != nullptr &&
+            core::evaluateLogLikelihood(ext, *prior, grid, config_.estimator.likelihood, log_l_)) {
+            const Scalar top = *std::max_element(log_l_.begin(), log_l_.end());
+            for (auto& v : log_l_) {
+                v -= top;
+            }
+            r.likelihood_curves.push_back(decimate(log_l_, curve_step_));
+        } else {
+            r.likelihood_curves.emplace_back();
+        }
+    }
+}
+
+void EvalRun::appendDepthErrors(const drivers::source::Frame& frame, const UpdateRow& up,
+                                EvalResult& r) {
+    const auto& info = source_.info();
+    if (!frame.depth_path || info.depth_scale_m <= 0 ||
+        up.scale.state == core::ScaleState::kNoData) {
+        return;
+    }
+    if (auto depth = drivers::dataset::loadDepthMetres(frame, info)) {
+        std::vector<double> rel;
+        std::vector<double> abs_m;
+        depthErrors(tracker_.filter(), points_, *depth, static_cast<double>(up.scale.map), rel,
+                    abs_m);
+        for (std::size_t k = 0; k < rel.size(); ++k) {
+            depth_rel_.emplace_back(r.updates.size(), rel[k]);
+            depth_abs_.emplace_back(r.updates.size(), abs_m[k]);
+        }
+    }
+}
+
+// Lost or diverged (the frame step reset the tracker): the next frame starts
+// a new map with a new, unrelated scale. The evidence about the old one is void.
+void EvalRun::endMap(EvalResult& r) {
+    estimator_.reset();
+    ++r.epochs;
+    track_ = Track{};
+    epoch_baseline_constant_.reset();
+    epoch_baseline_single_.reset();
+}
+
+void EvalRun::summarise(EvalResult& r) {
+    r.ms_per_frame = (tracker_ms_ + detector_ms_ + estimator_ms_) / static_cast<double>(r.frames);
+    r.tracker_ms_per_frame = tracker_ms_ / static_cast<double>(r.frames);
+    if (!r.updates.empty()) {
+        r.detector_ms_per_update = detector_ms_ / static_cast<double>(r.updates.size());
+        r.estimator_ms_per_update = estimator_ms_ / static_cast<double>(r.updates.size());
+    }
+    r.converged_update = convergedAt(
+        r.updates, static_cast<double>(config_.estimator.posterior.converged_rel_width));
+    if (!options_.truth_geometry) {
+        r.metric = metricTrajectory(r.frame_rows, options_.min_distance_m);
+    }
+    if (r.converged_update) {
+        r.distance = distanceErrorsAfter(r, *r.converged_update, options_);
+        std::vector<double> drel;
+        std::vector<double> dabs;
+        for (std::size_t k = 0; k < depth_rel_.size(); ++k) {
+            if (depth_rel_[k].first >= *r.converged_update) {
+                drel.push_back(depth_rel_[k].second);
+                dabs.push_back(depth_abs_[k].second);
+            }
+        }
+        r.depth.features = static_cast<int>(drel.size());
+        if (!drel.empty()) {
+            r.depth.median_rel = median(drel);
+            r.depth.median_abs_m = median(dabs);
+        }
+    }
+    if (source_.info().depth_scale_m <= 0) {
+        r.depth.note = "the dataset has no depth images";
+    } else if (!r.converged_update) {
+        r.depth.note = "not converged: no scale to check against depth";
+    } else {
+        r.depth.note =
+            "measured features in view at the converged updates; the depth image is read at the "
+            "feature's colour pixel (exact only where depth is registered to colour)";
+    }
+}
+
+}  // namespace
+
 Result<EvalResult> evaluate(drivers::source::FrameSource& source,
                             drivers::detector::ObjectDetector& detector,
                             const core::PriorTable& priors, const EvalOptions& options) {
@@ -326,364 +775,19 @@ Result<EvalResult> evaluate(drivers::source::FrameSource& source,
     if (auto s = source.seek(options.first_frame); !s) {
         return s.error();
     }
-
-    EvalResult r;
-    r.dataset = info.name;
-    const auto& grid = estimator->posterior().grid();
-    const std::size_t step =
-        std::max<std::size_t>(1, (grid.size() + static_cast<std::size_t>(options.curve_bins) - 1) /
-                                     static_cast<std::size_t>(options.curve_bins));
-    if (options.keep_curves) {
-        for (std::size_t j = 0; j < grid.size(); j += step) {
-            r.curve_d.push_back(static_cast<double>(grid.d(j)));
-        }
-    }
-
-    std::vector<core::slam::MapPoint> points;
-    std::vector<core::MapFeature> features;
-    std::vector<core::Detection> dets(static_cast<std::size_t>(config.detector.max_detections));
-    std::vector<core::ObservationRecord> records(4096);
-    std::vector<Scalar> log_l(grid.size());
-    drivers::detector::DetectionResult boxes;
-
-    // Per epoch: the trajectory, its frame rows, and the baselines.
-    Track track;
-    std::optional<double> epoch_baseline_constant;
-    std::optional<double> epoch_baseline_single;
-    double epoch_t0_s = 0;
-    int frames_in_map = 0;
     const auto gravity = drivers::imu::MapGravitySelector::forDataset(info.dir);
     if (!gravity) {
         return gravity.error();
     }
-    bool need_gravity = true;
     auto gyro_feed = drivers::imu::GyroFeed::create(*gravity, options.gyro_sim);
     if (!gyro_feed) {
         return gyro_feed.error();
     }
-    r.gyro_source = gyro_feed->source();
-
-    // Depth errors per update, filtered to the converged updates at the end.
-    std::vector<std::pair<std::size_t, double>> depth_rel;
-    std::vector<std::pair<std::size_t, double>> depth_abs;
-
-    double tracker_ms = 0;
-    double detector_ms = 0;
-    double estimator_ms = 0;
-
-    drivers::source::Frame frame;
-    const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
-    std::optional<std::string> first_read_error;
-    for (std::size_t i = options.first_frame; i < end; i += stride) {
-        auto got = drivers::source::readSelected(source, options.selection, i, frame);
-        if (!got) {
-            // A frame that cannot be read is skipped (the reader moved past it);
-            // the tracker sees a longer frame gap.
-            ++r.unreadable_frames;
-            if (!first_read_error) {
-                first_read_error = got.error().message;
-            }
-            continue;
-        }
-        if (!*got) {
-            break;
-        }
-        ++r.frames;
-        if (need_gravity) {
-            const drivers::imu::MapGravity g = gravity->atMapStart(frame);
-            r.gravity_source = g.source;
-            tracker->setGravityDownC(g.down_C);
-            need_gravity = false;
-        }
-        auto t0 = Clock::now();
-        const drivers::vision::TrackStats stats =
-            tracker->processFrame(frame.t_ns, frame.gray, gyro_feed->forFrame(frame));
-        tracker_ms += msSince(t0);
-        if (stats.gyro == core::slam::GyroCoverage::kOk) {
-            ++r.gyro_frames;
-        }
-
-        FrameRow row;
-        row.frame = frame.id;
-        row.t_s = static_cast<double>(frame.t_ns) * 1e-9;
-        row.epoch = r.epochs - 1;
-        row.features_measured = stats.inliers + stats.rescued;
-        const bool ok = stats.health == core::slam::SlamHealth::kOk;
-        row.tracked = ok && (!stats.new_map || r.frames == 1);
-        if (ok && stats.new_map) {
-            frames_in_map = 0;
-            epoch_t0_s = row.t_s;
-        }
-        if (ok) {
-            ++frames_in_map;
-        }
-        if (row.tracked) {
-            ++r.tracked_frames;
-        } else {
-            ++r.tracking_lost_frames;
-        }
-        const core::slam::EkfSlam& slam = tracker->filter();
-
-        // Ground truth over this epoch's tracked frames.
-        if (ok && frame.T_CtoW_gt) {
-            r.has_ground_truth = true;
-            track.est.push_back(slam.pose().p_CinW);
-            track.gt.push_back(frame.T_CtoW_gt->p_CinW);
-            row.has_position = true;
-            row.p_map = slam.pose().p_CinW;
-            row.p_gt = frame.T_CtoW_gt->p_CinW;
-            track.t_s.push_back(row.t_s);
-            row.scale_true = truthScale(track.est, track.gt, options.min_truth_path_m);
-            if (options.truth_geometry) {
-                row.scale_true = 1.0;  // the estimator sees metric poses
-            }
-            const std::size_t w = std::min<std::size_t>(
-                track.est.size(), static_cast<std::size_t>(options.window_frames));
-            const std::size_t from = track.est.size() - w;
-            row.window_full = w == static_cast<std::size_t>(options.window_frames);
-            row.scale_true_window =
-                options.truth_geometry
-                    ? std::optional<double>(1.0)
-                    : truthScale(std::span(track.est).subspan(from),
-                                 std::span(track.gt).subspan(from), options.min_truth_path_m);
-            if (!epoch_baseline_constant && row.t_s - epoch_t0_s >= options.baseline_seconds) {
-                epoch_baseline_constant = truthScale(track.est, track.gt, 0);
-                if (!r.baseline_constant_scale) {
-                    r.baseline_constant_scale = epoch_baseline_constant;
-                }
-            }
-        }
-
-        // Synchronous detection on every Nth frame of the map.
-        if (ok && frames_in_map > 1 && (frames_in_map - 1) % config.detection.every_frames == 0) {
-            t0 = Clock::now();
-            auto det = detector.detect(frame.color, frame.id, frame.t_ns, boxes);
-            detector_ms += msSince(t0);
-            if (!det) {
-                return makeError(det.error().code,
-                                 "frame " + std::to_string(frame.id) + ": " + det.error().message);
-            }
-            const std::size_t n = drivers::detector::toEstimatorDetections(boxes, dets);
-            slam.mapPoints(points);
-            features.clear();
-            for (const auto& m : points) {
-                features.push_back({m.p_FinW, m.P_FinW});
-            }
-            core::FrameSnapshot snapshot{slam.pose(), slam.upW(), features, frame.id};
-            if (options.truth_geometry) {
-                // Metric, true geometry: no map features (the object model
-                // needs none), the true camera and gravity.
-                snapshot.features = {};
-                if (frame.T_CtoW_gt && frame.gravity_down_C) {
-                    snapshot.pose = *frame.T_CtoW_gt;
-                    snapshot.up_W = -(frame.T_CtoW_gt->R_CtoW * *frame.gravity_down_C).normalized();
-                } else {
-                    // No truth for this frame: no update from it.
-                    snapshot.pose = slam.pose();
-                }
-            }
-            t0 = Clock::now();
-            const bool usable =
-                !options.truth_geometry || (frame.T_CtoW_gt && frame.gravity_down_C);
-            const core::UpdateStats u =
-                usable ? estimator->update(snapshot, std::span(dets.data(), n), records)
-                       : core::UpdateStats{};
-            estimator_ms += msSince(t0);
-
-            UpdateRow up;
-            up.update = static_cast<int>(r.updates.size());
-            up.row = r.frame_rows.size();
-            up.frame = frame.id;
-            up.t_s = row.t_s;
-            up.t_in_map_s = row.t_s - epoch_t0_s;
-            up.epoch = row.epoch;
-            up.detections = static_cast<int>(n);
-            up.observations = u.observations;
-            up.objects_used = u.objects_used;
-            up.views_used = u.views_used;
-            up.information_limit = static_cast<double>(estimator->informationLimitRelWidth95());
-            up.scale = estimator->summary();
-            up.scale_true = row.scale_true;
-            up.scale_true_window = row.scale_true_window;
-            if (const core::ObjectEvidence* objs = estimator->objects()) {
-                for (int k = 0; k < objs->activeCount(); ++k) {
-                    const core::ObjectSummary os = objs->summary(k, up.scale);
-                    ObjectRow orow;
-                    orow.update = up.update;
-                    orow.frame = frame.id;
-                    orow.id = os.id;
-                    orow.class_name = estimator->priors()
-                                          .priors()[static_cast<std::size_t>(os.class_index)]
-                                          .className();
-                    orow.state = core::toString(os.state);
-                    orow.detections = os.detections;
-                    orow.views_used = os.views_used;
-                    orow.local_estimate = static_cast<double>(os.local_estimate);
-                    orow.height_m = static_cast<double>(os.height_m);
-                    orow.height_lo_m = static_cast<double>(os.height_ci95_m.lo);
-                    orow.height_hi_m = static_cast<double>(os.height_ci95_m.hi);
-                    orow.anchor = os.p_AinW;
-                    orow.anchor_rel_sigma = static_cast<double>(os.anchor_rel_sigma);
-                    r.objects.push_back(std::move(orow));
-                }
-            }
-            if (!epoch_baseline_single && u.observations > 0) {
-                epoch_baseline_single = static_cast<double>(up.scale.map);
-                if (!r.baseline_single_scale) {
-                    r.baseline_single_scale = epoch_baseline_single;
-                }
-            }
-            const bool paper =
-                config.estimator.likelihood.variance_model == core::VarianceModel::kPaper;
-            for (int k = 0; k < u.records_written; ++k) {
-                const auto& rec = records[static_cast<std::size_t>(k)];
-                const auto& d = dets[static_cast<std::size_t>(rec.detection_index)];
-                ObservationRow o;
-                o.update = up.update;
-                o.frame = frame.id;
-                o.class_name = std::string(d.class_name);
-                o.score = static_cast<double>(d.score);
-                o.D = static_cast<double>(rec.D);
-                o.sigma_D = paper ? static_cast<double>(rec.sigma_D_paper)
-                                  : std::hypot(static_cast<double>(rec.sigma_D_feature),
-                                               static_cast<double>(rec.sigma_D_box));
-                o.local_estimate = static_cast<double>(rec.local_estimate);
-                o.weight = static_cast<double>(rec.weight);
-                o.object_id = rec.object_id;
-                o.kappa = static_cast<double>(rec.kappa);
-                r.observations.push_back(std::move(o));
-                if (options.keep_curves) {
-                    const core::HeightPrior* prior = priors.find(d.class_name);
-                    core::VerticalExtent ext;
-                    ext.D = rec.D;
-                    ext.sigma_D_paper = rec.sigma_D_paper;
-                    ext.sigma_D_feature = rec.sigma_D_feature;
-                    ext.sigma_D_box = rec.sigma_D_box;
-                    if (prior != nullptr &&
-                        core::evaluateLogLikelihood(ext, *prior, grid, config.estimator.likelihood,
-                                                    log_l)) {
-                        const Scalar top = *std::max_element(log_l.begin(), log_l.end());
-                        for (auto& v : log_l) {
-                            v -= top;
-                        }
-                        r.likelihood_curves.push_back(decimate(log_l, step));
-                    } else {
-                        r.likelihood_curves.emplace_back();
-                    }
-                }
-            }
-            if (options.keep_curves) {
-                r.posterior_curves.push_back(decimate(estimator->posterior().logDensity(), step));
-            }
-            if (frame.depth_path && info.depth_scale_m > 0 &&
-                up.scale.state != core::ScaleState::kNoData) {
-                if (auto depth = drivers::dataset::loadDepthMetres(frame, info)) {
-                    std::vector<double> rel;
-                    std::vector<double> abs_m;
-                    depthErrors(slam, points, *depth, static_cast<double>(up.scale.map), rel,
-                                abs_m);
-                    for (std::size_t k = 0; k < rel.size(); ++k) {
-                        depth_rel.emplace_back(r.updates.size(), rel[k]);
-                        depth_abs.emplace_back(r.updates.size(), abs_m[k]);
-                    }
-                }
-            }
-            r.updates.push_back(up);
-        }
-        row.scale = estimator->summary();
-        row.baseline_constant = epoch_baseline_constant;
-        row.baseline_single = epoch_baseline_single;
-        r.frame_rows.push_back(row);
-
-        if (stats.relocalised) {
-            ++r.relocalisations;  // back in the same map: same epoch, same evidence
-        }
-        if (!ok && stats.health != core::slam::SlamHealth::kRelocalising) {
-            // Lost or diverged: the next frame starts a new map with a new,
-            // unrelated scale. The evidence about the old one is void.
-            tracker->reset();
-            estimator->reset();
-            need_gravity = true;
-            ++r.epochs;
-            track = Track{};
-            epoch_baseline_constant.reset();
-            epoch_baseline_single.reset();
-            frames_in_map = 0;
-        }
-        if (options.progress) {
-            options.progress(i + 1 - options.first_frame, end - options.first_frame,
-                             r.frame_rows.back().scale);
-        }
-    }
-    if (r.frames == 0) {
-        std::string why = "no frame could be read";
-        if (first_read_error) {
-            why += " (" + std::to_string(r.unreadable_frames) +
-                   " unreadable; the first: " + *first_read_error + ")";
-        } else {
-            why += " (no frame in the selected range)";
-        }
-        return makeError(ErrorCode::kInvalidArgument, why);
-    }
-    r.ms_per_frame = (tracker_ms + detector_ms + estimator_ms) / static_cast<double>(r.frames);
-    r.tracker_ms_per_frame = tracker_ms / static_cast<double>(r.frames);
-    if (!r.updates.empty()) {
-        r.detector_ms_per_update = detector_ms / static_cast<double>(r.updates.size());
-        r.estimator_ms_per_update = estimator_ms / static_cast<double>(r.updates.size());
-    }
-    r.converged_update =
-        convergedAt(r.updates, static_cast<double>(config.estimator.posterior.converged_rel_width));
-    if (!options.truth_geometry) {
-        r.metric = metricTrajectory(r.frame_rows, options.min_distance_m);
-    }
-
-    if (r.converged_update) {
-        const std::int64_t from_frame = r.updates[*r.converged_update].frame;
-        const int epoch = r.updates[*r.converged_update].epoch;
-        // Distance errors between camera positions delta frames apart, both
-        // after convergence, with the estimate current at the later one.
-        std::vector<double> abs_m;
-        std::vector<double> rel;
-        const auto delta = static_cast<std::size_t>(options.distance_delta_frames);
-        for (std::size_t j = delta; j < r.frame_rows.size(); ++j) {
-            const auto& a = r.frame_rows[j - delta];
-            const auto& b = r.frame_rows[j];
-            if (!a.has_position || !b.has_position || a.frame < from_frame || a.epoch != epoch ||
-                b.epoch != epoch || b.scale.state == core::ScaleState::kNoData) {
-                continue;
-            }
-            const double gt_dist = (b.p_gt - a.p_gt).norm();
-            if (gt_dist < options.min_distance_m) {
-                continue;
-            }
-            const double est_dist =
-                static_cast<double>(b.scale.map) * static_cast<double>((b.p_map - a.p_map).norm());
-            abs_m.push_back(std::abs(est_dist - gt_dist));
-            rel.push_back(std::abs(est_dist / gt_dist - 1));
-        }
-        r.distance = summariseDistances(abs_m, rel);
-        std::vector<double> drel;
-        std::vector<double> dabs;
-        for (std::size_t k = 0; k < depth_rel.size(); ++k) {
-            if (depth_rel[k].first >= *r.converged_update) {
-                drel.push_back(depth_rel[k].second);
-                dabs.push_back(depth_abs[k].second);
-            }
-        }
-        r.depth.features = static_cast<int>(drel.size());
-        if (!drel.empty()) {
-            r.depth.median_rel = median(drel);
-            r.depth.median_abs_m = median(dabs);
-        }
-    }
-    if (info.depth_scale_m <= 0) {
-        r.depth.note = "the dataset has no depth images";
-    } else if (!r.converged_update) {
-        r.depth.note = "not converged: no scale to check against depth";
-    } else {
-        r.depth.note =
-            "measured features in view at the converged updates; the depth image is read at the "
-            "feature's colour pixel (exact only where depth is registered to colour)";
+    EvalResult r;
+    r.dataset = info.name;
+    EvalRun run(source, detector, priors, options, *tracker, *estimator, *gravity, *gyro_feed);
+    if (auto s = run.run(end, r); !s) {
+        return s.error();
     }
     return r;
 }

@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include <scaled/core/geometry/trajectory_alignment.h>
+#include <scaled/daemon/frame_step.h>
 #include <scaled/drivers/imu/gyro_feed.h>
 #include <scaled/drivers/imu/map_gravity.h>
 
@@ -93,7 +94,7 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
     double ms_sum = 0;
     double measured_sum = 0;
     double map_sum = 0;
-    bool need_gravity = true;
+    daemon::FrameStep step(*tracker);
     const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
     for (std::size_t i = options.first_frame; i < end; i += stride) {
         auto got = drivers::source::readSelected(source, options.selection, i, frame);
@@ -103,27 +104,20 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
         if (!*got) {
             break;
         }
-        if (need_gravity) {
-            // The vertical in the frame of the camera that starts the map.
-            const drivers::imu::MapGravity g = gravity->atMapStart(frame);
-            result.gravity_source = g.source;
-            tracker->setGravityDownC(g.down_C);
-            need_gravity = false;
+        const daemon::FrameStepResult r =
+            step.track(frame, gyro_feed->forFrame(frame),
+                       [&](const drivers::source::Frame& f) { return gravity->atMapStart(f); });
+        if (r.gravity != nullptr) {
+            result.gravity_source = r.gravity->source;
         }
-        const auto t0 = std::chrono::steady_clock::now();
-        const core::slam::ImuWindow* imu = gyro_feed->forFrame(frame);
-        const drivers::vision::TrackStats stats =
-            tracker->processFrame(frame.t_ns, frame.gray, imu);
+        const drivers::vision::TrackStats& stats = r.stats;
         if (stats.gyro == core::slam::GyroCoverage::kOk) {
             ++result.gyro_frames;
         }
-        const double ms =
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                .count();
-        ms_sum += ms;
-        result.ms_per_frame_max = std::max(result.ms_per_frame_max, ms);
+        ms_sum += r.track_ms;
+        result.ms_per_frame_max = std::max(result.ms_per_frame_max, r.track_ms);
         ++result.frames;
-        if (stats.health == core::slam::SlamHealth::kOk) {
+        if (r.ok) {
             // A frame that starts a replacement map was not tracked.
             if (!stats.new_map || result.frames == 1) {
                 ++result.tracked_frames;
@@ -145,15 +139,13 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
             if (stats.relocalised) {
                 ++result.relocalisations;
             }
-        } else if (stats.health == core::slam::SlamHealth::kRelocalising) {
-            // Lost, the map kept: the tracker looks for the camera in it.
-            ++result.relocalising_frames;
-        } else {
+        } else if (r.map_lost) {
             // Lost or diverged: the next frame starts a new map (new scale).
             ++result.reinitialisations;
-            tracker->reset();
-            need_gravity = true;
             segments.emplace_back();
+        } else {
+            // Lost, the map kept: the tracker looks for the camera in it.
+            ++result.relocalising_frames;
         }
         if (options.progress) {
             options.progress(i + 1 - options.first_frame, end - options.first_frame, stats);

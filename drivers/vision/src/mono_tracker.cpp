@@ -20,7 +20,7 @@ namespace slam = core::slam;
 
 namespace {
 
-// Consecutive stage times of one frame (TrackStats::*_us): each next() reads
+// Consecutive stage times of one frame (TrackStats::stage_us): each next() reads
 // the clock once and returns the microseconds since the previous read, so the
 // stages tile the frame without gaps. No allocation; about 20 ns per read.
 class StageLap {
@@ -626,7 +626,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         stats.features = static_cast<int>(slam_.features().size());
         stats.visible = stats.added;
         stats.health = slam_.health();
-        stats.map_us = lap.next();
+        stats.stage_us.map = lap.next();
         return stats;
     }
     pyramid_built_ = 0;
@@ -664,7 +664,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
             rate = gyro.coverage == slam::GyroCoverage::kOk ? &gyro.rate : nullptr;
         }
         const slam::SlamHealth predicted = slam_.predict(t_ns, rate);
-        stats.predict_us = lap.next();
+        stats.stage_us.predict = lap.next();
         if (predicted != slam::SlamHealth::kOk) {
             stats.health = predicted;
             stats.gyro.reset();  // nothing was predicted, with the gyro or without
@@ -704,16 +704,16 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
                 warpTemplate(a->patch, A);
             }
         }
-        stats.search_us += lap.next();
+        stats.stage_us.search += lap.next();
         const auto m = level == 0 ? matcher_.match(gray, a->patch, pr.h_px, pr.S, config_.match)
                                   : matchCoarseToFine(gray, level, *a, A, pr.h_px, pr.S, stats);
-        stats.match_us += lap.next();
+        stats.stage_us.match += lap.next();
         if (m) {
             stats.search_evaluations += m->evaluated;
             matches_.push_back({i, m->px});
         }
     }
-    stats.search_us += lap.next();
+    stats.stage_us.search += lap.next();
     const auto report = slam_.update(matches_);
     if (!report.bad_frame) {
         last_good_pose_ = slam_.pose();  // where relocalisation's guided search looks
@@ -724,7 +724,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
             updateGyroBias(*rate, R_prev_CtoW, t_prev_ns, t_ns);
         }
     }
-    stats.update_us = lap.next();
+    stats.stage_us.update = lap.next();
     stats.predicted = report.predicted;
     stats.matched = report.matched;
     stats.inliers = report.low_innovation_inliers;
@@ -746,7 +746,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         stats.added = addFeatures(gray, config_.slam.min_visible - stats.visible, false);
     }
     stats.features = static_cast<int>(slam_.features().size());
-    stats.map_us = lap.next();
+    stats.stage_us.map = lap.next();
     return stats;
 }
 

@@ -270,11 +270,11 @@ TEST(LogService, EventLinesAreJsonWithTheirFields) {
                            .tracked = 12,
                            .ms = 4.5,
                            .dropped = 3,
-                           .predict_us = 41.25,
-                           .search_us = 310.5,
-                           .match_us = 1234.5678,
-                           .update_us = 900,
-                           .map_us = 0},
+                           .stage_us = {.predict = 41.25,
+                                        .search = 310.5,
+                                        .match = 1234.5678,
+                                        .update = 900,
+                                        .map = 0}},
                 out);
     j = parse(out);
     EXPECT_EQ(j["class"], "FRAME");

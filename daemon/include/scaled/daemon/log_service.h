@@ -33,6 +33,7 @@
 #include <scaled/daemon/daemon_config.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
+#include <scaled/drivers/vision/mono_tracker.h>
 
 namespace scaled::drivers::fieldlog {
 class FieldLogWriter;
@@ -69,13 +70,9 @@ struct FrameEvent {
     double ms = 0;                   // tracking time of this frame
     std::uint64_t dropped = 0;       // frames dropped so far
     std::int64_t mono_ns = 0;
-    // The tracker's stages on this frame, microseconds ("stage_us"; see
-    // drivers::vision::TrackStats; 0: the stage did not run).
-    double predict_us = 0;
-    double search_us = 0;
-    double match_us = 0;
-    double update_us = 0;
-    double map_us = 0;
+    // The tracker's stages on this frame, microseconds ("stage_us"; 0: the
+    // stage did not run).
+    drivers::vision::StageTimes stage_us;
 };
 
 // One detector box.

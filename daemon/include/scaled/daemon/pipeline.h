@@ -43,6 +43,7 @@
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/slam/slam_snapshot.h>
 #include <scaled/daemon/daemon_config.h>
+#include <scaled/daemon/frame_step.h>
 #include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
@@ -76,13 +77,9 @@ public:
         int tracked = 0;
         double ms = 0;
         std::uint64_t dropped = 0;
-        // This frame's tracker stages, microseconds (drivers::vision::TrackStats; 0:
-        // the stage did not run on this frame).
-        double predict_us = 0;
-        double search_us = 0;
-        double match_us = 0;
-        double update_us = 0;
-        double map_us = 0;
+        // This frame's tracker stages, microseconds (0: the stage did not
+        // run on this frame).
+        drivers::vision::StageTimes stage_us;
     };
     struct Scale {
         const ScaleReport* report = nullptr;
@@ -201,8 +198,29 @@ private:
     // false when stopping.
     bool recoverCamera(const core::Error& error);
     void setSourceFault(const std::string& fault);
+    // The tracking thread: one frame step per frame (frame_step.h), then
+    // the daemon's part (state, status, pose, detection job, events).
+    struct TrackingState;
     void trackingLoop();
+    void trackFrame(TrackingState& state, QueuedFrame& item);
+    const core::slam::ImuWindow* gyroWindow(const drivers::source::Frame& frame,
+                                            const TrackingState& state);
+    drivers::imu::MapGravity selectGravity(const drivers::source::Frame& frame,
+                                           const std::optional<core::Vec3>& override_down_C);
+    void recordGravity(const drivers::imu::MapGravity& g);
+    std::uint64_t recordTracked(const FrameStepResult& r, std::int64_t frame_id,
+                                std::uint64_t tracked);
+    void publishPose(const drivers::source::Frame& frame, std::uint64_t epoch);
+    void handToDetector(TrackingState& state, const drivers::source::Frame& frame,
+                        std::uint64_t epoch);
+    // The detection thread: a job from the tracking thread, the detector,
+    // the estimator of the job's map.
+    struct DetectionState;
     void detectionLoop();
+    bool takeJob(DetectionState& state);
+    void recordDetectorRun(DetectionState& state, const std::optional<core::Error>& error,
+                           double latency_ms);
+    void updateScale(DetectionState& state);
 
     // Capture ring.
     bool pushFrame(QueuedFrame& item);  // false: stopping

@@ -35,7 +35,8 @@ struct DetectionSchedule {
     int every_frames = 10;  // run the detector on every Nth tracked frame (the paper: 10)
     // When > 0, run the detector at most this often instead (seconds of frame
     // time between the frames handed to it); every_frames is then ignored.
-    // Key detection.period_s, in [0, 3600]. scale-eval uses every_frames only.
+    // Key detection.period_s, in [0, 3600]. scale-eval follows the same
+    // schedule (frame_step.h: FrameStep::detectionDue).
     double period_s = 0;
 };
 

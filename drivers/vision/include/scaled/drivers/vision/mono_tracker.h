@@ -88,6 +88,31 @@ struct TrackerConfig {
 
 core::Result<bool> validate(const TrackerConfig& config);
 
+// Wall time of each stage of MonoTracker::processFrame() on one frame,
+// microseconds (std::chrono::steady_clock; core stays clock-free, so the
+// tracker times the calls it makes into it). A stage that did not run on the
+// frame is 0: a new-map frame has only map, a frame whose prediction failed
+// only predict, a frame with no feature to search no match. The stages are
+// consecutive and do not overlap; their sum is the frame's time less a few
+// hundred nanoseconds (argument checks, the clock reads). Embedded as it is in
+// the daemon's frame events and field-log FRAME lines ("stage_us").
+struct StageTimes {
+    double predict = 0;  // EkfSlam::predict: motion model, covariance propagation
+    // EkfSlam::predictMeasurements (projections, innovation covariances S)
+    // and, per predicted feature, the active-search setup outside the NCC
+    // matcher: finding its appearance, the predicted patch warp
+    // (predictedWarp) and warping the template (warpTemplate).
+    double search = 0;
+    double match = 0;   // Matcher::match calls: NCC search inside the chi-square ellipses
+    double update = 0;  // EkfSlam::update: 1-point RANSAC and both EKF updates
+    // EkfSlam::manageMap (deletion of bad features, inverse-depth to XYZ
+    // conversion), dropping the deleted features' appearances, and new
+    // features (free-region mask, corner detection, patch extraction,
+    // EkfSlam::addFeature); on a new-map frame, initialise plus the first
+    // features.
+    double map = 0;
+};
+
 struct TrackStats {
     core::slam::SlamHealth health = core::slam::SlamHealth::kUninitialised;
     bool new_map = false;        // this frame started a new map
@@ -111,27 +136,7 @@ struct TrackStats {
     std::array<core::Scalar, core::slam::UpdateReport::kAgeBins> nis_sum{};
     std::array<int, core::slam::UpdateReport::kAgeBins> nis_count{};
 
-    // Wall time of each stage of processFrame() on this frame, microseconds
-    // (std::chrono::steady_clock; core stays clock-free, so the tracker times
-    // the calls it makes into it). A stage that did not run on this frame is
-    // 0: a new-map frame has only map_us, a frame whose prediction failed only
-    // predict_us, a frame with no feature to search no match_us. The stages
-    // are consecutive and do not overlap; their sum is the frame's time less
-    // a few hundred nanoseconds (argument checks, the clock reads).
-    double predict_us = 0;  // EkfSlam::predict: motion model, covariance propagation
-    // EkfSlam::predictMeasurements (projections, innovation covariances S)
-    // and, per predicted feature, the active-search setup outside the NCC
-    // matcher: finding its appearance, the predicted patch warp
-    // (predictedWarp) and warping the template (warpTemplate).
-    double search_us = 0;
-    double match_us = 0;   // Matcher::match calls: NCC search inside the chi-square ellipses
-    double update_us = 0;  // EkfSlam::update: 1-point RANSAC and both EKF updates
-    // EkfSlam::manageMap (deletion of bad features, inverse-depth to XYZ
-    // conversion), dropping the deleted features' appearances, and new
-    // features (free-region mask, corner detection, patch extraction,
-    // EkfSlam::addFeature); on a new-map frame, initialise plus the first
-    // features.
-    double map_us = 0;
+    StageTimes stage_us;  // this frame's stages, microseconds
     // While relocalising: the attempt (corners, template scan, PnP, and on
     // success the filter's reset); the frame's search and update follow.
     double relocalise_us = 0;
