@@ -25,6 +25,7 @@
 #include <scaled/daemon/socket_service.h>
 #include <scaled/daemon/status_lights.h>
 #include <scaled/daemon/version.h>
+#include <scaled/drivers/base/log.h>
 #include <scaled/drivers/camera/v4l2_camera.h>
 #include <scaled/drivers/dataset/dataset.h>
 #include <scaled/drivers/detector/dnn_detector.h>
@@ -52,13 +53,19 @@ struct Failure {
     std::string message;
 };
 
-void printError(const std::string& message) {
-    std::fprintf(stderr, "scaled: %s\n", message.c_str());
-}
-
-void printInfo(const std::string& message) {
-    std::fprintf(stderr, "scaled: %s\n", message.c_str());
-}
+// The daemon's message categories (drivers/base/log.h); kMain's messages
+// carry no category of their own.
+using drivers::base::logDebug;
+using drivers::base::logError;
+using drivers::base::logInfo;
+using drivers::base::logWarning;
+const drivers::base::LogCategory kMain{"scaled"};
+const drivers::base::LogCategory kFieldLog{"log"};
+const drivers::base::LogCategory kGpio{"gpio"};
+const drivers::base::LogCategory kImu{"imu"};
+const drivers::base::LogCategory kSocket{"socket"};
+const drivers::base::LogCategory kPipelineLog{"pipeline"};
+const drivers::base::LogCategory kReload{"reload"};
 
 int exitCodeFor(const Error& e, int fallback) {
     switch (e.code) {
@@ -76,15 +83,15 @@ int exitCodeFor(const Error& e, int fallback) {
 int checkConfigurationAndReport(const CommandLine& cli, const std::filesystem::path& default_file) {
     const ConfigCheckReport report = checkConfiguration(cli, default_file);
     for (const auto& e : report.errors) {
-        printError(e);
+        logError(kMain, e);
     }
     const std::string name = report.file.empty() ? "built-in defaults" : report.file.string();
     for (const auto& n : report.notes) {
         std::printf("%s: note: %s\n", name.c_str(), n.c_str());
     }
     if (!report.ok()) {
-        std::fprintf(stderr, "scaled: %s: %zu error%s\n", name.c_str(), report.errors.size(),
-                     report.errors.size() == 1 ? "" : "s");
+        logError(kMain, name + ": " + std::to_string(report.errors.size()) +
+                            (report.errors.size() == 1 ? " error" : " errors"));
         return EX_CONFIG;
     }
     std::printf("%s: configuration OK\n", name.c_str());
@@ -146,9 +153,10 @@ Result<core::PriorTable> openPriors(const DaemonConfig& config) {
     std::error_code ec;
     const auto& path = config.pipeline.priors_path;
     if (path == defaultDaemonConfig().pipeline.priors_path && !std::filesystem::exists(path, ec)) {
-        printInfo(path.string() +
-                  " not found: using the priors built into this binary (config/priors.toml of "
-                  "its source tree)");
+        logInfo(kMain,
+                path.string() +
+                    " not found: using the priors built into this binary (config/priors.toml of "
+                    "its source tree)");
         return drivers::priors::parsePriors(drivers::priors::builtinPriorsToml(),
                                             "built-in config/priors.toml");
     }
@@ -192,13 +200,13 @@ std::optional<Failure> openParts(const DaemonConfig& config, PipelineParts& part
                                "source " + parts.source_name + ": " + live.error().message};
             }
             if (!missing.empty()) {
-                printInfo("source " + parts.source_name + ": not available yet (" + missing +
-                          "); running in the fault state and retrying");
+                logInfo(kMain, "source " + parts.source_name + ": not available yet (" + missing +
+                                   "); running in the fault state and retrying");
             } else {
-                printInfo("source " + parts.source_name + ": " + (*live)->describe() + ", " +
-                          (*live)->mode());
+                logInfo(kMain, "source " + parts.source_name + ": " + (*live)->describe() + ", " +
+                                   (*live)->mode());
                 for (const auto& note : (*live)->info().notes) {
-                    printInfo("source " + parts.source_name + ": " + note);
+                    logInfo(kMain, "source " + parts.source_name + ": " + note);
                 }
             }
             parts.live = live->get();
@@ -279,6 +287,9 @@ public:
     int run();
 
 private:
+    [[nodiscard]] std::optional<int> start();
+    [[nodiscard]] std::optional<int> startServing(PipelineParts parts);
+    int mainLoop(const sigset_t& signals);
     void reload();
     void tick(std::int64_t now_ns);
     void teardown(const char* reason);
@@ -318,10 +329,21 @@ int Daemon::run() {
     std::signal(SIGPIPE, SIG_IGN);  // NOLINT(cert-err33-c): the previous handler is not needed
 
     tty_ = !cli_.no_tty && isatty(STDERR_FILENO) == 1;
-    printInfo(std::string("scaled ") + version() + ", config " +
-              (config_.file.empty() ? std::string("built-in defaults") : config_.file.string()) +
-              ", source " + sourceName(config_.source));
+    logInfo(kMain,
+            std::string("scaled ") + version() + ", config " +
+                (config_.file.empty() ? std::string("built-in defaults") : config_.file.string()) +
+                ", source " + sourceName(config_.source));
+    if (const std::optional<int> failed = start()) {
+        return *failed;
+    }
+    notifier_.notify("READY=1\nSTATUS=started, " + sourceName(config_.source));
+    return mainLoop(signals);
+}
 
+// Everything in dependency order (chrony's main.c): what a later part
+// reports to comes first; teardown() stops them in reverse. The exit code
+// when a part that the daemon cannot run without fails.
+std::optional<int> Daemon::start() {
     // 1. The report hub everything publishes to.
     const auto bins = static_cast<std::size_t>(config_.pipeline.estimator.posterior.grid.bins);
     hub_ = std::make_unique<ReportHub>(bins);
@@ -330,13 +352,15 @@ int Daemon::run() {
     //    that cannot open is a fault, not a reason to stop serving the scale.
     auto log = LogService::create(config_.log, *hub_);
     if (!log) {
-        printError("log: " + log.error().message);
+        logError(kFieldLog, log.error().message);
         return EX_CONFIG;
     }
     log_ = std::move(*log);
     log_->start();
     events_ = std::make_unique<LogEvents>(*log_);
     events_->start(version(), sourceName(config_.source), toToml(config_));
+    logDebug(kFieldLog, "field log " + std::string(config_.log.enabled ? "in " : "off, ") +
+                            (config_.log.enabled ? config_.log.dir.string() : "log.enabled"));
 
     // 2b. The status LEDs. Without them the daemon runs on: one line says why.
     openLights();
@@ -348,62 +372,66 @@ int Daemon::run() {
     //     anything runs a parallel OpenCV call (thread_priority.h).
     if (auto workers = drivers::detector::startOpenCvWorkersAtNice(config_.pipeline.detector.nice);
         !workers) {
-        printError("detector.nice: " + workers.error().message +
-                   " (running with OpenCV's workers at the daemon's priority)");
+        logWarning(kMain, "detector.nice: " + workers.error().message +
+                              " (running with OpenCV's workers at the daemon's priority)");
         events_->onError("detector priority", workers.error().message);
     }
 
     // 3. Source, detector, priors.
     PipelineParts parts;
     if (auto f = openParts(config_, parts)) {
-        printError(f->message);
+        logError(kMain, f->message);
         events_->onError("start", f->message);
         teardown("start failed");
         return f->exit_code;
     }
     parts.imu = imu_.get();
     parts.imu_error = imu_error_;
+    logDebug(kPipelineLog, "source " + parts.source_name + " open, detector and priors loaded");
+    return startServing(std::move(parts));
+}
 
-    // 4. The socket.
+// 4. The socket and 5. the pipeline, then both started.
+std::optional<int> Daemon::startServing(PipelineParts parts) {
     auto sock = SocketService::create(config_.socket, *hub_, version());
     if (!sock) {
         // The default directory is made by systemd (RuntimeDirectory=scaled);
         // say how to run without it rather than leave the user guessing.
         const bool default_dir =
             config_.socket.path.parent_path() == defaultDaemonConfig().socket.path.parent_path();
-        printError("socket: " + sock.error().message +
-                   (default_dir ? " (the service's unit creates it; to run by hand, "
-                                  "--socket PATH in a directory you can write)"
-                                : ""));
+        logError(kSocket, sock.error().message +
+                              (default_dir ? " (the service's unit creates it; to run by hand, "
+                                             "--socket PATH in a directory you can write)"
+                                           : ""));
         events_->onError("socket", sock.error().message);
         teardown("socket failed");
         return EX_CANTCREAT;
     }
     socket_ = std::move(*sock);
-
-    // 5. The pipeline.
     auto pipeline = Pipeline::create(config_, std::move(parts), *hub_, events_.get());
     if (!pipeline) {
-        printError("pipeline: " + pipeline.error().message);
+        logError(kPipelineLog, pipeline.error().message);
         teardown("pipeline failed");
         return exitCodeFor(pipeline.error(), EX_SOFTWARE);
     }
     pipeline_ = std::move(*pipeline);
     if (auto s = socket_->start(); !s) {
-        printError("socket: " + s.error().message);
+        logError(kSocket, s.error().message);
         teardown("socket failed");
         return EX_CANTCREAT;
     }
     if (auto s = pipeline_->start(); !s) {
-        printError("pipeline: " + s.error().message);
+        logError(kPipelineLog, s.error().message);
         teardown("pipeline failed");
         return EX_SOFTWARE;
     }
-    printInfo("listening on " + socket_->path().string() +
-              (socket_->socketActivated() ? " (socket activation)" : ""));
-    notifier_.notify("READY=1\nSTATUS=started, " + sourceName(config_.source));
+    logInfo(kMain, "listening on " + socket_->path().string() +
+                       (socket_->socketActivated() ? " (socket activation)" : ""));
+    return std::nullopt;
+}
 
-    // 6. The main loop: signals, watchdog, status.
+// 6. The main loop: signals, watchdog, status; until a signal or the end.
+int Daemon::mainLoop(const sigset_t& signals) {
     const char* reason = "end of source";
     int exit_code = EX_OK;
     while (true) {
@@ -414,12 +442,13 @@ int Daemon::run() {
             break;
         }
         if (sig == SIGHUP) {
+            logDebug(kReload, "SIGHUP");
             reload();
         }
         tick(monotonicNowNs());
         if (pipeline_->finished()) {
             if (auto f = pipeline_->failure()) {
-                printError(f->message);
+                logError(kMain, f->message);
                 reason = "source failed";
                 exit_code = EX_IOERR;
             }
@@ -429,7 +458,7 @@ int Daemon::run() {
     if (tty_) {
         std::fputc('\n', stderr);
     }
-    printInfo(std::string("stopping (") + reason + "), " + formatScale(hub_->scale()));
+    logInfo(kMain, std::string("stopping (") + reason + "), " + formatScale(hub_->scale()));
     teardown(reason);
     return exit_code;
 }
@@ -437,20 +466,18 @@ int Daemon::run() {
 void Daemon::openLights() {
     auto lights = StatusLights::open(config_.gpio);
     if (!lights) {
-        const std::string msg =
-            "gpio: " + lights.error().message + " (running without status LEDs)";
-        printError(msg);
+        logError(kGpio, lights.error().message + " (running without status LEDs)");
         events_->onError("gpio", lights.error().message);
         return;
     }
     if (!*lights) {
-        printInfo("gpio: no chip configured (gpio.chip), no status LEDs");
+        logInfo(kGpio, "no chip configured (gpio.chip), no status LEDs");
         return;
     }
     lights_ = std::move(*lights);
     lights_->setPattern(LightPattern::kStarting);
     lights_->start();
-    printInfo("gpio: status LEDs on " + lights_->describe());
+    logInfo(kGpio, "status LEDs on " + lights_->describe());
 }
 
 void Daemon::openImu() {
@@ -460,9 +487,10 @@ void Daemon::openImu() {
     auto imu = ImuService::open(config_.imu);
     if (!imu) {
         imu_error_ = imu.error().message;
-        printError("imu: " + imu_error_ +
-                   " (running without the IMU: a new map's vertical comes from set_gravity, "
-                   "the dataset or a level camera)");
+        logError(kImu,
+                 imu_error_ +
+                     " (running without the IMU: a new map's vertical comes from set_gravity, "
+                     "the dataset or a level camera)");
         events_->onError("imu", imu_error_);
         return;
     }
@@ -473,10 +501,10 @@ void Daemon::openImu() {
     const int wait_ms = static_cast<int>(std::lround(config_.imu.window_s * 2000)) + 1000;
     const bool filled = imu_->waitForWindow(wait_ms);
     const ImuStatus st = imu_->status();
-    printInfo("imu: " + st.device + ", " + st.mode +
-              (filled ? std::string()
-                      : ": no full window of samples within " + std::to_string(wait_ms) + " ms" +
-                            (st.error.empty() ? "" : " (" + st.error + ")")));
+    logInfo(kImu, st.device + ", " + st.mode +
+                      (filled ? std::string()
+                              : ": no full window of samples within " + std::to_string(wait_ms) +
+                                    " ms" + (st.error.empty() ? "" : " (" + st.error + ")")));
 }
 
 void Daemon::tick(std::int64_t now_ns) {
@@ -493,7 +521,7 @@ void Daemon::tick(std::int64_t now_ns) {
         }
         lights_->setAlive(now_ns - last_beat_ns_ < 1'000'000'000);
         if (auto err = lights_->takeError()) {
-            printError("gpio: " + *err + " (the LEDs may be wrong)");
+            logWarning(kGpio, *err + " (the LEDs may be wrong)");
             events_->onError("gpio", *err);
         }
     }
@@ -514,7 +542,7 @@ void Daemon::tick(std::int64_t now_ns) {
     if (log_fault != last_log_fault_) {
         pipeline_->setFault(log_fault);
         if (!log_fault.empty()) {
-            printError(log_fault + " (logging stopped; the scale is still served)");
+            logError(kMain, log_fault + " (logging stopped; the scale is still served)");
         }
         last_log_fault_ = log_fault;
     }
@@ -537,7 +565,7 @@ void Daemon::reload() {
     notifier_.notify("RELOADING=1");
     auto fresh = loadDaemonConfig(cli_, config_.file);
     if (!fresh) {
-        printError("reload: " + fresh.error().message + " (keeping the running configuration)");
+        logError(kReload, fresh.error().message + " (keeping the running configuration)");
         events_->onError("reload", fresh.error().message);
         notifier_.notify("READY=1");
         return;
@@ -550,19 +578,19 @@ void Daemon::reload() {
     auto det = openDetector(next);
     if (!priors || !det) {
         const std::string msg = !priors ? priors.error().message : det.error().message;
-        printError("reload: " + msg + " (keeping the running configuration)");
+        logError(kReload, msg + " (keeping the running configuration)");
         events_->onError("reload", msg);
         notifier_.notify("READY=1");
         return;
     }
     if (toToml(*fresh) != toToml(next)) {
-        printInfo(
-            "reload: only estimator.priors, [detector] and [detection] are reloaded; other "
-            "changes take effect at the next restart");
+        logWarning(kReload,
+                   "only estimator.priors, [detector] and [detection] are reloaded; other "
+                   "changes take effect at the next restart");
     }
     pipeline_->reload(std::move(*priors), std::move(*det), next.pipeline.detection);
     config_ = std::move(next);
-    printInfo("reload: priors " + config_.pipeline.priors_path.string() + " and detector reloaded");
+    logInfo(kReload, "priors " + config_.pipeline.priors_path.string() + " and detector reloaded");
     const ScaleReport now = hub_->scale();
     events_->onState(now.state, now.state, now.epoch, now.frame_id,
                      "reload: priors, detector and detection schedule");
@@ -641,11 +669,12 @@ int runMain(int argc, const char* const* argv) {
     }
     auto config = loadDaemonConfig(parsed.cli, default_file);
     if (!config) {
-        printError(config.error().message);
+        logError(kMain, config.error().message);
         return EX_CONFIG;
     }
+    drivers::base::setLogLevel(config->log.level);
     if (auto group = checkSocketGroup(config->socket); !group) {
-        printError("socket.group: " + group.error().message);
+        logError(kSocket, "socket.group: " + group.error().message);
         return group.error().code == ErrorCode::kNotFound ? EX_CONFIG : EX_OSERR;
     }
     Daemon daemon(std::move(parsed.cli), std::move(*config));

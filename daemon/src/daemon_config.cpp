@@ -111,15 +111,14 @@ std::optional<std::string> rotationProblem(const std::array<double, 9>& r) {
     return std::nullopt;
 }
 
-std::vector<Field> daemonFields(DaemonConfig& c) {
-    using config_detail::boolean;
+// [source]
+std::vector<Field> sourceFields(SourceConfig& s) {
     using config_detail::choice;
     using config_detail::integer;
     using config_detail::path;
     using config_detail::real;
     using config_detail::text;
-    auto& s = c.source;
-    std::vector<Field> out = {
+    return {
         choice("source", "kind", &s.kind,
                {{"sim", SourceKind::kSim},
                 {"replay", SourceKind::kReplay},
@@ -139,16 +138,14 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         integer("source", "sim_width_px", &s.sim_width_px, 16, 4096),
         integer("source", "sim_height_px", &s.sim_height_px, 16, 4096),
     };
-    for (auto& f : config_detail::pipelineFields(c.pipeline)) {
-        out.push_back(std::move(f));
-    }
-    auto& m = c.camera;
-    auto& g = c.gpio;
-    auto& u = c.imu;
-    auto& q = c.queues;
-    auto& k = c.socket;
-    auto& l = c.log;
-    std::vector<Field> rest = {
+}
+
+// [camera]
+std::vector<Field> cameraFields(CameraConfig& m) {
+    using config_detail::choice;
+    using config_detail::integer;
+    using config_detail::real;
+    return {
         integer("camera", "width_px", &m.width_px, 16, 8192),
         integer("camera", "height_px", &m.height_px, 16, 8192),
         real("camera", "fps", &m.fps, 0, 1000, Bound::kOpen),
@@ -168,6 +165,17 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         real("camera", "cy_px", &m.cy_px, 0, 1e6),
         real("camera", "k1", &m.k1, -10, 10),
         real("camera", "k2", &m.k2, -10, 10),
+    };
+}
+
+// [gpio] and [imu]
+std::vector<Field> deviceFields(GpioConfig& g, ImuConfig& u) {
+    using config_detail::boolean;
+    using config_detail::choice;
+    using config_detail::integer;
+    using config_detail::real;
+    using config_detail::text;
+    return {
         text("gpio", "chip", &g.chip),
         integer("gpio", "status_line", &g.status_line, -1, 4095),
         integer("gpio", "heartbeat_line", &g.heartbeat_line, -1, 4095),
@@ -180,6 +188,18 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         integer("imu", "buffer_length", &u.buffer_length, 2, 65536),
         config_detail::realArray("imu", "rotation_imu_to_camera", &u.rotation_imu_to_camera, -1, 1),
         real("imu", "window_s", &u.window_s, 0.05, 10),
+    };
+}
+
+// [pipeline] queues, [socket] and [log]
+std::vector<Field> serviceFields(QueueConfig& q, SocketConfig& k, LogConfig& l) {
+    using config_detail::boolean;
+    using config_detail::choice;
+    using config_detail::integer;
+    using config_detail::path;
+    using config_detail::real;
+    using config_detail::text;
+    return {
         integer("pipeline", "capture_queue_frames", &q.capture_queue_frames, 1, 1000),
         integer("pipeline", "status_interval_ms", &q.status_interval_ms, 100, 60000),
         path("socket", "path", &k.path),
@@ -200,37 +220,50 @@ std::vector<Field> daemonFields(DaemonConfig& c) {
         integer("log", "max_total_bytes", &l.max_total_bytes, 4096, std::int64_t{1} << 40),
         integer("log", "fsync_interval_ms", &l.fsync_interval_ms, 0, 3600000),
         integer("log", "queue_bytes", &l.queue_bytes, 4096, 1 << 30),
+        choice("log", "level", &l.level,
+               {{"error", drivers::base::LogLevel::kError},
+                {"warning", drivers::base::LogLevel::kWarning},
+                {"info", drivers::base::LogLevel::kInfo},
+                {"debug", drivers::base::LogLevel::kDebug}}),
     };
-    for (auto& f : rest) {
-        out.push_back(std::move(f));
-    }
+}
+
+// Every key of the daemon's file, one table per section (the pipeline's own
+// from pipeline_config.cpp), in the order config/scaled.toml documents them.
+std::vector<Field> daemonFields(DaemonConfig& c) {
+    std::vector<Field> out = sourceFields(c.source);
+    const auto append = [&out](std::vector<Field> more) {
+        for (auto& f : more) {
+            out.push_back(std::move(f));
+        }
+    };
+    append(config_detail::pipelineFields(c.pipeline));
+    append(cameraFields(c.camera));
+    append(deviceFields(c.gpio, c.imu));
+    append(serviceFields(c.queues, c.socket, c.log));
     return out;
 }
 
-// Cross-field checks of the whole configuration.
-Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where,
-                         config_detail::ProblemList* all = nullptr) {
-    config_detail::Checker check(where, all);
-    if (check.failed(config_detail::checkPipeline(c.pipeline, where, all))) {
-        return check.result();
-    }
+// The cross-field checks of one part of the configuration; true when the
+// check must stop (the first problem, when not collecting them all).
+bool checkSourceAndCamera(const DaemonConfig& c, config_detail::Checker& check) {
     const auto& s = c.source;
     if (s.kind == SourceKind::kReplay && s.replay_path.empty() &&
         check.fail({"source.replay", "source.kind"},
                    "required when source.kind = \"replay\" (a dataset directory or video "
                    "file) (got \"\")")) {
-        return check.result();
+        return true;
     }
     if (s.kind == SourceKind::kV4l2 && s.device.empty() &&
         check.fail({"source.device", "source.kind"},
                    "required when source.kind = \"v4l2\" (e.g. \"/dev/video0\") (got \"\")")) {
-        return check.result();
+        return true;
     }
     if (s.kind == SourceKind::kLibcamera && s.device.empty() &&
         check.fail({"source.device", "source.kind"},
                    "required when source.kind = \"libcamera\" (a camera index such as "
                    "\"0\" or a libcamera id) (got \"\")")) {
-        return check.result();
+        return true;
     }
     const bool live = s.kind == SourceKind::kV4l2 || s.kind == SourceKind::kLibcamera;
     const auto& m = c.camera;
@@ -240,64 +273,86 @@ Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where,
                        "\") needs the camera's calibration: camera.fx_px, fy_px, cx_px "
                        "and cy_px must all be > 0 (got fx_px = " +
                        drivers::priors::tomlread::num(m.fx_px) + ")")) {
-        return check.result();
+        return true;
     }
     if (m.retry_max_s < m.retry_initial_s &&
         check.fail({"camera.retry_max_s", "camera.retry_initial_s"},
                    "must be >= camera.retry_initial_s = " +
                        drivers::priors::tomlread::num(m.retry_initial_s) + " (got " +
                        drivers::priors::tomlread::num(m.retry_max_s) + ")")) {
-        return check.result();
+        return true;
     }
+    return false;
+}
+
+bool checkGpioAndImu(const DaemonConfig& c, config_detail::Checker& check) {
     const auto& g = c.gpio;
     if (!g.chip.empty() && g.status_line < 0 && g.heartbeat_line < 0 &&
         check.fail({"gpio.status_line", "gpio.chip"},
                    "gpio.chip is set (\"" + g.chip +
                        "\") but no line is: set gpio.status_line and/or "
                        "gpio.heartbeat_line (got -1)")) {
-        return check.result();
+        return true;
     }
     if (g.status_line >= 0 && g.status_line == g.heartbeat_line &&
         check.fail({"gpio.heartbeat_line", "gpio.status_line"},
                    "must differ from gpio.status_line (got " + std::to_string(g.heartbeat_line) +
                        " for both)")) {
-        return check.result();
+        return true;
     }
     if (g.chip.empty() && (g.status_line >= 0 || g.heartbeat_line >= 0) &&
         check.fail({"gpio.chip", "gpio.status_line", "gpio.heartbeat_line"},
                    "required when gpio.status_line or gpio.heartbeat_line is set "
                    "(a path, name or label) (got \"\")")) {
-        return check.result();
+        return true;
     }
     if (auto bad = rotationProblem(c.imu.rotation_imu_to_camera);
         bad && check.fail({"imu.rotation_imu_to_camera"}, *bad)) {
-        return check.result();
+        return true;
     }
+    return false;
+}
+
+bool checkSocketAndLog(const DaemonConfig& c, config_detail::Checker& check) {
     const std::string socket_path = c.socket.path.string();
     if ((socket_path.empty() || socket_path.size() > kMaxSocketPathBytes) &&
         check.fail({"socket.path"}, "must be a path of 1 to " +
                                         std::to_string(kMaxSocketPathBytes) +
                                         " bytes (a Unix socket) (got \"" + socket_path + "\")")) {
-        return check.result();
+        return true;
     }
     if (c.socket.client_buffer_bytes < c.socket.max_request_bytes &&
         check.fail(
             {"socket.client_buffer_bytes", "socket.max_request_bytes"},
             "must be >= socket.max_request_bytes = " + std::to_string(c.socket.max_request_bytes) +
                 " (got " + std::to_string(c.socket.client_buffer_bytes) + ")")) {
-        return check.result();
+        return true;
     }
     if (c.log.enabled && c.log.dir.empty() &&
         check.fail({"log.dir", "log.enabled"},
                    "must not be empty when log.enabled = true (got \"\")")) {
-        return check.result();
+        return true;
     }
     if (c.log.max_total_bytes < c.log.max_file_bytes &&
         check.fail({"log.max_total_bytes", "log.max_file_bytes"},
                    "must be >= log.max_file_bytes = " + std::to_string(c.log.max_file_bytes) +
                        " (got " + std::to_string(c.log.max_total_bytes) + ")")) {
+        return true;
+    }
+    return false;
+}
+
+// Cross-field checks of the whole configuration.
+Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where,
+                         config_detail::ProblemList* all = nullptr) {
+    config_detail::Checker check(where, all);
+    if (check.failed(config_detail::checkPipeline(c.pipeline, where, all))) {
         return check.result();
     }
+    if (checkSourceAndCamera(c, check) || checkGpioAndImu(c, check)) {
+        return check.result();
+    }
+    checkSocketAndLog(c, check);
     return check.result();
 }
 
@@ -438,6 +493,132 @@ Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source) {
     return true;
 }
 
+namespace {
+
+constexpr const char* kCommandLineFooter =
+    "Configuration: defaults, then the file (--config, else " SCALED_SYSCONFDIR
+    "/scaled/scaled.toml when it exists), then --set, then "
+    "--source/--socket/--log-dir/--pacing/--verbose. Every key, its "
+    "default, unit and allowed range is documented in config/scaled.toml (installed as "
+    "/etc/scaled/scaled.toml).\n"
+    "Exit codes (sysexits.h): 0 success; 64 usage; 66 an input that does not exist "
+    "(dataset, model, camera device); 69 a camera or model that is there but cannot be "
+    "used; 70 internal error; 71 the system refused a lookup; "
+    "73 cannot create the socket (path in use by a live daemon, directory missing or not "
+    "writable); 74 the source failed while running; 78 configuration error (also: an "
+    "unknown socket.group, a priors file that is missing or does not parse; --check-config "
+    "reports every such problem).";
+
+// The options' text as given, before they are checked.
+struct RawOptions {
+    std::string config;
+    std::string check_file;
+    std::string source;
+    std::string socket;
+    std::string log_dir;
+    std::string pacing;
+    CLI::Option* config_opt = nullptr;
+    CLI::Option* source_opt = nullptr;
+    CLI::Option* socket_opt = nullptr;
+    CLI::Option* log_opt = nullptr;
+    CLI::Option* pacing_opt = nullptr;
+    CLI::Option* check_opt = nullptr;
+};
+
+void addOptions(CLI::App& app, RawOptions& raw, CommandLine& cli) {
+    raw.config_opt =
+        app.add_option("--config", raw.config, "configuration file (TOML)")->type_name("FILE");
+    raw.source_opt = app.add_option("--source", raw.source,
+                                    "frame source: sim, replay:DIR, v4l2:DEVICE or "
+                                    "libcamera:ID (overrides [source] kind)")
+                         ->type_name("SPEC");
+    raw.socket_opt =
+        app.add_option("--socket", raw.socket, "Unix socket path (overrides socket.path)")
+            ->type_name("PATH");
+    raw.log_opt =
+        app.add_option("--log-dir", raw.log_dir, "field log directory (overrides log.dir)")
+            ->type_name("DIR");
+    raw.pacing_opt =
+        app.add_option("--pacing", raw.pacing, "realtime or fast (overrides source.pacing)")
+            ->type_name("realtime|fast");
+    app.add_option("--set", cli.sets,
+                   "override one key, e.g. --set detection.every_frames=5 (repeatable)")
+        ->type_name("SECTION.KEY=VALUE")
+        ->allow_extra_args(false)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+    app.add_flag("-v,--verbose", cli.verbose,
+                 "debug messages too (overrides log.level; messages go to stderr, the journal "
+                 "under systemd)");
+    app.add_flag("--no-tty", cli.no_tty, "no live status line on the terminal");
+    raw.check_opt = app.add_option("--check-config", raw.check_file,
+                                   "check the configuration (FILE, else the file that "
+                                   "would be used), print the result and exit")
+                        ->type_name("[FILE]")
+                        ->expected(0, 1);
+    app.add_flag("--version", cli.version, "print the version and exit");
+    app.add_flag("--list-cameras", cli.list_cameras,
+                 "list the V4L2 and libcamera cameras with their formats and exit");
+}
+
+// --config and --check-config; nullopt when they agree, else the usage error.
+std::optional<std::string> takeConfigOptions(const RawOptions& raw, CommandLine& cli) {
+    if (raw.config_opt->count() > 0) {
+        cli.config = std::filesystem::path(raw.config);
+    }
+    if (raw.check_opt->count() > 0) {
+        cli.check_config = true;
+        if (!raw.check_file.empty()) {
+            if (cli.config && *cli.config != raw.check_file) {
+                return "--check-config " + raw.check_file + " and --config " + raw.config +
+                       " name different files";
+            }
+            cli.config = std::filesystem::path(raw.check_file);
+        }
+    }
+    return std::nullopt;
+}
+
+// The dedicated options and --set, checked for form (their values are
+// checked with the configuration); nullopt when fine, else the usage error.
+std::optional<std::string> takeOverrides(const RawOptions& raw, CommandLine& cli) {
+    if (raw.source_opt->count() > 0) {
+        SourceConfig scratch;
+        if (auto ok = applySourceSpec(raw.source, scratch); !ok) {
+            return ok.error().message;
+        }
+        cli.source = raw.source;
+    }
+    if (raw.socket_opt->count() > 0) {
+        if (raw.socket.empty()) {
+            return std::string("--socket needs a non-empty path");
+        }
+        cli.socket = std::filesystem::path(raw.socket);
+    }
+    if (raw.log_opt->count() > 0) {
+        if (raw.log_dir.empty()) {
+            return std::string("--log-dir needs a non-empty directory");
+        }
+        cli.log_dir = std::filesystem::path(raw.log_dir);
+    }
+    if (raw.pacing_opt->count() > 0) {
+        if (!parsePacing(raw.pacing)) {
+            return "--pacing " + raw.pacing + ": expected realtime or fast";
+        }
+        cli.pacing = raw.pacing;
+    }
+    for (const auto& a : cli.sets) {
+        const auto eq = a.find('=');
+        const auto dot = a.find('.');
+        if (eq == std::string::npos || dot == std::string::npos || dot > eq || dot == 0 ||
+            eq == dot + 1) {
+            return "--set " + a + ": expected section.key=value (e.g. detection.every_frames=5)";
+        }
+    }
+    return std::nullopt;
+}
+
+}  // namespace
+
 ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
     ParsedCommandLine out;
     const auto usage = [&](const std::string& message) {
@@ -451,54 +632,9 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
             "scaled: gives a monocular SLAM map a metric scale from the objects a detector "
             "finds.",
             "scaled");
-        app.footer(
-            "Configuration: defaults, then the file (--config, else " SCALED_SYSCONFDIR
-            "/scaled/scaled.toml when it exists), then --set, then "
-            "--source/--socket/--log-dir/--pacing. Every key, its "
-            "default, unit and allowed range is documented in config/scaled.toml (installed as "
-            "/etc/scaled/scaled.toml).\n"
-            "Exit codes (sysexits.h): 0 success; 64 usage; 66 an input that does not exist "
-            "(dataset, model, camera device); 69 a camera or model that is there but cannot be "
-            "used; 70 internal error; 71 the system refused a lookup; "
-            "73 cannot create the socket (path in use by a live daemon, directory missing or not "
-            "writable); 74 the source failed while running; 78 configuration error (also: an "
-            "unknown socket.group, a priors file that is missing or does not parse; --check-config "
-            "reports every such problem).");
-        std::string config;
-        std::string check_file;
-        std::string source;
-        std::string socket;
-        std::string log_dir;
-        std::string pacing;
-        auto* config_opt =
-            app.add_option("--config", config, "configuration file (TOML)")->type_name("FILE");
-        auto* source_opt = app.add_option("--source", source,
-                                          "frame source: sim, replay:DIR, v4l2:DEVICE or "
-                                          "libcamera:ID (overrides [source] kind)")
-                               ->type_name("SPEC");
-        auto* socket_opt =
-            app.add_option("--socket", socket, "Unix socket path (overrides socket.path)")
-                ->type_name("PATH");
-        auto* log_opt =
-            app.add_option("--log-dir", log_dir, "field log directory (overrides log.dir)")
-                ->type_name("DIR");
-        auto* pacing_opt =
-            app.add_option("--pacing", pacing, "realtime or fast (overrides source.pacing)")
-                ->type_name("realtime|fast");
-        app.add_option("--set", out.cli.sets,
-                       "override one key, e.g. --set detection.every_frames=5 (repeatable)")
-            ->type_name("SECTION.KEY=VALUE")
-            ->allow_extra_args(false)
-            ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-        app.add_flag("--no-tty", out.cli.no_tty, "no live status line on the terminal");
-        auto* check_opt = app.add_option("--check-config", check_file,
-                                         "check the configuration (FILE, else the file that "
-                                         "would be used), print the result and exit")
-                              ->type_name("[FILE]")
-                              ->expected(0, 1);
-        app.add_flag("--version", out.cli.version, "print the version and exit");
-        app.add_flag("--list-cameras", out.cli.list_cameras,
-                     "list the V4L2 and libcamera cameras with their formats and exit");
+        app.footer(kCommandLineFooter);
+        RawOptions raw;
+        addOptions(app, raw, out.cli);
         try {
             app.parse(argc, argv);
         } catch (const CLI::ParseError& e) {
@@ -509,7 +645,6 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
             out.output = app.help();
             return out;
         }
-
         if (out.cli.version) {
             out.exit_now = true;
             out.output = std::string("scaled ") + version() + "\n";
@@ -518,52 +653,11 @@ ParsedCommandLine parseCommandLine(int argc, const char* const* argv) {
         if (out.cli.list_cameras) {
             return out;  // runMain lists them (the drivers are not part of parsing)
         }
-        if (config_opt->count() > 0) {
-            out.cli.config = std::filesystem::path(config);
+        if (auto bad = takeConfigOptions(raw, out.cli)) {
+            return usage(*bad);
         }
-        if (check_opt->count() > 0) {
-            out.cli.check_config = true;
-            if (!check_file.empty()) {
-                if (out.cli.config && *out.cli.config != check_file) {
-                    return usage("--check-config " + check_file + " and --config " + config +
-                                 " name different files");
-                }
-                out.cli.config = std::filesystem::path(check_file);
-            }
-        }
-        if (source_opt->count() > 0) {
-            SourceConfig scratch;
-            if (auto ok = applySourceSpec(source, scratch); !ok) {
-                return usage(ok.error().message);
-            }
-            out.cli.source = source;
-        }
-        if (socket_opt->count() > 0) {
-            if (socket.empty()) {
-                return usage("--socket needs a non-empty path");
-            }
-            out.cli.socket = std::filesystem::path(socket);
-        }
-        if (log_opt->count() > 0) {
-            if (log_dir.empty()) {
-                return usage("--log-dir needs a non-empty directory");
-            }
-            out.cli.log_dir = std::filesystem::path(log_dir);
-        }
-        if (pacing_opt->count() > 0) {
-            if (!parsePacing(pacing)) {
-                return usage("--pacing " + pacing + ": expected realtime or fast");
-            }
-            out.cli.pacing = pacing;
-        }
-        for (const auto& a : out.cli.sets) {
-            const auto eq = a.find('=');
-            const auto dot = a.find('.');
-            if (eq == std::string::npos || dot == std::string::npos || dot > eq || dot == 0 ||
-                eq == dot + 1) {
-                return usage("--set " + a +
-                             ": expected section.key=value (e.g. detection.every_frames=5)");
-            }
+        if (auto bad = takeOverrides(raw, out.cli)) {
+            return usage(*bad);
         }
         return out;
     } catch (const std::exception& e) {  // CLI11's construction errors, allocation
@@ -609,6 +703,10 @@ Result<bool> applyDedicatedOptions(const CommandLine& cli, DaemonConfig& config,
     if (cli.log_dir) {
         config.log.dir = fromCommandLine(*cli.log_dir);
         set_by.emplace_back("log.dir", "--log-dir " + cli.log_dir->string());
+    }
+    if (cli.verbose) {
+        config.log.level = drivers::base::LogLevel::kDebug;
+        set_by.emplace_back("log.level", "--verbose");
     }
     if (cli.pacing) {
         if (const auto mode = parsePacing(*cli.pacing)) {
@@ -669,6 +767,45 @@ void mergeProblems(config_detail::ProblemList& into, const config_detail::Proble
 
 }  // namespace
 
+namespace {
+
+// The LINE of a "SOURCE:LINE: ..." message about source_name; else the
+// largest number (the command line's problems come after the file's).
+std::size_t lineOf(const core::Error& e, const std::string& source_name) {
+    const std::string prefix = source_name + ":";
+    std::size_t n = 0;
+    if (e.message.rfind(prefix, 0) == 0) {
+        std::size_t i = prefix.size();
+        while (i < e.message.size() && e.message[i] >= '0' && e.message[i] <= '9') {
+            n = n * 10 + static_cast<std::size_t>(e.message[i] - '0');
+            ++i;
+        }
+        if (n > 0) {
+            return n;
+        }
+    }
+    return std::numeric_limits<std::size_t>::max();
+}
+
+// The problems into `out` in file order (a TOML table iterates its keys by
+// name), then the command line's in its order.
+void takeProblemsInOrder(const config_detail::ProblemList& problems, const std::string& source_name,
+                         CheckedConfig& out) {
+    std::vector<std::size_t> order(problems.errors.size());
+    for (std::size_t i = 0; i < order.size(); ++i) {
+        order[i] = i;
+    }
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+        return lineOf(problems.errors[a], source_name) < lineOf(problems.errors[b], source_name);
+    });
+    for (const std::size_t i : order) {
+        out.errors.push_back(problems.errors[i]);
+        out.error_keys.push_back(problems.keys[i]);
+    }
+}
+
+}  // namespace
+
 CheckedConfig checkDaemonConfig(const CommandLine& cli,
                                 const std::filesystem::path& default_config_file) {
     CheckedConfig out;
@@ -676,34 +813,7 @@ CheckedConfig checkDaemonConfig(const CommandLine& cli,
     config_detail::ProblemList problems;
     std::string source_name = "built-in defaults";
     const auto finish = [&] {
-        // In file order (a TOML table iterates its keys by name), then the
-        // command line's in its order.
-        const auto line = [&](const core::Error& e) {
-            const std::string prefix = source_name + ":";
-            std::size_t n = 0;
-            if (e.message.rfind(prefix, 0) == 0) {
-                std::size_t i = prefix.size();
-                while (i < e.message.size() && e.message[i] >= '0' && e.message[i] <= '9') {
-                    n = n * 10 + static_cast<std::size_t>(e.message[i] - '0');
-                    ++i;
-                }
-                if (n > 0) {
-                    return n;
-                }
-            }
-            return std::numeric_limits<std::size_t>::max();
-        };
-        std::vector<std::size_t> order(problems.errors.size());
-        for (std::size_t i = 0; i < order.size(); ++i) {
-            order[i] = i;
-        }
-        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-            return line(problems.errors[a]) < line(problems.errors[b]);
-        });
-        for (const std::size_t i : order) {
-            out.errors.push_back(problems.errors[i]);
-            out.error_keys.push_back(problems.keys[i]);
-        }
+        takeProblemsInOrder(problems, source_name, out);
         return std::move(out);
     };
     const std::filesystem::path file = configFileFor(cli, default_config_file);

@@ -11,6 +11,7 @@
 #include <scaled/daemon/json_write.h>
 #include <scaled/daemon/log_service.h>
 #include <scaled/daemon/protocol.h>
+#include <scaled/drivers/base/log.h>
 #include <scaled/drivers/fieldlog/field_log.h>
 
 namespace scaled::daemon {
@@ -383,9 +384,8 @@ void LogService::setFault(const std::string& message) {
         faulted_ = true;
         error_ = message;
     }
-    // NOLINTNEXTLINE(cppcoreguidelines-pro-type-vararg)
-    std::fprintf(stderr, "scaled: field log stopped: %s (the daemon keeps running)\n",
-                 message.c_str());
+    drivers::base::logError(drivers::base::LogCategory{"log"},
+                            "field log stopped: " + message + " (the daemon keeps running)");
 }
 
 void LogService::drain(bool force_sync) {

@@ -133,6 +133,7 @@ TEST(DaemonConfig, KeysAreThePipelinesAndTheDaemons) {
                           "log.max_total_bytes",
                           "log.fsync_interval_ms",
                           "log.queue_bytes",
+                          "log.level",
                           "pipeline.capture_queue_frames",
                           "pipeline.status_interval_ms",
                           "camera.width_px",

@@ -20,6 +20,7 @@
 
 #include <scaled/core/result.h>
 #include <scaled/daemon/pipeline_config.h>
+#include <scaled/drivers/base/log.h>
 #include <scaled/drivers/camera/camera.h>
 #include <scaled/drivers/source/paced_source.h>
 
@@ -133,6 +134,9 @@ struct LogConfig {
     std::uint64_t max_total_bytes = 64u << 20;  // delete the oldest files above this total
     int fsync_interval_ms = 1000;               // flush + fsync at most this often
     std::size_t queue_bytes = 1u << 20;         // in-memory queue; full: lines dropped and counted
+    // The daemon's messages on stderr (the journal under systemd), not the
+    // field log: error, warning, info or debug (--verbose).
+    drivers::base::LogLevel level = drivers::base::LogLevel::kInfo;
 };
 
 // [pipeline]
@@ -189,6 +193,7 @@ struct CommandLine {
     std::optional<std::string> pacing;             // --pacing realtime|fast
     std::vector<std::string> sets;                 // --set section.key=value (repeatable)
     bool no_tty = false;                           // --no-tty: no live status line
+    bool verbose = false;                          // -v, --verbose: log.level = debug
     bool check_config = false;                     // --check-config [FILE]: validate and exit
     bool version = false;                          // --version
     bool list_cameras = false;                     // --list-cameras
