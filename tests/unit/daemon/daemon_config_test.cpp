@@ -631,8 +631,9 @@ TEST(DaemonCommandLine, HelpAndVersion) {
     EXPECT_TRUE(help.exit_now);
     EXPECT_EQ(help.exit_code, 0);
     EXPECT_TRUE(help.error.empty());
-    for (const char* word : {"--config", "--source", "--socket", "--log-dir", "--pacing", "--set",
-                             "--no-tty", "--check-config", "--version", "config/scaled.toml"}) {
+    for (const char* word :
+         {"--config", "--source", "--socket", "--log-dir", "--pacing", "--set", "--no-tty",
+          "--verbose", "--check-config", "--version", "config/scaled.toml"}) {
         EXPECT_NE(help.output.find(word), std::string::npos) << word << " not in\n" << help.output;
     }
     const auto version = parse({"--version"});
@@ -715,6 +716,35 @@ TEST(DaemonLoad, FileThenSetThenDedicatedOptions) {
     auto t = loadDaemonConfig(together, "");
     ASSERT_TRUE(t.ok()) << t.error().message;
     EXPECT_EQ(t->source.replay_path, std::filesystem::path("/data/seq"));
+}
+
+// log.level: the daemon's messages; --verbose (-v) sets debug over the file.
+TEST(DaemonLoad, LogLevelFromTheFileAndVerbose) {
+    test::TempDir dir("daemon_load");
+    const auto file = dir.path() / "quiet.toml";
+    std::ofstream(file) << "[log]\nlevel = \"warning\"\n";
+    CommandLine cli;
+    cli.config = file;
+    auto quiet = loadDaemonConfig(cli, "");
+    ASSERT_TRUE(quiet.ok()) << quiet.error().message;
+    EXPECT_EQ(quiet->log.level, drivers::base::LogLevel::kWarning);
+    EXPECT_NE(toToml(*quiet).find("level = \"warning\""), std::string::npos) << toToml(*quiet);
+
+    const auto parsed = parse({"-v", "--config", file.string()});
+    ASSERT_FALSE(parsed.exit_now) << parsed.error;
+    EXPECT_TRUE(parsed.cli.verbose);
+    auto verbose = loadDaemonConfig(parsed.cli, "");
+    ASSERT_TRUE(verbose.ok()) << verbose.error().message;
+    EXPECT_EQ(verbose->log.level, drivers::base::LogLevel::kDebug);
+
+    const auto loud = dir.path() / "loud.toml";
+    std::ofstream(loud) << "[log]\nlevel = \"loud\"\n";
+    cli.config = loud;
+    auto bad = loadDaemonConfig(cli, "");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find("loud.toml:2"), std::string::npos) << bad.error().message;
+    EXPECT_NE(bad.error().message.find("log.level"), std::string::npos) << bad.error().message;
+    EXPECT_NE(bad.error().message.find("\"loud\""), std::string::npos) << bad.error().message;
 }
 
 TEST(DaemonLoad, Errors) {
