@@ -141,13 +141,12 @@ std::pair<std::string, std::string> splitKey(const std::string& full) {
 
 }  // namespace
 
-std::vector<Field> pipelineFields(PipelineConfig& c) {
-    auto& s = c.tracker.slam;
-    auto& d = c.detector;
-    auto& e = c.estimator;
-    auto& o = c.estimator.objects;
+namespace {
+
+// [tracker]: the EKF (core::slam::SlamConfig) and the front end
+std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
+    auto& s = t.slam;
     return {
-        // [tracker]
         real("tracker", "sigma_a", &s.motion.sigma_a, 0, 1e4, Bound::kOpen),
         real("tracker", "sigma_alpha", &s.motion.sigma_alpha, 0, 1e4, Bound::kOpen),
         real("tracker", "pixel_sigma_px", &s.pixel_sigma_px, 0, 100, Bound::kOpen),
@@ -169,29 +168,33 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         integer("tracker", "min_inliers", &s.min_inliers, 1, 1000),
         integer("tracker", "lost_after_frames", &s.lost_after_frames, 1, 100000),
         real("tracker", "max_dt_s", &s.max_dt_s, 0, 3600, Bound::kOpen),
-        integer("tracker", "patch_size", &c.tracker.patch_size, 3, 63),
-        boolean("tracker", "warp_patches", &c.tracker.warp_patches),
-        integer("tracker", "max_new_per_frame", &c.tracker.max_new_per_frame, 0, 1000),
-        real("tracker", "min_ncc", &c.tracker.match.min_ncc, -1, 1),
-        integer("tracker", "max_search_pixels", &c.tracker.match.max_search_pixels, 1, 1000000),
-        integer("tracker", "pyramid_levels", &c.tracker.pyramid_levels, 0, 3),
-        integer("tracker", "coarse_max_search_pixels", &c.tracker.coarse_max_search_pixels, 1,
-                1000000),
-        real("tracker", "coarse_min_fraction", &c.tracker.coarse_min_fraction, 0, 1),
-        real("tracker", "coarse_min_ncc", &c.tracker.coarse_min_ncc, -1, 1, Bound::kOpen),
-        integer("tracker", "feature_border_px", &c.tracker.feature_border_px, 0, 200),
-        real("tracker", "relocalise_s", &c.tracker.relocalise_s, 0, 3600),
-        integer("tracker", "relocalise_min_inliers", &c.tracker.relocalise_min_inliers, 4, 1000),
-        real("tracker", "relocalise_reproj_px", &c.tracker.relocalise_reproj_px, 0, 100,
-             Bound::kOpen),
-        integer("tracker", "relocalise_corners", &c.tracker.relocalise_corners, 1, 10000),
-        real("tracker", "relocalise_search_px", &c.tracker.relocalise_search_px, 0, 10000),
-        boolean("tracker", "use_gyro", &c.tracker.use_gyro),
-        real("tracker", "gyro_noise_density", &c.tracker.gyro_noise_density, 0, 1),
-        real("tracker", "gyro_bias_sigma_radps", &c.tracker.gyro_bias_sigma_radps, 0, 10),
-        real("tracker", "gyro_max_gap_s", &c.tracker.gyro_max_gap_s, 0, 1, Bound::kOpen),
-        real("tracker", "gyro_bias_time_s", &c.tracker.gyro_bias_time_s, 0, 3600),
-        // [detector]
+        integer("tracker", "patch_size", &t.patch_size, 3, 63),
+        boolean("tracker", "warp_patches", &t.warp_patches),
+        integer("tracker", "max_new_per_frame", &t.max_new_per_frame, 0, 1000),
+        real("tracker", "min_ncc", &t.match.min_ncc, -1, 1),
+        integer("tracker", "max_search_pixels", &t.match.max_search_pixels, 1, 1000000),
+        integer("tracker", "pyramid_levels", &t.pyramid_levels, 0, 3),
+        integer("tracker", "coarse_max_search_pixels", &t.coarse_max_search_pixels, 1, 1000000),
+        real("tracker", "coarse_min_fraction", &t.coarse_min_fraction, 0, 1),
+        real("tracker", "coarse_min_ncc", &t.coarse_min_ncc, -1, 1, Bound::kOpen),
+        integer("tracker", "feature_border_px", &t.feature_border_px, 0, 200),
+        real("tracker", "relocalise_s", &t.relocalise_s, 0, 3600),
+        integer("tracker", "relocalise_min_inliers", &t.relocalise_min_inliers, 4, 1000),
+        real("tracker", "relocalise_reproj_px", &t.relocalise_reproj_px, 0, 100, Bound::kOpen),
+        integer("tracker", "relocalise_corners", &t.relocalise_corners, 1, 10000),
+        real("tracker", "relocalise_search_px", &t.relocalise_search_px, 0, 10000),
+        boolean("tracker", "use_gyro", &t.use_gyro),
+        real("tracker", "gyro_noise_density", &t.gyro_noise_density, 0, 1),
+        real("tracker", "gyro_bias_sigma_radps", &t.gyro_bias_sigma_radps, 0, 10),
+        real("tracker", "gyro_max_gap_s", &t.gyro_max_gap_s, 0, 1, Bound::kOpen),
+        real("tracker", "gyro_bias_time_s", &t.gyro_bias_time_s, 0, 3600),
+    };
+}
+
+// [detector] and [detection]
+std::vector<Field> detectorFields(PipelineConfig& c) {
+    auto& d = c.detector;
+    return {
         choice("detector", "family", &d.family,
                {{"yolox", drivers::detector::ModelFamily::kYolox},
                 {"darknet", drivers::detector::ModelFamily::kDarknet}}),
@@ -206,10 +209,15 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         integer("detector", "nice", &d.nice, drivers::detector::kMinNice,
                 drivers::detector::kMaxNice),
         integer("detector", "max_detections", &d.max_detections, 1, 10000),
-        // [detection]
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
         real("detection", "period_s", &c.detection.period_s, 0, 3600),
-        // [estimator]
+    };
+}
+
+// [estimator]
+std::vector<Field> estimatorFields(PipelineConfig& c) {
+    auto& e = c.estimator;
+    return {
         path("estimator", "priors", &c.priors_path),
         choice(
             "estimator", "model", &e.model,
@@ -245,7 +253,12 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         choice("estimator", "posterior_arithmetic", &e.posterior.arithmetic,
                {{"floating", core::PosteriorArithmetic::kFloating},
                 {"fixed", core::PosteriorArithmetic::kFixed}}),
-        // [objects]
+    };
+}
+
+// [objects]: object-level evidence (core::ObjectConfig)
+std::vector<Field> objectFields(core::ObjectConfig& o) {
+    return {
         integer("objects", "max_objects", &o.max_objects, 1, 1024),
         integer("objects", "max_views", &o.max_views, 2, 1024),
         real("objects", "centre_rel_sigma", &o.centre_rel_sigma, 0, 10),
@@ -265,6 +278,22 @@ std::vector<Field> pipelineFields(PipelineConfig& c) {
         boolean("objects", "width_model", &o.width_model),
         boolean("objects", "one_height", &o.one_height),
     };
+}
+
+}  // namespace
+
+// Every key of the pipeline, one table per section.
+std::vector<Field> pipelineFields(PipelineConfig& c) {
+    std::vector<Field> out = trackerFields(c.tracker);
+    for (auto* more : {&detectorFields, &estimatorFields}) {
+        for (auto& f : more(c)) {
+            out.push_back(std::move(f));
+        }
+    }
+    for (auto& f : objectFields(c.estimator.objects)) {
+        out.push_back(std::move(f));
+    }
+    return out;
 }
 
 Locator documentLocator(const toml::table& root, std::string_view source) {

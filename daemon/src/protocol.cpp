@@ -312,10 +312,10 @@ void appendScale(std::string& out, const ScaleReport& r, std::int64_t now_mono_n
     out += "}\n";
 }
 
-void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& log,
-                  const ClientCounts& clients) {
-    out += R"({"class":"STATUS","source":)";
-    appendJsonString(out, s.source);
+namespace {
+
+// STATUS: the vertical, the IMU and the gyro prior.
+void appendStatusSensors(std::string& out, const PipelineStatus& s) {
     if (!s.gravity_source.empty()) {
         key(out, "gravity_source");
         appendJsonString(out, s.gravity_source);
@@ -348,6 +348,10 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         appendArray(out, s.gyro.bias_C_radps);
         out += '}';
     }
+}
+
+// STATUS: frames, detector, features, scale updates.
+void appendStatusCounters(std::string& out, const PipelineStatus& s) {
     key(out, "uptime_s");
     appendJsonNumber(out, s.uptime_s);
     key(out, "fps");
@@ -386,18 +390,10 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
     appendJsonInt(out, s.scale_updates);
     key(out, "epoch");
     appendJsonInt(out, s.epoch);
-    if (s.live) {
-        out += R"(,"camera":{"device":)";
-        appendJsonString(out, s.camera_device);
-        key(out, "mode");
-        appendJsonString(out, s.camera_mode);
-        key(out, "lost");
-        appendBool(out, s.camera_lost);
-        key(out, "reconnects");
-        appendJsonInt(out, s.camera_reconnects);
-        out += '}';
-    }
-    appendTiming(out, s.timing);
+}
+
+// STATUS: the socket's clients and the field log.
+void appendStatusService(std::string& out, const LogStatus& log, const ClientCounts& clients) {
     out += R"(,"clients":{"connected":)";
     appendJsonInt(out, clients.connected);
     key(out, "max");
@@ -428,6 +424,29 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         key(out, "error");
         appendJsonString(out, log.error);
     }
+}
+
+}  // namespace
+
+void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& log,
+                  const ClientCounts& clients) {
+    out += R"({"class":"STATUS","source":)";
+    appendJsonString(out, s.source);
+    appendStatusSensors(out, s);
+    appendStatusCounters(out, s);
+    if (s.live) {
+        out += R"(,"camera":{"device":)";
+        appendJsonString(out, s.camera_device);
+        key(out, "mode");
+        appendJsonString(out, s.camera_mode);
+        key(out, "lost");
+        appendBool(out, s.camera_lost);
+        key(out, "reconnects");
+        appendJsonInt(out, s.camera_reconnects);
+        out += '}';
+    }
+    appendTiming(out, s.timing);
+    appendStatusService(out, log, clients);
     out += "}}\n";
 }
 
@@ -581,6 +600,57 @@ void appendError(std::string& out, std::string_view message, std::string_view cm
     out += "}\n";
 }
 
+namespace {
+
+// watch's arguments ("enable", "pose"); nullopt when valid, else what is wrong.
+std::optional<std::string> readWatchArguments(const nlohmann::json& doc, Request& r) {
+    const auto it = doc.find("enable");
+    if (it != doc.end()) {
+        if (!it->is_boolean()) {
+            return std::string("\"enable\" must be true or false");
+        }
+        r.enable = it->get<bool>();
+    }
+    const auto pose_it = doc.find("pose");
+    if (pose_it != doc.end()) {
+        if (!pose_it->is_boolean()) {
+            return std::string("\"pose\" must be true or false");
+        }
+        r.pose = pose_it->get<bool>();
+    }
+    return std::nullopt;
+}
+
+// set_gravity's "down", normalised; nullopt when valid, else what is wrong.
+std::optional<std::string> readGravityArguments(const nlohmann::json& doc, Request& r) {
+    using nlohmann::json;
+    const auto it = doc.find("down");
+    const char* bad = "\"down\" must be an array of 3 finite numbers, not all zero";
+    if (it == doc.end() || !it->is_array() || it->size() != 3) {
+        return std::string(bad);
+    }
+    for (std::size_t i = 0; i < 3; ++i) {
+        const json& v = (*it)[i];
+        if (!v.is_number()) {
+            return std::string(bad);
+        }
+        r.down[i] = v.get<double>();
+        if (!std::isfinite(r.down[i])) {
+            return std::string(bad);
+        }
+    }
+    const double norm = safeNorm(r.down);
+    if (!(norm > 0) || !std::isfinite(norm)) {
+        return std::string(bad);
+    }
+    for (double& v : r.down) {
+        v /= norm;
+    }
+    return std::nullopt;
+}
+
+}  // namespace
+
 Request parseRequest(std::string_view line) {
     using nlohmann::json;
     // nlohmann::json stops at a NUL byte as at the end of the input.
@@ -620,43 +690,13 @@ Request parseRequest(std::string_view line) {
     } else if (r.cmd == "pose") {
         r.command = Command::kPose;
     } else if (r.cmd == "watch") {
-        const auto it = doc.find("enable");
-        if (it != doc.end()) {
-            if (!it->is_boolean()) {
-                return invalid(r.cmd, "\"enable\" must be true or false");
-            }
-            r.enable = it->get<bool>();
-        }
-        const auto pose_it = doc.find("pose");
-        if (pose_it != doc.end()) {
-            if (!pose_it->is_boolean()) {
-                return invalid(r.cmd, "\"pose\" must be true or false");
-            }
-            r.pose = pose_it->get<bool>();
+        if (auto bad = readWatchArguments(doc, r)) {
+            return invalid(r.cmd, *bad);
         }
         r.command = Command::kWatch;
     } else if (r.cmd == "set_gravity") {
-        const auto it = doc.find("down");
-        const char* bad = "\"down\" must be an array of 3 finite numbers, not all zero";
-        if (it == doc.end() || !it->is_array() || it->size() != 3) {
-            return invalid(r.cmd, bad);
-        }
-        for (std::size_t i = 0; i < 3; ++i) {
-            const json& v = (*it)[i];
-            if (!v.is_number()) {
-                return invalid(r.cmd, bad);
-            }
-            r.down[i] = v.get<double>();
-            if (!std::isfinite(r.down[i])) {
-                return invalid(r.cmd, bad);
-            }
-        }
-        const double norm = safeNorm(r.down);
-        if (!(norm > 0) || !std::isfinite(norm)) {
-            return invalid(r.cmd, bad);
-        }
-        for (double& v : r.down) {
-            v /= norm;
+        if (auto bad = readGravityArguments(doc, r)) {
+            return invalid(r.cmd, *bad);
         }
         r.command = Command::kSetGravity;
     } else {
