@@ -2,10 +2,11 @@
 # Behaviour unchanged across a restructuring: scale-eval, slam-run and the
 # daemon built at two revisions give byte-identical outputs on redkitchen.
 #
-#   scripts/same-outputs.sh BASE [HEAD] [--frames N]
+#   scripts/same-outputs.sh BASE [HEAD] [--frames N] [--head-build DIR]
 #
 # BASE and HEAD are git revisions (HEAD defaults to the working tree as it is,
-# built in build/release). Each revision is built (release preset, only the
+# built in build/release, or the existing build DIR given by --head-build: the
+# ctest tools.same_outputs passes its own). Each revision is built (release preset, only the
 # three programs) in build/same-outputs/<rev>, then over the first N frames
 # (default 300):
 #   - slam-run --out: the trajectory file;
@@ -17,19 +18,22 @@
 #     the field log's DETECTION, SCALE, OBJECT, POSE and STATE lines without
 #     their clock readings (mono_ns, ms, latency_ms).
 # Exit 0 when every output is the same to the byte, 1 with the differing files
-# named otherwise, 66 without the dataset or model, 64 on bad arguments.
+# named otherwise, 66 without the dataset or model, 77 outside a git checkout
+# with BASE in its history, 64 on bad arguments.
 # Needs ../shared (SCALED_SHARED_DIR): data/redkitchen and models/yolox_nano.onnx.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
 
-usage() { echo "usage: scripts/same-outputs.sh BASE [HEAD] [--frames N]" >&2; exit 64; }
+usage() { echo "usage: scripts/same-outputs.sh BASE [HEAD] [--frames N] [--head-build DIR]" >&2; exit 64; }
 base=""
 head=""
+head_dir=""
 frames=300
 while [[ $# -gt 0 ]]; do
   case $1 in
     --frames) [[ $# -ge 2 && $2 =~ ^[1-9][0-9]*$ ]] || usage; frames=$2; shift 2 ;;
+    --head-build) [[ $# -ge 2 && -d $2 ]] || usage; head_dir=$(cd "$2" && pwd); shift 2 ;;
     -*) usage ;;
     *) if [[ -z $base ]]; then base=$1; elif [[ -z $head ]]; then head=$1; else usage; fi; shift ;;
   esac
@@ -44,12 +48,23 @@ if [[ ! -d $dataset || ! -f $model ]]; then
   exit 66
 fi
 
+if ! git rev-parse --verify --quiet "$base^{commit}" > /dev/null 2>&1; then
+  echo "same-outputs: $base is not a revision of this checkout (a git clone with its history is needed)" >&2
+  exit 77
+fi
+[[ -z $head_dir || -z $head ]] || usage
+
 targets=(scale-eval slam-run scaled)
 jobs=${SCALED_JOBS:-$(nproc)}
 
 # build REV -> prints the build directory holding bin/
 build() {
   local rev=$1
+  if [[ -z $rev && -n $head_dir ]]; then
+    cmake --build "$head_dir" -j "$jobs" --target "${targets[@]}" > /dev/null
+    echo "$head_dir"
+    return
+  fi
   if [[ -z $rev ]]; then
     cmake --preset release > /dev/null
     cmake --build build/release -j "$jobs" --target "${targets[@]}" > /dev/null
