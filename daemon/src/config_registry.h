@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -23,6 +24,7 @@
 
 #include <toml++/toml.h>
 
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/daemon/pipeline_config.h>
 #include <scaled/drivers/priors/toml_read.h>
@@ -43,25 +45,29 @@ std::string tomlQuote(const std::string& s);
 
 enum class Bound : std::uint8_t { kClosed, kOpen };
 
+// A number within limits core (or a driver) owns (scaled/core/param_limits.h).
 template <typename T>
-Field real(const char* section, const char* key, T* target, double lo, double hi,
-           Bound lo_bound = Bound::kClosed) {
+Field real(const char* section, const char* key, T* target, core::ParamLimits limits) {
     using drivers::priors::tomlread::num;
     using drivers::priors::tomlread::show;
     return {section, key,
             [=](const toml::node& n, const std::filesystem::path&) -> std::optional<std::string> {
                 const auto v = drivers::priors::tomlread::asNumber(n);
-                const bool ok = v && std::isfinite(*v) && *v <= hi &&
-                                (lo_bound == Bound::kOpen ? *v > lo : *v >= lo);
-                if (!ok) {
-                    return std::string("must be a number in ") +
-                           (lo_bound == Bound::kOpen ? "(" : "[") + num(lo) + ", " + num(hi) +
-                           "] (got " + show(n) + ")";
+                if (!v || !limits.contains(*v)) {
+                    return std::string("must be a number in ") + (limits.lo_open ? "(" : "[") +
+                           num(limits.lo) + ", " + num(limits.hi) + (limits.hi_open ? ")" : "]") +
+                           " (got " + show(n) + ")";
                 }
                 *target = static_cast<T>(*v);
                 return std::nullopt;
             },
             [=] { return num(static_cast<double>(*target)); }};
+}
+
+template <typename T>
+Field real(const char* section, const char* key, T* target, double lo, double hi,
+           Bound lo_bound = Bound::kClosed) {
+    return real(section, key, target, core::ParamLimits{lo, hi, lo_bound == Bound::kOpen, false});
 }
 
 template <typename T>
@@ -78,6 +84,18 @@ Field integer(const char* section, const char* key, T* target, std::int64_t lo, 
                 return std::nullopt;
             },
             [=] { return std::to_string(*target); }};
+}
+
+// An integer within limits core (or a driver) owns; open bounds exclude
+// the bound itself.
+template <typename T>
+Field integer(const char* section, const char* key, T* target, const core::ParamLimits& limits) {
+    const auto bound = [](double v) {
+        return v >= 9.2e18 ? std::numeric_limits<std::int64_t>::max()
+                           : static_cast<std::int64_t>(v);
+    };
+    return integer(section, key, target, bound(limits.lo) + (limits.lo_open ? 1 : 0),
+                   bound(limits.hi) - (limits.hi_open ? 1 : 0));
 }
 
 template <typename E>

@@ -70,54 +70,42 @@ const char* toString(ObjectState state) {
 }
 
 Result<bool> validate(const ObjectConfig& c) {
-    const auto in = [](Scalar v, Scalar lo, Scalar hi) {
-        return std::isfinite(v) && v >= lo && v <= hi;
+    using L = ObjectLimits;
+    const struct {
+        const char* name;
+        double value;
+        const ParamLimits& limits;
+    } checks[] = {
+        {"max_objects", static_cast<double>(c.max_objects), L::max_objects},
+        {"max_views", static_cast<double>(c.max_views), L::max_views},
+        {"centre_rel_sigma", static_cast<double>(c.centre_rel_sigma), L::centre_rel_sigma},
+        {"centre_sigma_px", static_cast<double>(c.centre_sigma_px), L::centre_sigma_px},
+        {"min_parallax_deg", static_cast<double>(c.min_parallax_deg), L::min_parallax_deg},
+        {"max_anchor_rel_sigma", static_cast<double>(c.max_anchor_rel_sigma),
+         L::max_anchor_rel_sigma},
+        {"anchor_box_margin", static_cast<double>(c.anchor_box_margin), L::anchor_box_margin},
+        {"association_gate", static_cast<double>(c.association_gate), L::association_gate},
+        {"epipolar_depth_min", static_cast<double>(c.epipolar_depth_min), L::epipolar_depth_min},
+        {"epipolar_depth_max", static_cast<double>(c.epipolar_depth_max), L::epipolar_depth_max},
+        {"max_gap_updates", static_cast<double>(c.max_gap_updates), L::max_gap_updates},
+        {"box_edge_rel_sigma", static_cast<double>(c.box_edge_rel_sigma), L::box_edge_rel_sigma},
+        {"object_rel_sigma", static_cast<double>(c.object_rel_sigma), L::object_rel_sigma},
+        {"map_rel_sigma", static_cast<double>(c.map_rel_sigma), L::map_rel_sigma},
+        {"view_band", static_cast<double>(c.view_band), L::view_band},
+        {"view_reference_quantile", static_cast<double>(c.view_reference_quantile),
+         L::view_reference_quantile},
     };
-    if (c.max_objects < 1 || c.max_objects > 1024) {
-        return invalid("max_objects", static_cast<Scalar>(c.max_objects), "in [1, 1024]");
+    for (const auto& check : checks) {
+        if (!check.limits.contains(check.value)) {
+            return invalid(check.name, static_cast<Scalar>(check.value), check.limits.text());
+        }
     }
-    if (c.max_views < 2 || c.max_views > 1024) {
-        return invalid("max_views", static_cast<Scalar>(c.max_views), "in [2, 1024]");
-    }
-    if (!in(c.centre_rel_sigma, 0, 10) || !in(c.centre_sigma_px, 0, 1000) ||
-        !(c.centre_rel_sigma > 0 || c.centre_sigma_px > 0)) {
+    if (!(c.centre_rel_sigma > 0 || c.centre_sigma_px > 0)) {
         return invalid("centre_rel_sigma", c.centre_rel_sigma,
-                       "in [0, 10] with centre_sigma_px in [0, 1000], not both 0");
+                       "> 0 when centre_sigma_px is 0 (not both 0)");
     }
-    if (!in(c.min_parallax_deg, 0, 90)) {
-        return invalid("min_parallax_deg", c.min_parallax_deg, "in [0, 90]");
-    }
-    if (!in(c.max_anchor_rel_sigma, 0, 10) || !(c.max_anchor_rel_sigma > 0)) {
-        return invalid("max_anchor_rel_sigma", c.max_anchor_rel_sigma, "in (0, 10]");
-    }
-    if (!in(c.anchor_box_margin, 0, 10)) {
-        return invalid("anchor_box_margin", c.anchor_box_margin, "in [0, 10]");
-    }
-    if (!in(c.association_gate, 0, 100) || !(c.association_gate > 0)) {
-        return invalid("association_gate", c.association_gate, "in (0, 100]");
-    }
-    if (!(c.epipolar_depth_min > 0) || !(c.epipolar_depth_max > c.epipolar_depth_min) ||
-        !std::isfinite(c.epipolar_depth_max)) {
-        return invalid("epipolar_depth_min", c.epipolar_depth_min,
-                       "> 0 and below epipolar_depth_max");
-    }
-    if (c.max_gap_updates < 1) {
-        return invalid("max_gap_updates", static_cast<Scalar>(c.max_gap_updates), ">= 1");
-    }
-    if (!in(c.box_edge_rel_sigma, 0, 1)) {
-        return invalid("box_edge_rel_sigma", c.box_edge_rel_sigma, "in [0, 1]");
-    }
-    if (!in(c.object_rel_sigma, 0, 10)) {
-        return invalid("object_rel_sigma", c.object_rel_sigma, "in [0, 10]");
-    }
-    if (!in(c.map_rel_sigma, 0, 1)) {
-        return invalid("map_rel_sigma", c.map_rel_sigma, "in [0, 1]");
-    }
-    if (!in(c.view_band, 0, 10) || !(c.view_band > 0)) {
-        return invalid("view_band", c.view_band, "in (0, 10]");
-    }
-    if (!in(c.view_reference_quantile, 0, 1)) {
-        return invalid("view_reference_quantile", c.view_reference_quantile, "in [0, 1]");
+    if (!(c.epipolar_depth_max > c.epipolar_depth_min)) {
+        return invalid("epipolar_depth_min", c.epipolar_depth_min, "below epipolar_depth_max");
     }
     return true;
 }

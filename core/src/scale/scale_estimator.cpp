@@ -1,4 +1,5 @@
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include <scaled/core/scale/scale_estimator.h>
@@ -15,31 +16,53 @@ const char* toString(EstimatorModel model) {
     return "unknown";
 }
 
+namespace {
+
+// The first parameter outside its EstimatorLimits, named.
+std::optional<Error> outOfLimits(const EstimatorConfig& config) {
+    using L = EstimatorLimits;
+    const auto& lc = config.likelihood;
+    const auto& ec = config.extent;
+    const struct {
+        const char* name;
+        double value;
+        const ParamLimits& limits;
+    } checks[] = {
+        {"max_features_per_box", static_cast<double>(config.max_features_per_box),
+         L::max_features_per_box},
+        {"min_detection_score", static_cast<double>(config.min_detection_score),
+         L::min_detection_score},
+        {"outlier_weight", static_cast<double>(lc.outlier_weight), L::outlier_weight},
+        {"outlier_height_range_m", static_cast<double>(lc.outlier_height_range_m),
+         L::outlier_height_range_m},
+        {"partial_weight", static_cast<double>(lc.partial_weight), L::partial_weight},
+        {"min_sigma_m", static_cast<double>(lc.min_sigma_m), L::min_sigma_m},
+        {"box_edge_sigma_px", static_cast<double>(ec.box_edge_sigma_px), L::box_edge_sigma_px},
+        {"border_margin_px", static_cast<double>(ec.border_margin_px), L::border_margin_px},
+        {"min_extent_px", static_cast<double>(ec.min_extent_px), L::min_extent_px},
+    };
+    for (const auto& check : checks) {
+        if (!check.limits.contains(check.value)) {
+            return makeError(ErrorCode::kInvalidArgument, std::string("scale estimator: ") +
+                                                              check.name + " must be " +
+                                                              check.limits.text() + " (got " +
+                                                              std::to_string(check.value) + ")");
+        }
+    }
+    return std::nullopt;
+}
+
+}  // namespace
+
 Result<ScaleEstimator> ScaleEstimator::create(const EstimatorConfig& config, PriorTable priors,
                                               const PinholeRadialCamera& camera) {
     if (priors.empty()) {
         return makeError(ErrorCode::kInvalidArgument, "scale estimator: no height priors given");
     }
-    if (config.max_features_per_box < 1 || config.max_features_per_box > 4096) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         "scale estimator: max_features_per_box must be in [1, 4096] (got " +
-                             std::to_string(config.max_features_per_box) + ")");
+    if (auto bad = outOfLimits(config)) {
+        return *bad;
     }
     const auto& lc = config.likelihood;
-    if (lc.robust &&
-        !(lc.outlier_weight > 0 && lc.outlier_weight < 1 && lc.outlier_height_range_m > 0)) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         "scale estimator: robust likelihood needs 0 < outlier_weight < 1 and "
-                         "outlier_height_range_m > 0");
-    }
-    if (!(lc.partial_weight >= 0 && lc.partial_weight < 1)) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         "scale estimator: partial_weight must be in [0, 1) (got " +
-                             std::to_string(lc.partial_weight) + ")");
-    }
-    if (!(lc.min_sigma_m > 0)) {
-        return makeError(ErrorCode::kInvalidArgument, "scale estimator: min_sigma_m must be > 0");
-    }
     auto posterior = ScalePosterior::create(config.posterior);
     if (!posterior) {
         return posterior.error();

@@ -30,16 +30,20 @@ const char* toString(PosteriorArithmetic arithmetic) {
 }
 
 Result<bool> validate(const PosteriorConfig& config) {
-    if (!(config.converged_rel_width > 0) || !std::isfinite(config.converged_rel_width)) {
+    if (!PosteriorLimits::converged_rel_width.contains(config.converged_rel_width)) {
         return makeError(ErrorCode::kInvalidArgument,
-                         "posterior: converged_rel_width must be > 0 (got " +
+                         "posterior: converged_rel_width must be " +
+                             PosteriorLimits::converged_rel_width.text() + " (got " +
                              std::to_string(config.converged_rel_width) + ")");
     }
     if (!(config.log_floor < 0) || !std::isfinite(config.log_floor)) {
         return makeError(ErrorCode::kInvalidArgument, "posterior: log_floor must be < 0");
     }
-    if (!(config.drift_sigma_log >= 0) || !std::isfinite(config.drift_sigma_log)) {
-        return makeError(ErrorCode::kInvalidArgument, "posterior: drift_sigma_log must be >= 0");
+    if (!PosteriorLimits::drift_sigma_log.contains(config.drift_sigma_log)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "posterior: drift_sigma_log must be " +
+                             PosteriorLimits::drift_sigma_log.text() + " (got " +
+                             std::to_string(config.drift_sigma_log) + ")");
     }
     return true;
 }

@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include <Eigen/Cholesky>
@@ -13,86 +14,68 @@ namespace scaled::core::slam {
 
 namespace {
 
-bool finitePositive(Scalar v) {
-    return std::isfinite(v) && v > 0;
-}
-
-Error fieldError(const char* field, Scalar value, const char* allowed) {
+Error fieldError(const char* field, Scalar value, const std::string& allowed) {
     return makeError(
         ErrorCode::kInvalidArgument,
         std::string("slam.") + field + " = " + std::to_string(value) + ": must be " + allowed);
 }
 
+// The first parameter outside its SlamLimits, named.
+std::optional<Error> outOfLimits(const SlamConfig& c) {
+    using L = SlamLimits;
+    const struct {
+        const char* name;
+        double value;
+        const ParamLimits& limits;
+    } checks[] = {
+        {"sigma_a", static_cast<double>(c.motion.sigma_a), L::sigma_a},
+        {"sigma_alpha", static_cast<double>(c.motion.sigma_alpha), L::sigma_alpha},
+        {"pixel_sigma_px", static_cast<double>(c.pixel_sigma_px), L::pixel_sigma_px},
+        {"init_sigma_v", static_cast<double>(c.init_sigma_v), L::init_sigma_v},
+        {"init_sigma_w", static_cast<double>(c.init_sigma_w), L::init_sigma_w},
+        {"rho0", static_cast<double>(c.rho0), L::rho0},
+        {"sigma_rho", static_cast<double>(c.sigma_rho), L::sigma_rho},
+        {"linearity_threshold", static_cast<double>(c.linearity_threshold), L::linearity_threshold},
+        {"max_features", static_cast<double>(c.max_features), L::max_features},
+        {"max_measured", static_cast<double>(c.max_measured), L::max_measured},
+        {"min_visible", static_cast<double>(c.min_visible), L::min_visible},
+        {"image_margin_px", static_cast<double>(c.image_margin_px), L::image_margin_px},
+        {"chi2_gate", static_cast<double>(c.chi2_gate), L::chi2_gate},
+        {"ransac_threshold_px", static_cast<double>(c.ransac_threshold_px), L::ransac_threshold_px},
+        {"ransac_confidence", static_cast<double>(c.ransac_confidence), L::ransac_confidence},
+        {"ransac_min_hypotheses", static_cast<double>(c.ransac_min_hypotheses),
+         L::ransac_min_hypotheses},
+        {"ransac_max_hypotheses", static_cast<double>(c.ransac_max_hypotheses),
+         L::ransac_max_hypotheses},
+        {"delete_min_attempts", static_cast<double>(c.delete_min_attempts), L::delete_min_attempts},
+        {"delete_min_ratio", static_cast<double>(c.delete_min_ratio), L::delete_min_ratio},
+        {"min_inliers", static_cast<double>(c.min_inliers), L::min_inliers},
+        {"lost_after_frames", static_cast<double>(c.lost_after_frames), L::lost_after_frames},
+        {"max_dt_s", static_cast<double>(c.max_dt_s), L::max_dt_s},
+    };
+    for (const auto& check : checks) {
+        if (!check.limits.contains(check.value)) {
+            return fieldError(check.name, static_cast<Scalar>(check.value), check.limits.text());
+        }
+    }
+    return std::nullopt;
+}
+
 }  // namespace
 
 Result<bool> validate(const SlamConfig& c) {
-    if (!finitePositive(c.motion.sigma_a)) {
-        return fieldError("sigma_a", c.motion.sigma_a, "> 0");
+    if (auto bad = outOfLimits(c)) {
+        return *bad;
     }
-    if (!finitePositive(c.motion.sigma_alpha)) {
-        return fieldError("sigma_alpha", c.motion.sigma_alpha, "> 0");
-    }
-    if (!finitePositive(c.pixel_sigma_px)) {
-        return fieldError("pixel_sigma_px", c.pixel_sigma_px, "> 0");
-    }
-    if (!(std::isfinite(c.init_sigma_v) && c.init_sigma_v >= 0)) {
-        return fieldError("init_sigma_v", c.init_sigma_v, ">= 0");
-    }
-    if (!(std::isfinite(c.init_sigma_w) && c.init_sigma_w >= 0)) {
-        return fieldError("init_sigma_w", c.init_sigma_w, ">= 0");
-    }
-    if (!(std::isfinite(c.rho0) && c.rho0 >= 0)) {
-        return fieldError("rho0", c.rho0, ">= 0");
-    }
-    if (!finitePositive(c.sigma_rho)) {
-        return fieldError("sigma_rho", c.sigma_rho, "> 0");
-    }
-    if (!finitePositive(c.linearity_threshold)) {
-        return fieldError("linearity_threshold", c.linearity_threshold, "> 0");
-    }
-    if (c.max_features < 1 || c.max_features > 1000) {
-        return fieldError("max_features", Scalar(c.max_features), "in [1, 1000]");
-    }
-    if (c.max_measured < 1 || c.max_measured > c.max_features) {
+    if (c.max_measured > c.max_features) {
         return fieldError("max_measured", Scalar(c.max_measured), "in [1, max_features]");
     }
-    if (c.min_visible < 0 || c.min_visible > c.max_features) {
+    if (c.min_visible > c.max_features) {
         return fieldError("min_visible", Scalar(c.min_visible), "in [0, max_features]");
     }
-    if (!(std::isfinite(c.image_margin_px) && c.image_margin_px >= 0)) {
-        return fieldError("image_margin_px", c.image_margin_px, ">= 0");
-    }
-    if (!finitePositive(c.chi2_gate)) {
-        return fieldError("chi2_gate", c.chi2_gate, "> 0");
-    }
-    if (!finitePositive(c.ransac_threshold_px)) {
-        return fieldError("ransac_threshold_px", c.ransac_threshold_px, "> 0");
-    }
-    if (!(c.ransac_confidence > 0 && c.ransac_confidence < 1)) {
-        return fieldError("ransac_confidence", c.ransac_confidence, "in (0, 1)");
-    }
-    if (c.ransac_min_hypotheses < 1 || c.ransac_min_hypotheses > c.ransac_max_hypotheses) {
+    if (c.ransac_min_hypotheses > c.ransac_max_hypotheses) {
         return fieldError("ransac_min_hypotheses", Scalar(c.ransac_min_hypotheses),
                           "in [1, ransac_max_hypotheses]");
-    }
-    if (c.ransac_max_hypotheses < 1 || c.ransac_max_hypotheses > 10000) {
-        return fieldError("ransac_max_hypotheses", Scalar(c.ransac_max_hypotheses),
-                          "in [1, 10000]");
-    }
-    if (c.delete_min_attempts < 1) {
-        return fieldError("delete_min_attempts", Scalar(c.delete_min_attempts), ">= 1");
-    }
-    if (!(c.delete_min_ratio >= 0 && c.delete_min_ratio <= 1)) {
-        return fieldError("delete_min_ratio", c.delete_min_ratio, "in [0, 1]");
-    }
-    if (c.min_inliers < 1) {
-        return fieldError("min_inliers", Scalar(c.min_inliers), ">= 1");
-    }
-    if (c.lost_after_frames < 1) {
-        return fieldError("lost_after_frames", Scalar(c.lost_after_frames), ">= 1");
-    }
-    if (!finitePositive(c.max_dt_s)) {
-        return fieldError("max_dt_s", c.max_dt_s, "> 0");
     }
     return true;
 }

@@ -1,8 +1,12 @@
 // The pipeline configuration: every key checked, errors that name the file,
 // line, key and value; overrides; relative paths; a round trip through toToml.
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
+#include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -196,6 +200,90 @@ TEST(PipelineConfig, RansacHypothesesStayWithinWhatTheTrackerAccepts) {
     EXPECT_TRUE(core::slam::validate(c.tracker.slam).ok());
 }
 
+// The ranges of the core components' keys are core's tables (SlamLimits,
+// PosteriorLimits, EstimatorLimits, ObjectLimits): at a closed bound the key
+// is accepted, just past a bound it is refused, by the registry and by core's
+// own check of the same parameter.
+TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
+    struct Key {
+        const char* name;  // section.key
+        core::ParamLimits limits;
+        bool integer;
+    };
+    using S = core::slam::SlamLimits;
+    using P = core::PosteriorLimits;
+    using E = core::EstimatorLimits;
+    using O = core::ObjectLimits;
+    const Key keys[] = {
+        {"tracker.sigma_a", S::sigma_a, false},
+        {"tracker.pixel_sigma_px", S::pixel_sigma_px, false},
+        {"tracker.init_sigma_v", S::init_sigma_v, false},
+        {"tracker.rho0", S::rho0, false},
+        {"tracker.linearity_threshold", S::linearity_threshold, false},
+        {"tracker.chi2_gate", S::chi2_gate, false},
+        {"tracker.ransac_confidence", S::ransac_confidence, false},
+        {"tracker.ransac_max_hypotheses", S::ransac_max_hypotheses, true},
+        {"tracker.min_inliers", S::min_inliers, true},
+        {"tracker.lost_after_frames", S::lost_after_frames, true},
+        {"tracker.max_dt_s", S::max_dt_s, false},
+        {"estimator.converged_rel_width", P::converged_rel_width, false},
+        {"estimator.drift_sigma_log", P::drift_sigma_log, false},
+        {"estimator.max_features_per_box", E::max_features_per_box, true},
+        {"estimator.outlier_weight", E::outlier_weight, false},
+        {"estimator.partial_weight", E::partial_weight, false},
+        {"estimator.min_sigma_m", E::min_sigma_m, false},
+        {"estimator.min_extent_px", E::min_extent_px, false},
+        {"objects.max_objects", O::max_objects, true},
+        {"objects.max_views", O::max_views, true},
+        {"objects.association_gate", O::association_gate, false},
+        {"objects.view_band", O::view_band, false},
+        {"objects.max_gap_updates", O::max_gap_updates, true},
+    };
+    const auto text = [](double v, bool integer) {
+        std::ostringstream out;
+        if (integer) {
+            out << static_cast<long long>(v);
+        } else {
+            out << std::setprecision(17) << v;
+        }
+        return out.str();
+    };
+    for (const Key& k : keys) {
+        SCOPED_TRACE(k.name);
+        const double step = k.integer ? 1 : std::max(1e-6, std::abs(k.limits.hi) * 1e-6);
+        const double above = k.limits.hi_open ? k.limits.hi : k.limits.hi + step;
+        const double below = k.limits.lo_open ? k.limits.lo : k.limits.lo - step;
+        for (const double bad : {above, below}) {
+            PipelineConfig c = defaultPipelineConfig();
+            EXPECT_FALSE(
+                applyPipelineOverrides({std::string(k.name) + "=" + text(bad, k.integer)}, c).ok())
+                << "accepted " << bad;
+            EXPECT_FALSE(k.limits.contains(bad)) << bad;
+        }
+        for (const double good : {k.limits.lo, k.limits.hi}) {
+            if ((good == k.limits.lo && k.limits.lo_open) ||
+                (good == k.limits.hi && k.limits.hi_open)) {
+                continue;
+            }
+            PipelineConfig c = defaultPipelineConfig();
+            const auto r =
+                applyPipelineOverrides({std::string(k.name) + "=" + text(good, k.integer)}, c);
+            EXPECT_TRUE(r.ok()) << good << ": " << (r.ok() ? "" : r.error().message);
+        }
+    }
+    // Core refuses what the registry refuses: a value past a bound set
+    // directly in the configuration.
+    PipelineConfig c = defaultPipelineConfig();
+    c.tracker.slam.chi2_gate = static_cast<core::Scalar>(2e4);
+    EXPECT_FALSE(core::slam::validate(c.tracker.slam).ok());
+    c = defaultPipelineConfig();
+    c.estimator.objects.view_band = 0;
+    EXPECT_FALSE(core::validate(c.estimator.objects).ok());
+    c = defaultPipelineConfig();
+    c.estimator.posterior.drift_sigma_log = 2;
+    EXPECT_FALSE(core::validate(c.estimator.posterior).ok());
+}
+
 TEST(PipelineConfig, EpipolarDepthMaxMustExceedMin) {
     PipelineConfig c = defaultPipelineConfig();
     // Equal is rejected, at the line of epipolar_depth_max.
@@ -255,9 +343,12 @@ TEST(PipelineConfig, PosteriorArithmeticIsCheckedLikeEveryKey) {
               "test.toml:2: estimator.posterior_arithmetic: must be one of \"floating\", "
               "\"fixed\" (got 1)");
     // The fixed formats need min_sigma_m >= 10 um.
-    EXPECT_EQ(applyError("[estimator]\nposterior_arithmetic = \"fixed\"\nmin_sigma_m = 0\n", c),
+    EXPECT_EQ(applyError("[estimator]\nposterior_arithmetic = \"fixed\"\nmin_sigma_m = 1e-6\n", c),
               "test.toml:3: estimator.min_sigma_m: must be >= 1e-05 with "
-              "estimator.posterior_arithmetic = \"fixed\" (got 0)");
+              "estimator.posterior_arithmetic = \"fixed\" (got 1e-06)");
+    // Its own range is core's (core::EstimatorLimits): 0 is no sigma.
+    EXPECT_EQ(applyError("[estimator]\nmin_sigma_m = 0\n", c),
+              "test.toml:2: estimator.min_sigma_m: must be a number in (0, 10] (got 0)");
 }
 
 TEST(PipelineConfig, AppliesKeysAndKeepsTheRest) {
@@ -321,7 +412,7 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
     EXPECT_EQ(applyError("[estimator]\nrobust = 1\n", c),
               "test.toml:2: estimator.robust: must be true or false (got 1)");
     EXPECT_EQ(applyError("[estimator]\noutlier_weight = 0\n", c),
-              "test.toml:2: estimator.outlier_weight: must be a number in (0, 1] (got 0)");
+              "test.toml:2: estimator.outlier_weight: must be a number in (0, 1) (got 0)");
     EXPECT_EQ(applyError("[tracker]\nsigma_a = nan\n", c),
               "test.toml:2: tracker.sigma_a: must be a number in (0, 10000] (got nan)");
     EXPECT_EQ(applyError("[detector]\nclasses = [\"cup\", 3]\n", c),

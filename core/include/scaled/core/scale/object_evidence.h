@@ -38,6 +38,7 @@
 #include <vector>
 
 #include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/core/scale/height_prior.h>
 #include <scaled/core/scale/object_likelihood.h>
@@ -103,7 +104,29 @@ struct ObjectConfig {
     ApparentHeightPrior::GridSpec height_grid;
 };
 
-// The message names the field and its value.
+// The allowed values of ObjectConfig's parameters (param_limits.h):
+// validate() checks them, the daemon's [objects] section offers them.
+struct ObjectLimits {
+    static constexpr ParamLimits max_objects = closed(1, 1024);
+    static constexpr ParamLimits max_views = closed(2, 1024);
+    static constexpr ParamLimits centre_rel_sigma = closed(0, 10);  // not both centre terms 0
+    static constexpr ParamLimits centre_sigma_px = closed(0, 1000);
+    static constexpr ParamLimits min_parallax_deg = closed(0, 90);
+    static constexpr ParamLimits max_anchor_rel_sigma = openClosed(0, 10);
+    static constexpr ParamLimits anchor_box_margin = closed(0, 10);
+    static constexpr ParamLimits association_gate = openClosed(0, 100);
+    static constexpr ParamLimits epipolar_depth_min = openClosed(0, 1e6);  // < epipolar_depth_max
+    static constexpr ParamLimits epipolar_depth_max = openClosed(0, 1e6);
+    static constexpr ParamLimits max_gap_updates = closed(1, 1e6);
+    static constexpr ParamLimits box_edge_rel_sigma = closed(0, 1);
+    static constexpr ParamLimits object_rel_sigma = closed(0, 10);
+    static constexpr ParamLimits map_rel_sigma = closed(0, 1);
+    static constexpr ParamLimits view_band = openClosed(0, 10);
+    static constexpr ParamLimits view_reference_quantile = closed(0, 1);
+};
+
+// Checks ObjectLimits and the parameters' relations; the message names the
+// field and its value.
 Result<bool> validate(const ObjectConfig& config);
 
 enum class ObjectState : std::uint8_t {

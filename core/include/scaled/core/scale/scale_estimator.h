@@ -19,6 +19,7 @@
 #include <vector>
 
 #include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/core/scale/fixed_posterior.h>
 #include <scaled/core/scale/height_prior.h>
@@ -98,6 +99,22 @@ struct UpdateStats {
     int objects_used = 0;
     int views_used = 0;
     int new_objects = 0;
+};
+
+// The allowed values of EstimatorConfig's own parameters and of its
+// likelihood and extent parts (param_limits.h): ScaleEstimator::create
+// checks them, the daemon's [estimator] section offers them. The posterior's
+// are PosteriorLimits, the objects' ObjectLimits.
+struct EstimatorLimits {
+    static constexpr ParamLimits max_features_per_box = closed(1, 4096);
+    static constexpr ParamLimits min_detection_score = closed(0, 1);
+    static constexpr ParamLimits outlier_weight = open(0, 1);
+    static constexpr ParamLimits outlier_height_range_m = openClosed(0, 1e3);
+    static constexpr ParamLimits partial_weight = closed(0, 0.99);
+    static constexpr ParamLimits min_sigma_m = openClosed(0, 10);
+    static constexpr ParamLimits box_edge_sigma_px = closed(0, 1000);
+    static constexpr ParamLimits border_margin_px = closed(0, 1000);
+    static constexpr ParamLimits min_extent_px = closed(0, 10000);
 };
 
 class ScaleEstimator {

@@ -10,6 +10,7 @@
 #include <span>
 #include <vector>
 
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/core/scale/fixed_posterior.h>
 #include <scaled/core/scale/scale_grid.h>
@@ -52,6 +53,17 @@ struct PosteriorConfig {
     Scalar log_floor = -1000;
     // Diffusion of log d per update (scale drift). 0 = off.
     Scalar drift_sigma_log = 0;
+};
+
+// The allowed values of PosteriorConfig's parameters (param_limits.h):
+// validate() and ScaleGrid::create check them, the daemon's [estimator]
+// section offers them.
+struct PosteriorLimits {
+    static constexpr ParamLimits grid_d_min = openClosed(0, kUnbounded);  // finite, < d_max
+    static constexpr ParamLimits grid_d_max = openClosed(0, kUnbounded);
+    static constexpr ParamLimits grid_bins = closed(ScaleGrid::kMinBins, ScaleGrid::kMaxBins);
+    static constexpr ParamLimits converged_rel_width = openClosed(0, 10);
+    static constexpr ParamLimits drift_sigma_log = closed(0, 1);
 };
 
 // Checks the posterior's own fields (the grid is checked by ScaleGrid::create);

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/core/scale/vertical_extent.h>
 #include <scaled/core/slam/feature_model.h>
@@ -70,7 +71,36 @@ struct SlamConfig {
     Scalar max_dt_s = Scalar(1);  // a larger frame gap is refused (the caller re-initialises)
 };
 
-// Checks ranges; the message names the field and value.
+// The allowed values of SlamConfig's parameters (param_limits.h): validate()
+// checks them, the daemon's [tracker] section offers them.
+struct SlamLimits {
+    static constexpr ParamLimits sigma_a = openClosed(0, 1e4);
+    static constexpr ParamLimits sigma_alpha = openClosed(0, 1e4);
+    static constexpr ParamLimits pixel_sigma_px = openClosed(0, 100);
+    static constexpr ParamLimits init_sigma_v = closed(0, 1e3);
+    static constexpr ParamLimits init_sigma_w = closed(0, 1e3);
+    static constexpr ParamLimits rho0 = closed(0, 1e3);
+    static constexpr ParamLimits sigma_rho = openClosed(0, 1e3);
+    static constexpr ParamLimits linearity_threshold = openClosed(0, 10);
+    static constexpr ParamLimits max_features = closed(1, 1000);
+    static constexpr ParamLimits max_measured = closed(1, 1000);  // and <= max_features
+    static constexpr ParamLimits min_visible = closed(0, 1000);   // and <= max_features
+    static constexpr ParamLimits image_margin_px = closed(0, 1000);
+    static constexpr ParamLimits chi2_gate = openClosed(0, 1e4);
+    static constexpr ParamLimits ransac_threshold_px = openClosed(0, 100);
+    static constexpr ParamLimits ransac_confidence = openClosed(0, 0.999999);
+    static constexpr ParamLimits ransac_min_hypotheses = closed(1, 10000);  // <= the max
+    static constexpr ParamLimits ransac_max_hypotheses = closed(1, 10000);
+    static constexpr ParamLimits seed = closed(0, kMaxInt64);
+    static constexpr ParamLimits delete_min_attempts = closed(1, 1e6);
+    static constexpr ParamLimits delete_min_ratio = closed(0, 1);
+    static constexpr ParamLimits min_inliers = closed(1, 1000);
+    static constexpr ParamLimits lost_after_frames = closed(1, 100000);
+    static constexpr ParamLimits max_dt_s = openClosed(0, 3600);
+};
+
+// Checks ranges (SlamLimits) and the parameters' relations; the message
+// names the field and value.
 Result<bool> validate(const SlamConfig& config);
 
 enum class SlamHealth : std::uint8_t {

@@ -1,0 +1,45 @@
+#pragma once
+
+// The allowed values of a numeric parameter, written once, next to the
+// parameter's component: core's validate() checks a configuration against
+// them and the daemon's configuration registry offers them (the range in
+// its error messages and in config/scaled.toml). One table per component:
+// SlamLimits (ekf_slam.h), PosteriorLimits (scale_posterior.h),
+// EstimatorLimits (scale_estimator.h), ObjectLimits (object_evidence.h).
+// Checks between parameters (max_measured <= max_features, ...) stay in
+// validate().
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+namespace scaled::core {
+
+struct ParamLimits {
+    double lo = 0;
+    double hi = 0;
+    bool lo_open = false;  // lo itself is not allowed
+    bool hi_open = false;  // hi itself is not allowed
+
+    // Finite and within the bounds.
+    [[nodiscard]] bool contains(double v) const {
+        return std::isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+    }
+    // "in (0, 10000]"; an infinite bound reads "inf".
+    [[nodiscard]] std::string text() const;
+};
+
+// The usual shapes.
+constexpr ParamLimits closed(double lo, double hi) {
+    return {lo, hi, false, false};
+}
+constexpr ParamLimits openClosed(double lo, double hi) {
+    return {lo, hi, true, false};
+}
+constexpr ParamLimits open(double lo, double hi) {
+    return {lo, hi, true, true};
+}
+inline constexpr double kUnbounded = std::numeric_limits<double>::infinity();
+inline constexpr double kMaxInt64 = 9223372036854775807.0;
+
+}  // namespace scaled::core
