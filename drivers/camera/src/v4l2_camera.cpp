@@ -547,6 +547,71 @@ std::string openNote(int err) {
     return "cannot open: " + errnoText(err);
 }
 
+// The /dev/video* nodes probed for findByCard: the single-planar capture
+// nodes, and the text naming the others worth mentioning.
+struct CaptureNodes {
+    std::vector<NodeProbe> capture;
+    std::string unchecked;  // nodes that could not be opened, and why
+    std::string others;     // multi-planar capture nodes (not supported)
+};
+
+// Probes every node in turn (each closed before the next is opened).
+CaptureNodes probeCaptureNodes(const std::vector<std::string>& nodes) {
+    CaptureNodes found;
+    for (const std::string& path : nodes) {
+        NodeProbe p = probeNode(path);
+        if (p.open_errno != 0) {
+            found.unchecked +=
+                (found.unchecked.empty() ? "" : ", ") + path + " (" + openNote(p.open_errno) + ")";
+            continue;
+        }
+        if (p.querycap_errno != 0) {
+            continue;
+        }
+        p.fd.reset();
+        if (kindOf(p.caps) == NodeKind::kCapture) {
+            found.capture.push_back(std::move(p));
+        } else if (kindOf(p.caps) == NodeKind::kCaptureMplane) {
+            found.others += (found.others.empty() ? "" : ", ") + p.path + " \"" + p.card +
+                            "\" (multi-planar: not supported)";
+        }
+    }
+    return found;
+}
+
+// `/dev/video0 "card", /dev/video2 "card"`.
+std::string cardListing(const std::vector<const NodeProbe*>& list) {
+    std::string s;
+    for (const NodeProbe* p : list) {
+        s += (s.empty() ? "" : ", ") + p->path + " \"" + p->card + "\"";
+    }
+    return s;
+}
+
+// Why no capture node has the card name (`who` names the request).
+std::string noSuchCardText(const std::string& who, std::size_t node_count,
+                           const CaptureNodes& found) {
+    std::vector<const NodeProbe*> all;
+    all.reserve(found.capture.size());
+    for (const NodeProbe& p : found.capture) {
+        all.push_back(&p);
+    }
+    std::string msg = who + ": no V4L2 capture device has that card name; ";
+    if (all.empty()) {
+        msg += "there is no capture device among " + std::to_string(node_count) +
+               " /dev/video* node(s)";
+    } else {
+        msg += "capture devices: " + cardListing(all);
+    }
+    if (!found.others.empty()) {
+        msg += "; also " + found.others;
+    }
+    if (!found.unchecked.empty()) {
+        msg += "; could not check " + found.unchecked;
+    }
+    return msg;
+}
+
 // The capture node whose card name is `name`: exact match first, then a
 // unique case-insensitive substring. Not found is kNotFound at open and
 // kUnavailable at reopen (the device may come back).
@@ -560,38 +625,11 @@ core::Result<std::string> findByCard(const std::string& name, bool reopening) {
                                       "system (is the camera plugged in and its driver "
                                       "loaded?)");
     }
-    std::vector<NodeProbe> capture;
-    std::string unchecked;
-    std::string others;
-    for (const std::string& path : nodes) {
-        NodeProbe p = probeNode(path);
-        if (p.open_errno != 0) {
-            unchecked +=
-                (unchecked.empty() ? "" : ", ") + path + " (" + openNote(p.open_errno) + ")";
-            continue;
-        }
-        if (p.querycap_errno != 0) {
-            continue;
-        }
-        p.fd.reset();
-        if (kindOf(p.caps) == NodeKind::kCapture) {
-            capture.push_back(std::move(p));
-        } else if (kindOf(p.caps) == NodeKind::kCaptureMplane) {
-            others += (others.empty() ? "" : ", ") + p.path + " \"" + p.card +
-                      "\" (multi-planar: not supported)";
-        }
-    }
-    const auto listing = [](const std::vector<const NodeProbe*>& list) {
-        std::string s;
-        for (const NodeProbe* p : list) {
-            s += (s.empty() ? "" : ", ") + p->path + " \"" + p->card + "\"";
-        }
-        return s;
-    };
+    const CaptureNodes found = probeCaptureNodes(nodes);
     std::vector<const NodeProbe*> exact;
     std::vector<const NodeProbe*> partial;
     const std::string lower = toLower(name);
-    for (const NodeProbe& p : capture) {
+    for (const NodeProbe& p : found.capture) {
         if (p.card == name) {
             exact.push_back(&p);
         } else if (toLower(p.card).find(lower) != std::string::npos) {
@@ -604,7 +642,7 @@ core::Result<std::string> findByCard(const std::string& name, bool reopening) {
     if (exact.size() > 1) {
         return makeError(ErrorCode::kInvalidArgument,
                          who + ": ambiguous: " + std::to_string(exact.size()) +
-                             " capture devices have that card name: " + listing(exact) +
+                             " capture devices have that card name: " + cardListing(exact) +
                              "; give a path instead (e.g. /dev/v4l/by-id/... or "
                              "/dev/v4l/by-path/...)");
     }
@@ -613,28 +651,10 @@ core::Result<std::string> findByCard(const std::string& name, bool reopening) {
     }
     if (partial.size() > 1) {
         return makeError(ErrorCode::kInvalidArgument,
-                         who + ": ambiguous: it matches the cards of " + listing(partial) +
+                         who + ": ambiguous: it matches the cards of " + cardListing(partial) +
                              "; give the whole card name or a path");
     }
-    std::vector<const NodeProbe*> all;
-    all.reserve(capture.size());
-    for (const NodeProbe& p : capture) {
-        all.push_back(&p);
-    }
-    std::string msg = who + ": no V4L2 capture device has that card name; ";
-    if (all.empty()) {
-        msg += "there is no capture device among " + std::to_string(nodes.size()) +
-               " /dev/video* node(s)";
-    } else {
-        msg += "capture devices: " + listing(all);
-    }
-    if (!others.empty()) {
-        msg += "; also " + others;
-    }
-    if (!unchecked.empty()) {
-        msg += "; could not check " + unchecked;
-    }
-    return makeError(missing, msg);
+    return makeError(missing, noSuchCardText(who, nodes.size(), found));
 }
 
 // ------------------------------------------------------------ streaming
@@ -873,9 +893,8 @@ core::Result<bool> startStreaming(CaptureStream& s, const std::string& who,
     return true;
 }
 
-// Opens `path`, negotiates format, size and rate, maps the buffers and starts
-// streaming. `reopening`: a missing node is kUnavailable (it may come back).
-core::Result<Opened> openStream(const std::string& path, const CameraOptions& opt, bool reopening) {
+// `path` exists and is a character device.
+core::Status checkCharDevice(const std::string& path, bool reopening) {
     struct stat st = {};
     if (::stat(path.c_str(), &st) != 0) {
         return openError(path, errno, reopening);
@@ -886,16 +905,11 @@ core::Result<Opened> openStream(const std::string& path, const CameraOptions& op
                                                  : "not a character device";
         return makeError(ErrorCode::kInvalidArgument, path + ": not a V4L2 device (" + what + ")");
     }
-    Opened out;
-    out.stream = std::make_unique<CaptureStream>();
-    CaptureStream& s = *out.stream;
-    Negotiated& neg = out.neg;
-    neg.path = path;
-    s.fd.reset(::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC));
-    if (!s.fd.isValid()) {
-        return openError(path, errno, reopening);
-    }
-    const int fd = s.fd.get();
+    return {};
+}
+
+// VIDIOC_QUERYCAP: the card and bus into `neg`; a streaming capture node.
+core::Status queryCaptureCaps(int fd, const std::string& path, Negotiated& neg) {
     v4l2_capability cap{};
     if (xioctl(fd, VIDIOC_QUERYCAP, &cap) != 0) {
         const int err = errno;
@@ -918,25 +932,28 @@ core::Result<Opened> openStream(const std::string& path, const CameraOptions& op
         return makeError(ErrorCode::kInvalidArgument,
                          who + ": does not support streaming I/O (read() only)");
     }
+    return {};
+}
 
-    const std::vector<DeviceFormat> formats = enumFormats(fd);
-    auto fourcc = chooseFourcc(who, opt, formats);
-    if (!fourcc) {
-        return fourcc.error();
-    }
+// VIDIOC_S_FMT with `fourcc` at the asked size; the device's answer when it
+// kept both.
+core::Result<v4l2_pix_format> setPixelFormat(int fd, const std::string& who,
+                                             const CameraOptions& opt,
+                                             const std::vector<DeviceFormat>& formats,
+                                             std::uint32_t fourcc) {
     v4l2_format fmt{};
     fmt.type = kCaptureType;
     fmt.fmt.pix.width = static_cast<std::uint32_t>(opt.width_px);
     fmt.fmt.pix.height = static_cast<std::uint32_t>(opt.height_px);
-    fmt.fmt.pix.pixelformat = *fourcc;
+    fmt.fmt.pix.pixelformat = fourcc;
     fmt.fmt.pix.field = V4L2_FIELD_NONE;
     if (xioctl(fd, VIDIOC_S_FMT, &fmt) != 0) {
         return ioctlError(who, "VIDIOC_S_FMT", errno);
     }
     const v4l2_pix_format& pix = fmt.fmt.pix;
-    if (pix.pixelformat != *fourcc) {
+    if (pix.pixelformat != fourcc) {
         return makeError(ErrorCode::kInvalidArgument,
-                         who + ": asked for " + formatName(*fourcc) + ", the device set " +
+                         who + ": asked for " + formatName(fourcc) + ", the device set " +
                              formatName(pix.pixelformat) + "; it offers " + formatsText(formats));
     }
     // Strict: a tracker calibrated at one size must not silently get another.
@@ -944,7 +961,7 @@ core::Result<Opened> openStream(const std::string& path, const CameraOptions& op
         static_cast<int>(pix.height) != opt.height_px) {
         std::string sizes;
         for (const DeviceFormat& d : formats) {
-            if (d.fourcc == *fourcc) {
+            if (d.fourcc == fourcc) {
                 sizes = sizesText(d.sizes);
             }
         }
@@ -952,10 +969,17 @@ core::Result<Opened> openStream(const std::string& path, const CameraOptions& op
                          who + ": size " +
                              sizeText(static_cast<std::uint32_t>(opt.width_px),
                                       static_cast<std::uint32_t>(opt.height_px)) +
-                             " is not offered for " + formatName(*fourcc) +
-                             ": the device offered " + sizeText(pix.width, pix.height) +
+                             " is not offered for " + formatName(fourcc) + ": the device offered " +
+                             sizeText(pix.width, pix.height) +
                              (sizes.empty() ? std::string() : "; it lists " + sizes));
     }
+    return pix;
+}
+
+// The format the device set, into `neg` (format, size, stride, notes);
+// checks the stride and the intrinsics' size.
+core::Status takePixelFormat(const v4l2_pix_format& pix, const std::string& who,
+                             const CameraOptions& opt, Negotiated& neg) {
     neg.fourcc = pix.pixelformat;
     neg.format = *formatOfFourcc(pix.pixelformat);
     neg.width_px = opt.width_px;
@@ -982,6 +1006,42 @@ core::Result<Opened> openStream(const std::string& path, const CameraOptions& op
                              std::to_string(opt.intrinsics.width_px) + "x" +
                              std::to_string(opt.intrinsics.height_px) +
                              " images, the camera delivers " + sizeText(pix.width, pix.height));
+    }
+    return {};
+}
+
+// Opens `path`, negotiates format, size and rate, maps the buffers and starts
+// streaming. `reopening`: a missing node is kUnavailable (it may come back).
+core::Result<Opened> openStream(const std::string& path, const CameraOptions& opt, bool reopening) {
+    if (auto ok = checkCharDevice(path, reopening); !ok) {
+        return ok.error();
+    }
+    Opened out;
+    out.stream = std::make_unique<CaptureStream>();
+    CaptureStream& s = *out.stream;
+    Negotiated& neg = out.neg;
+    neg.path = path;
+    s.fd.reset(::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC));
+    if (!s.fd.isValid()) {
+        return openError(path, errno, reopening);
+    }
+    const int fd = s.fd.get();
+    if (auto ok = queryCaptureCaps(fd, path, neg); !ok) {
+        return ok.error();
+    }
+    const std::string who = neg.who();
+
+    const std::vector<DeviceFormat> formats = enumFormats(fd);
+    auto fourcc = chooseFourcc(who, opt, formats);
+    if (!fourcc) {
+        return fourcc.error();
+    }
+    auto pix = setPixelFormat(fd, who, opt, formats, *fourcc);
+    if (!pix) {
+        return pix.error();
+    }
+    if (auto ok = takePixelFormat(*pix, who, opt, neg); !ok) {
+        return ok.error();
     }
     auto rate = setFrameRate(fd, who, opt, neg);
     if (!rate) {

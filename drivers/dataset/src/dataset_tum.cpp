@@ -243,6 +243,145 @@ Result<std::vector<TumAccelSample>> parseTumAccelerometer(std::string_view text,
     return out;
 }
 
+namespace {
+
+// The frames of rgb.txt, in index.frames.
+core::Status readTumFrames(const std::filesystem::path& dir, detail::ReplayIndex& index) {
+    index.index_file = dir / "rgb.txt";
+    auto rgb = readTumImageList(index.index_file);
+    if (!rgb) {
+        return rgb.error();
+    }
+    index.frames.reserve(rgb->size());
+    for (TumListEntry& e : *rgb) {
+        detail::ReplayFrame f;
+        f.t_ns = e.t_ns;
+        f.image = dir / e.file;
+        f.listed_as = std::move(e.file);
+        f.index_line = e.line;
+        index.frames.push_back(std::move(f));
+    }
+    return {};
+}
+
+// Each frame's ground-truth pose from groundtruth.txt (nearest within tol_ns),
+// or a note that there is none.
+core::Status attachTumGroundTruth(const std::filesystem::path& dir, int64_t tol_ns,
+                                  const DatasetOptions& opt, detail::ReplayIndex& index) {
+    const std::filesystem::path gt_file = dir / "groundtruth.txt";
+    if (!detail::pathExists(gt_file)) {
+        index.info.notes.push_back(gt_file.string() + " not found: no ground truth");
+        return {};
+    }
+    auto gt = readTumTrajectory(gt_file);
+    if (!gt) {
+        return gt.error();
+    }
+    std::vector<int64_t> times;
+    times.reserve(gt->size());
+    for (const auto& [t, pose] : *gt) {
+        times.push_back(t);
+    }
+    std::size_t without = 0;
+    for (detail::ReplayFrame& f : index.frames) {
+        if (auto k = detail::nearestWithin(times, f.t_ns, tol_ns)) {
+            f.T_CtoW_gt = (*gt)[*k].second;
+        } else {
+            ++without;
+        }
+    }
+    if (without > 0) {
+        index.info.notes.push_back(gt_file.string() + ": " + std::to_string(without) + " of " +
+                                   std::to_string(index.frames.size()) +
+                                   " frames have no pose within " +
+                                   detail::shortNumber(opt.max_assoc_dt_s) + " s");
+    }
+    return {};
+}
+
+// Each frame's depth image from depth.txt (nearest within tol_ns, when the
+// file exists), and the depth scale.
+core::Status attachTumDepth(const std::filesystem::path& dir, int64_t tol_ns,
+                            const DatasetOptions& opt, detail::ReplayIndex& index) {
+    const std::filesystem::path depth_file = dir / "depth.txt";
+    if (!detail::pathExists(depth_file)) {
+        return {};
+    }
+    auto text = detail::readTextFile(depth_file);
+    if (!text) {
+        return text.error();
+    }
+    auto depth = parseTumImageList(*text, depth_file);
+    if (!depth) {
+        return depth.error();
+    }
+    std::vector<int64_t> times;
+    times.reserve(depth->size());
+    for (const TumListEntry& e : *depth) {
+        times.push_back(e.t_ns);
+    }
+    for (detail::ReplayFrame& f : index.frames) {
+        if (auto k = detail::nearestWithin(times, f.t_ns, tol_ns)) {
+            std::filesystem::path p = dir / (*depth)[*k].file;
+            if (detail::isRegularFile(p)) {
+                f.depth_path = std::move(p);
+            }
+        }
+    }
+    index.info.depth_scale_m = opt.depth_scale_m.value_or(
+        detail::commentMentions(*text, "millimet") ? kMillimetre : kTumDepthScaleM);
+    return {};
+}
+
+// The gravity direction of gravity.txt, when the file exists.
+core::Status attachTumGravity(const std::filesystem::path& dir, detail::ReplayIndex& index) {
+    const std::filesystem::path gravity_file = dir / "gravity.txt";
+    if (detail::pathExists(gravity_file)) {
+        auto g = readGravityFile(gravity_file);
+        if (!g) {
+            return g.error();
+        }
+        index.info.gravity_down_W = *g;
+    }
+    return {};
+}
+
+// Each frame's accelerometer sample from accelerometer.txt (nearest within
+// tol_ns, when the file exists).
+core::Status attachTumAccelerometer(const std::filesystem::path& dir, int64_t tol_ns,
+                                    const DatasetOptions& opt, detail::ReplayIndex& index) {
+    const std::filesystem::path accel_file = dir / "accelerometer.txt";
+    if (!detail::pathExists(accel_file)) {
+        return {};
+    }
+    auto samples = readTumAccelerometer(accel_file);
+    if (!samples) {
+        return samples.error();
+    }
+    std::vector<int64_t> times;
+    times.reserve(samples->size());
+    for (const TumAccelSample& a : *samples) {
+        times.push_back(a.t_ns);
+    }
+    std::size_t without = 0;
+    for (detail::ReplayFrame& f : index.frames) {
+        if (auto k = detail::nearestWithin(times, f.t_ns, tol_ns)) {
+            f.accel_C = (*samples)[*k].accel;
+        } else {
+            ++without;
+        }
+    }
+    if (without > 0) {
+        index.info.notes.push_back(accel_file.string() + ": " + std::to_string(without) + " of " +
+                                   std::to_string(index.frames.size()) +
+                                   " frames have no sample within " +
+                                   detail::shortNumber(opt.max_assoc_dt_s) + " s");
+    }
+    return {};
+}
+
+}  // namespace
+
 Result<std::unique_ptr<source::FrameSource>> openTumDataset(const std::filesystem::path& dir,
                                                             const DatasetOptions& opt) {
     std::error_code ec;
@@ -262,119 +401,27 @@ Result<std::unique_ptr<source::FrameSource>> openTumDataset(const std::filesyste
     detail::ReplayIndex index;
     index.info.name = detail::datasetName(dir);
     index.info.dir = dir;
-    index.index_file = dir / "rgb.txt";
-    auto rgb = readTumImageList(index.index_file);
-    if (!rgb) {
-        return rgb.error();
-    }
-    index.frames.reserve(rgb->size());
-    for (TumListEntry& e : *rgb) {
-        detail::ReplayFrame f;
-        f.t_ns = e.t_ns;
-        f.image = dir / e.file;
-        f.listed_as = std::move(e.file);
-        f.index_line = e.line;
-        index.frames.push_back(std::move(f));
+    if (auto ok = readTumFrames(dir, index); !ok) {
+        return ok.error();
     }
     if (auto trimmed = detail::trimMissingTail(index, opt); !trimmed) {
         return trimmed.error();
     }
-
-    const std::filesystem::path gt_file = dir / "groundtruth.txt";
-    if (detail::pathExists(gt_file)) {
-        auto gt = readTumTrajectory(gt_file);
-        if (!gt) {
-            return gt.error();
-        }
-        std::vector<int64_t> times;
-        times.reserve(gt->size());
-        for (const auto& [t, pose] : *gt) {
-            times.push_back(t);
-        }
-        std::size_t without = 0;
-        for (detail::ReplayFrame& f : index.frames) {
-            if (auto k = detail::nearestWithin(times, f.t_ns, *tol_ns)) {
-                f.T_CtoW_gt = (*gt)[*k].second;
-            } else {
-                ++without;
-            }
-        }
-        if (without > 0) {
-            index.info.notes.push_back(gt_file.string() + ": " + std::to_string(without) + " of " +
-                                       std::to_string(index.frames.size()) +
-                                       " frames have no pose within " +
-                                       detail::shortNumber(opt.max_assoc_dt_s) + " s");
-        }
-    } else {
-        index.info.notes.push_back(gt_file.string() + " not found: no ground truth");
+    if (auto ok = attachTumGroundTruth(dir, *tol_ns, opt, index); !ok) {
+        return ok.error();
     }
-
-    const std::filesystem::path depth_file = dir / "depth.txt";
-    if (detail::pathExists(depth_file)) {
-        auto text = detail::readTextFile(depth_file);
-        if (!text) {
-            return text.error();
-        }
-        auto depth = parseTumImageList(*text, depth_file);
-        if (!depth) {
-            return depth.error();
-        }
-        std::vector<int64_t> times;
-        times.reserve(depth->size());
-        for (const TumListEntry& e : *depth) {
-            times.push_back(e.t_ns);
-        }
-        for (detail::ReplayFrame& f : index.frames) {
-            if (auto k = detail::nearestWithin(times, f.t_ns, *tol_ns)) {
-                std::filesystem::path p = dir / (*depth)[*k].file;
-                if (detail::isRegularFile(p)) {
-                    f.depth_path = std::move(p);
-                }
-            }
-        }
-        index.info.depth_scale_m = opt.depth_scale_m.value_or(
-            detail::commentMentions(*text, "millimet") ? kMillimetre : kTumDepthScaleM);
+    if (auto ok = attachTumDepth(dir, *tol_ns, opt, index); !ok) {
+        return ok.error();
     }
-
     if (auto resolved = detail::resolveIntrinsicsFromCameraFile(index, dir / "camera.txt", opt);
         !resolved) {
         return resolved.error();
     }
-
-    const std::filesystem::path gravity_file = dir / "gravity.txt";
-    if (detail::pathExists(gravity_file)) {
-        auto g = readGravityFile(gravity_file);
-        if (!g) {
-            return g.error();
-        }
-        index.info.gravity_down_W = *g;
+    if (auto ok = attachTumGravity(dir, index); !ok) {
+        return ok.error();
     }
-
-    const std::filesystem::path accel_file = dir / "accelerometer.txt";
-    if (detail::pathExists(accel_file)) {
-        auto samples = readTumAccelerometer(accel_file);
-        if (!samples) {
-            return samples.error();
-        }
-        std::vector<int64_t> times;
-        times.reserve(samples->size());
-        for (const TumAccelSample& a : *samples) {
-            times.push_back(a.t_ns);
-        }
-        std::size_t without = 0;
-        for (detail::ReplayFrame& f : index.frames) {
-            if (auto k = detail::nearestWithin(times, f.t_ns, *tol_ns)) {
-                f.accel_C = (*samples)[*k].accel;
-            } else {
-                ++without;
-            }
-        }
-        if (without > 0) {
-            index.info.notes.push_back(accel_file.string() + ": " + std::to_string(without) +
-                                       " of " + std::to_string(index.frames.size()) +
-                                       " frames have no sample within " +
-                                       detail::shortNumber(opt.max_assoc_dt_s) + " s");
-        }
+    if (auto ok = attachTumAccelerometer(dir, *tol_ns, opt, index); !ok) {
+        return ok.error();
     }
     return detail::makeReplaySource(std::move(index));
 }

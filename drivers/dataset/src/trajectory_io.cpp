@@ -62,6 +62,99 @@ bool startsWithWord(std::string_view s, std::string_view word) {
     return true;
 }
 
+// The pieces of a decimal timestamp ([+-]digits[.digits][e[+-]digits]).
+struct TimestampParts {
+    bool negative = false;
+    std::string digits;    // integer and fraction digits, in order
+    int64_t frac_len = 0;  // how many of `digits` are the fraction
+    int64_t exponent = 0;  // saturated at +-kMaxExponent
+};
+
+// The exponent at text[i] when an 'e' or 'E' starts there (i moves past it);
+// false when the 'e' has no digits.
+bool lexExponent(std::string_view text, std::size_t& i, int64_t& exponent) {
+    if (i < text.size() && (text[i] == 'e' || text[i] == 'E')) {
+        ++i;
+        bool exp_negative = false;
+        if (i < text.size() && (text[i] == '+' || text[i] == '-')) {
+            exp_negative = text[i] == '-';
+            ++i;
+        }
+        if (i >= text.size() || !isDigit(text[i])) {
+            return false;
+        }
+        while (i < text.size() && isDigit(text[i])) {
+            exponent = std::min<int64_t>(exponent * 10 + (text[i++] - '0'), kMaxExponent);
+        }
+        if (exp_negative) {
+            exponent = -exponent;
+        }
+    }
+    return true;
+}
+
+// Splits a timestamp into `parts`: nullptr, or why it is not a timestamp.
+const char* lexTimestamp(std::string_view text, TimestampParts& parts) {
+    std::size_t i = 0;
+    if (i < text.size() && (text[i] == '+' || text[i] == '-')) {
+        parts.negative = text[i] == '-';
+        ++i;
+    }
+    if (startsWithWord(text.substr(i), "nan") || startsWithWord(text.substr(i), "inf")) {
+        return "timestamp is not finite";
+    }
+    while (i < text.size() && isDigit(text[i])) {
+        parts.digits += text[i++];
+    }
+    if (i < text.size() && text[i] == '.') {
+        ++i;
+        while (i < text.size() && isDigit(text[i])) {
+            parts.digits += text[i++];
+            ++parts.frac_len;
+        }
+    }
+    if (parts.digits.empty()) {
+        return "timestamp is not a number";
+    }
+    if (!lexExponent(text, i, parts.exponent)) {
+        return "timestamp is not a number";
+    }
+    if (i != text.size()) {
+        return "timestamp is not a number";
+    }
+    return nullptr;
+}
+
+// mag = digits * 10^shift, rounded half up when shift < 0 (digits without
+// leading zeros); false on overflow.
+bool magnitudeTimesPow10(const std::string& digits, int64_t shift, uint64_t& mag) {
+    const auto n_digits = static_cast<int64_t>(digits.size());
+    bool overflow = false;
+    if (shift >= 0) {
+        if (n_digits + shift > 20) {
+            overflow = true;
+        }
+        for (int64_t k = 0; k < n_digits && !overflow; ++k) {
+            overflow =
+                !pushDigit(mag, static_cast<unsigned>(digits[static_cast<std::size_t>(k)] - '0'));
+        }
+        for (int64_t k = 0; k < shift && !overflow; ++k) {
+            overflow = !pushDigit(mag, 0);
+        }
+    } else {
+        const int64_t keep = n_digits + shift;  // digits left of the ns point
+        for (int64_t k = 0; k < keep && !overflow; ++k) {
+            overflow =
+                !pushDigit(mag, static_cast<unsigned>(digits[static_cast<std::size_t>(k)] - '0'));
+        }
+        if (!overflow && keep >= 0 && digits[static_cast<std::size_t>(keep)] >= '5') {
+            overflow = mag == std::numeric_limits<uint64_t>::max();
+            ++mag;
+        }
+    }
+    return !overflow;
+}
+
 // t rounded to microseconds, half away from zero (cannot overflow: |t| / 1000).
 int64_t roundToUs(int64_t t_ns) {
     const int64_t q = t_ns / 1000;
@@ -123,88 +216,25 @@ Result<int64_t> parseTimestampNs(std::string_view text) {
         return makeError(ErrorCode::kParse,
                          std::string(what) + ": '" + detail::printable(text) + "'");
     };
-    std::size_t i = 0;
-    bool negative = false;
-    if (i < text.size() && (text[i] == '+' || text[i] == '-')) {
-        negative = text[i] == '-';
-        ++i;
+    TimestampParts parts;
+    if (const char* why = lexTimestamp(text, parts); why != nullptr) {
+        return fail(why);
     }
-    if (startsWithWord(text.substr(i), "nan") || startsWithWord(text.substr(i), "inf")) {
-        return fail("timestamp is not finite");
-    }
-    std::string digits;
-    int64_t frac_len = 0;
-    while (i < text.size() && isDigit(text[i])) {
-        digits += text[i++];
-    }
-    if (i < text.size() && text[i] == '.') {
-        ++i;
-        while (i < text.size() && isDigit(text[i])) {
-            digits += text[i++];
-            ++frac_len;
-        }
-    }
-    if (digits.empty()) {
-        return fail("timestamp is not a number");
-    }
-    int64_t exponent = 0;
-    if (i < text.size() && (text[i] == 'e' || text[i] == 'E')) {
-        ++i;
-        bool exp_negative = false;
-        if (i < text.size() && (text[i] == '+' || text[i] == '-')) {
-            exp_negative = text[i] == '-';
-            ++i;
-        }
-        if (i >= text.size() || !isDigit(text[i])) {
-            return fail("timestamp is not a number");
-        }
-        while (i < text.size() && isDigit(text[i])) {
-            exponent = std::min<int64_t>(exponent * 10 + (text[i++] - '0'), kMaxExponent);
-        }
-        if (exp_negative) {
-            exponent = -exponent;
-        }
-    }
-    if (i != text.size()) {
-        return fail("timestamp is not a number");
-    }
+    std::string& digits = parts.digits;
     const std::size_t first = digits.find_first_not_of('0');
     if (first == std::string::npos) {
         return int64_t{0};
     }
     digits.erase(0, first);
-    const auto n_digits = static_cast<int64_t>(digits.size());
     // value in ns = digits * 10^shift
-    const int64_t shift = exponent - frac_len + 9;
+    const int64_t shift = parts.exponent - parts.frac_len + 9;
     uint64_t mag = 0;
-    bool overflow = false;
-    if (shift >= 0) {
-        if (n_digits + shift > 20) {
-            overflow = true;
-        }
-        for (int64_t k = 0; k < n_digits && !overflow; ++k) {
-            overflow =
-                !pushDigit(mag, static_cast<unsigned>(digits[static_cast<std::size_t>(k)] - '0'));
-        }
-        for (int64_t k = 0; k < shift && !overflow; ++k) {
-            overflow = !pushDigit(mag, 0);
-        }
-    } else {
-        const int64_t keep = n_digits + shift;  // digits left of the ns point
-        for (int64_t k = 0; k < keep && !overflow; ++k) {
-            overflow =
-                !pushDigit(mag, static_cast<unsigned>(digits[static_cast<std::size_t>(k)] - '0'));
-        }
-        if (!overflow && keep >= 0 && digits[static_cast<std::size_t>(keep)] >= '5') {
-            overflow = mag == std::numeric_limits<uint64_t>::max();
-            ++mag;
-        }
-    }
-    const uint64_t limit = negative ? kInt64MaxMag + 1 : kInt64MaxMag;
+    const bool overflow = !magnitudeTimesPow10(digits, shift, mag);
+    const uint64_t limit = parts.negative ? kInt64MaxMag + 1 : kInt64MaxMag;
     if (overflow || mag > limit) {
         return fail("timestamp out of range (beyond +-292 years in ns)");
     }
-    if (!negative) {
+    if (!parts.negative) {
         return static_cast<int64_t>(mag);
     }
     if (mag == kInt64MaxMag + 1) {

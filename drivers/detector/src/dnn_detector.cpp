@@ -283,6 +283,15 @@ struct DnnDetector::Impl {
     // boxes are fractions of the image).
     double preprocess(const cv::Mat& image);
     void forward();
+
+    // The steps of create(); `what` names the model's files in messages.
+    // Reads the network (OpenCV exceptions caught here), checks Darknet weights.
+    core::Status loadNet(const std::string& what);
+    // One forward pass on a blank image at the configured size.
+    core::Status warmUp(const std::string& what);
+    // The outputs' shape against the class names (and YOLOX's grid, made
+    // here); the number of rows (boxes) in all outputs.
+    core::Result<std::size_t> checkOutputs(const std::string& what);
 };
 
 double DnnDetector::Impl::preprocess(const cv::Mat& image) {
@@ -333,26 +342,24 @@ std::span<const std::string> DnnDetector::classNames() const {
     return impl_->names;
 }
 
-Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& config) {
-    if (auto ok = validate(config); !ok) {
-        return ok.error();
-    }
-    auto impl = std::make_unique<Impl>();
-    impl->config = config;
-    DetectorInfo& info = impl->info;
+namespace {
+
+// The paths of the model, weights and class names `config` names (or implies).
+void fillModelPaths(const DetectorConfig& config, DetectorInfo& info) {
     info.family = config.family;
     info.model_path = config.model_path;
     info.input_size_px = config.input_size_px;
     info.names_path = config.names_path.empty() ? config.model_path.parent_path() / "coco.names"
                                                 : config.names_path;
-    const bool darknet = config.family == ModelFamily::kDarknet;
-    if (darknet) {
+    if (config.family == ModelFamily::kDarknet) {
         info.weights_path =
             config.weights_path.empty()
                 ? std::filesystem::path(config.model_path).replace_extension(".weights")
                 : config.weights_path;
     }
+}
 
+core::Status checkModelFiles(const DetectorInfo& info, bool darknet) {
     if (auto ok = checkReadableFile(info.model_path, darknet ? "Darknet cfg file" : "ONNX model");
         !ok) {
         return ok.error();
@@ -362,67 +369,77 @@ Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& c
             return ok.error();
         }
     }
-    auto names = readClassNames(info.names_path);
-    if (!names) {
-        return names.error();
-    }
-    impl->names = std::move(*names);
-    info.class_count = static_cast<int>(impl->names.size());
+    return {};
+}
 
-    std::vector<unsigned char> allowed(impl->names.size(), config.classes.empty() ? 1 : 0);
+// Per class name, 1 when its detections are kept (config.classes; all when empty).
+Result<std::vector<unsigned char>> allowedClasses(const std::vector<std::string>& names,
+                                                  const DetectorConfig& config,
+                                                  const std::filesystem::path& names_path) {
+    std::vector<unsigned char> allowed(names.size(), config.classes.empty() ? 1 : 0);
     for (const std::string& wanted : config.classes) {
-        const auto it = std::find(impl->names.begin(), impl->names.end(), wanted);
-        if (it == impl->names.end()) {
+        const auto it = std::find(names.begin(), names.end(), wanted);
+        if (it == names.end()) {
             return makeError(ErrorCode::kInvalidArgument,
                              fieldError("classes", "\"" + wanted + "\"",
-                                        "not a class of " + info.names_path.string()));
+                                        "not a class of " + names_path.string()));
         }
-        allowed[static_cast<std::size_t>(it - impl->names.begin())] = 1;
+        allowed[static_cast<std::size_t>(it - names.begin())] = 1;
     }
+    return allowed;
+}
 
-    const std::string what = darknet ? info.model_path.string() + " + " + info.weights_path.string()
-                                     : info.model_path.string();
+}  // namespace
+
+core::Status DnnDetector::Impl::loadNet(const std::string& what) {
+    const bool darknet = config.family == ModelFamily::kDarknet;
     try {
-        impl->net = darknet ? cv::dnn::readNetFromDarknet(info.model_path.string(),
-                                                          info.weights_path.string())
-                            : cv::dnn::readNetFromONNX(info.model_path.string());
+        net = darknet ? cv::dnn::readNetFromDarknet(info.model_path.string(),
+                                                    info.weights_path.string())
+                      : cv::dnn::readNetFromONNX(info.model_path.string());
     } catch (const cv::Exception& e) {
         return makeError(ErrorCode::kParse, what + ": cannot load the " +
                                                 std::string(toString(config.family)) +
                                                 " model (OpenCV: " + openCvReason(e) + ")");
     }
-    if (impl->net.empty()) {
+    if (net.empty()) {
         return makeError(ErrorCode::kParse, what + ": the " + std::string(toString(config.family)) +
                                                 " model has no layers");
     }
-
     if (darknet) {
-        if (auto ok = checkDarknetWeightsSize(impl->net, info.weights_path); !ok) {
+        if (auto ok = checkDarknetWeightsSize(net, info.weights_path); !ok) {
             return ok.error();
         }
     }
+    return {};
+}
 
-    // Warm-up at the configured size: checks that the network runs there and
-    // outputs what the decoder expects, and pays first-run costs now.
+core::Status DnnDetector::Impl::warmUp(const std::string& what) {
     const int s = config.input_size_px;
     try {
-        impl->net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
-        impl->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
-        impl->out_names = impl->net.getUnconnectedOutLayersNames();
+        net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+        net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+        out_names = net.getUnconnectedOutLayersNames();
         const cv::Mat blank(s, s, CV_8UC3, cv::Scalar::all(kYoloxPad));
-        (void)impl->preprocess(blank);
-        impl->forward();
+        (void)preprocess(blank);
+        forward();
     } catch (const cv::Exception& e) {
         return makeError(ErrorCode::kParse, what + ": the model does not run at input size " +
                                                 std::to_string(s) + " (OpenCV: " + openCvReason(e) +
                                                 ")");
     }
+    return {};
+}
+
+Result<std::size_t> DnnDetector::Impl::checkOutputs(const std::string& what) {
+    const bool darknet = config.family == ModelFamily::kDarknet;
+    const int s = config.input_size_px;
     const int cols = kBoxColumns + info.class_count;
-    if (impl->outs.empty()) {
+    if (outs.empty()) {
         return makeError(ErrorCode::kParse, what + ": the model has no outputs");
     }
     std::size_t rows = 0;
-    for (const cv::Mat& out : impl->outs) {
+    for (const cv::Mat& out : outs) {
         const int out_cols = out.dims >= 2 ? out.size[out.dims - 1] : 0;
         if (out_cols != cols) {
             return makeError(ErrorCode::kParse, what + ": the model outputs " +
@@ -434,20 +451,62 @@ Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& c
         if (out.type() != CV_32F) {
             return makeError(ErrorCode::kParse, what + ": the model output is not float32");
         }
+        // cols > kBoxColumns: create() reads at least one class name before this.
+        // NOLINTNEXTLINE(clang-analyzer-core.DivideZero)
         rows += out.total() / static_cast<std::size_t>(cols);
     }
     if (!darknet) {
-        impl->grid = makeYoloxGrid(s);
-        if (impl->outs.size() != 1 || rows != impl->grid.size()) {
+        grid = makeYoloxGrid(s);
+        if (outs.size() != 1 || rows != grid.size()) {
             return makeError(ErrorCode::kParse,
-                             what + ": expected one output of " +
-                                 std::to_string(impl->grid.size()) + " rows at input size " +
-                                 std::to_string(s) + " (YOLOX strides 8, 16, 32), got " +
-                                 std::to_string(impl->outs.size()) + " output(s) of " +
-                                 std::to_string(rows) + " rows in total");
+                             what + ": expected one output of " + std::to_string(grid.size()) +
+                                 " rows at input size " + std::to_string(s) +
+                                 " (YOLOX strides 8, 16, 32), got " + std::to_string(outs.size()) +
+                                 " output(s) of " + std::to_string(rows) + " rows in total");
         }
     }
-    impl->decoder.emplace(std::move(allowed), rows);
+    return rows;
+}
+
+Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& config) {
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
+    }
+    auto impl = std::make_unique<Impl>();
+    impl->config = config;
+    DetectorInfo& info = impl->info;
+    fillModelPaths(config, info);
+    const bool darknet = config.family == ModelFamily::kDarknet;
+
+    if (auto ok = checkModelFiles(info, darknet); !ok) {
+        return ok.error();
+    }
+    auto names = readClassNames(info.names_path);
+    if (!names) {
+        return names.error();
+    }
+    impl->names = std::move(*names);
+    info.class_count = static_cast<int>(impl->names.size());
+    auto allowed = allowedClasses(impl->names, config, info.names_path);
+    if (!allowed) {
+        return allowed.error();
+    }
+
+    const std::string what = darknet ? info.model_path.string() + " + " + info.weights_path.string()
+                                     : info.model_path.string();
+    if (auto ok = impl->loadNet(what); !ok) {
+        return ok.error();
+    }
+    // Warm-up at the configured size: checks that the network runs there and
+    // outputs what the decoder expects, and pays first-run costs now.
+    if (auto ok = impl->warmUp(what); !ok) {
+        return ok.error();
+    }
+    auto rows = impl->checkOutputs(what);
+    if (!rows) {
+        return rows.error();
+    }
+    impl->decoder.emplace(std::move(*allowed), *rows);
     return std::unique_ptr<DnnDetector>(new DnnDetector(std::move(impl)));
 }
 

@@ -293,6 +293,141 @@ Result<fs::path> findDevice(std::string_view spec, const IioOptions& options) {
     return best_dir;
 }
 
+// The channel names of a device: in_<ch>_raw files and scan elements
+// (in_<ch>_en), sorted, each once.
+std::vector<std::string> channelNames(const fs::path& dir) {
+    std::vector<std::string> names;
+    for (const std::string& entry : listDir(dir)) {
+        if (startsWith(entry, "in_") && endsWith(entry, "_raw") && entry.size() > 7) {
+            names.push_back(entry.substr(3, entry.size() - 7));
+        }
+    }
+    const fs::path scan_dir = dir / "scan_elements";
+    for (const std::string& entry : listDir(scan_dir)) {
+        if (startsWith(entry, "in_") && endsWith(entry, "_en") && entry.size() > 6) {
+            names.push_back(entry.substr(3, entry.size() - 6));
+        }
+    }
+    std::sort(names.begin(), names.end());
+    names.erase(std::unique(names.begin(), names.end()), names.end());
+    return names;
+}
+
+// A channel's scale and offset (its own attributes or its type's shared ones).
+core::Status readScaleAndOffset(const fs::path& dir, const std::string& ch, IioChannel& c) {
+    if (auto p = channelAttr(dir, ch, "scale")) {
+        auto v = readNumberAttr(*p);
+        if (!v) {
+            return v.error();
+        }
+        c.scale = *v;
+        c.has_scale = true;
+    }
+    if (auto p = channelAttr(dir, ch, "offset")) {
+        auto v = readNumberAttr(*p);
+        if (!v) {
+            return v.error();
+        }
+        c.offset = *v;
+    }
+    return {};
+}
+
+// A scan element's index and type (scan_elements/in_<ch>_index, _type).
+core::Status readScanElement(const fs::path& scan_dir, const std::string& ch, IioChannel& c) {
+    const fs::path index_file = scan_dir / ("in_" + ch + "_index");
+    auto index = readIntAttr(index_file);
+    if (!index) {
+        return index.error();
+    }
+    if (*index < 0 || *index > 1'000'000) {
+        return makeError(ErrorCode::kParse, index_file.string() + ": index out of range: " +
+                                                quote(std::to_string(*index)));
+    }
+    const fs::path type_file = scan_dir / ("in_" + ch + "_type");
+    auto type_text = readAttr(type_file);
+    if (!type_text) {
+        return type_text.error();
+    }
+    auto type = parseIioScanType(*type_text);
+    if (!type) {
+        return makeError(ErrorCode::kParse, type_file.string() + ": " + type.error().message);
+    }
+    c.scan_index = static_cast<int>(*index);
+    c.scan_type = *type;
+    return {};
+}
+
+// One channel of the device in `dir`: raw file, scale, offset, scan element.
+Result<IioChannel> readChannelInfo(const fs::path& dir, const std::string& ch) {
+    IioChannel c;
+    c.name = ch;
+    c.has_raw = pathExists(dir / ("in_" + ch + "_raw"));
+    if (ch != "timestamp") {
+        if (auto ok = readScaleAndOffset(dir, ch, c); !ok) {
+            return ok.error();
+        }
+    }
+    const fs::path scan_dir = dir / "scan_elements";
+    if (pathExists(scan_dir / ("in_" + ch + "_en"))) {
+        if (auto ok = readScanElement(scan_dir, ch, c); !ok) {
+            return ok.error();
+        }
+    }
+    return c;
+}
+
+// Sets current_timestamp_clock to `wanted` (a clock name) unless it already is.
+Result<clockid_t> setTimestampClock(const fs::path& clock_file, const std::string& wanted) {
+    const auto id = clockByName(wanted);
+    if (!id) {
+        std::string known;
+        for (const ClockName& c : kClocks) {
+            known += std::string(known.empty() ? "" : ", ") + c.name;
+        }
+        return makeError(ErrorCode::kInvalidArgument,
+                         "IioOptions::timestamp_clock " + quote(wanted) + ": not one of " + known);
+    }
+    auto current = readAttr(clock_file);
+    if (!current) {
+        return current.error();
+    }
+    if (*current != wanted) {
+        auto w = writeAttr(clock_file, wanted);
+        if (!w) {
+            return w.error();
+        }
+    }
+    return *id;
+}
+
+// The clock current_timestamp_clock names.
+Result<clockid_t> currentTimestampClock(const fs::path& clock_file) {
+    auto current = readAttr(clock_file);
+    if (!current) {
+        return current.error();
+    }
+    const auto id = clockByName(*current);
+    if (!id) {
+        return makeError(ErrorCode::kParse,
+                         clock_file.string() + ": unknown clock " + quote(*current));
+    }
+    return *id;
+}
+
+// The clock of the device's timestamps: set from options.timestamp_clock or
+// read; CLOCK_REALTIME without a current_timestamp_clock file.
+Result<clockid_t> timestampClock(const fs::path& dir, const IioOptions& options) {
+    const fs::path clock_file = dir / "current_timestamp_clock";
+    if (!pathExists(clock_file)) {
+        return CLOCK_REALTIME;
+    }
+    if (!options.timestamp_clock.empty()) {
+        return setTimestampClock(clock_file, options.timestamp_clock);
+    }
+    return currentTimestampClock(clock_file);
+}
+
 std::size_t alignUp(std::size_t v, std::size_t a) {
     return a == 0 ? v : (v + a - 1) / a * a;
 }
@@ -424,106 +559,20 @@ Result<IioDevice> IioDevice::open(std::string_view name_or_path, const IioOption
     dev.name_ = *name;
 
     // The channels: in_<ch>_raw files and scan elements.
-    std::vector<std::string> names;
-    for (const std::string& entry : listDir(*dir)) {
-        if (startsWith(entry, "in_") && endsWith(entry, "_raw") && entry.size() > 7) {
-            names.push_back(entry.substr(3, entry.size() - 7));
+    for (const std::string& ch : channelNames(*dir)) {
+        auto c = readChannelInfo(*dir, ch);
+        if (!c) {
+            return c.error();
         }
-    }
-    const fs::path scan_dir = *dir / "scan_elements";
-    for (const std::string& entry : listDir(scan_dir)) {
-        if (startsWith(entry, "in_") && endsWith(entry, "_en") && entry.size() > 6) {
-            names.push_back(entry.substr(3, entry.size() - 6));
-        }
-    }
-    std::sort(names.begin(), names.end());
-    names.erase(std::unique(names.begin(), names.end()), names.end());
-    for (const std::string& ch : names) {
-        IioChannel c;
-        c.name = ch;
-        c.has_raw = pathExists(*dir / ("in_" + ch + "_raw"));
-        if (ch != "timestamp") {
-            if (auto p = channelAttr(*dir, ch, "scale")) {
-                auto v = readNumberAttr(*p);
-                if (!v) {
-                    return v.error();
-                }
-                c.scale = *v;
-                c.has_scale = true;
-            }
-            if (auto p = channelAttr(*dir, ch, "offset")) {
-                auto v = readNumberAttr(*p);
-                if (!v) {
-                    return v.error();
-                }
-                c.offset = *v;
-            }
-        }
-        if (pathExists(scan_dir / ("in_" + ch + "_en"))) {
-            const fs::path index_file = scan_dir / ("in_" + ch + "_index");
-            auto index = readIntAttr(index_file);
-            if (!index) {
-                return index.error();
-            }
-            if (*index < 0 || *index > 1'000'000) {
-                return makeError(ErrorCode::kParse, index_file.string() + ": index out of range: " +
-                                                        quote(std::to_string(*index)));
-            }
-            const fs::path type_file = scan_dir / ("in_" + ch + "_type");
-            auto type_text = readAttr(type_file);
-            if (!type_text) {
-                return type_text.error();
-            }
-            auto type = parseIioScanType(*type_text);
-            if (!type) {
-                return makeError(ErrorCode::kParse,
-                                 type_file.string() + ": " + type.error().message);
-            }
-            c.scan_index = static_cast<int>(*index);
-            c.scan_type = *type;
-        }
-        dev.channels_.push_back(std::move(c));
+        dev.channels_.push_back(std::move(*c));
     }
 
     // The timestamp clock (see the header).
-    dev.clock_id_ = CLOCK_REALTIME;
-    const fs::path clock_file = *dir / "current_timestamp_clock";
-    if (pathExists(clock_file)) {
-        if (!options.timestamp_clock.empty()) {
-            const auto id = clockByName(options.timestamp_clock);
-            if (!id) {
-                std::string known;
-                for (const ClockName& c : kClocks) {
-                    known += std::string(known.empty() ? "" : ", ") + c.name;
-                }
-                return makeError(ErrorCode::kInvalidArgument, "IioOptions::timestamp_clock " +
-                                                                  quote(options.timestamp_clock) +
-                                                                  ": not one of " + known);
-            }
-            auto current = readAttr(clock_file);
-            if (!current) {
-                return current.error();
-            }
-            if (*current != options.timestamp_clock) {
-                auto w = writeAttr(clock_file, options.timestamp_clock);
-                if (!w) {
-                    return w.error();
-                }
-            }
-            dev.clock_id_ = *id;
-        } else {
-            auto current = readAttr(clock_file);
-            if (!current) {
-                return current.error();
-            }
-            const auto id = clockByName(*current);
-            if (!id) {
-                return makeError(ErrorCode::kParse,
-                                 clock_file.string() + ": unknown clock " + quote(*current));
-            }
-            dev.clock_id_ = *id;
-        }
+    auto clock = timestampClock(*dir, options);
+    if (!clock) {
+        return clock.error();
     }
+    dev.clock_id_ = *clock;
     return dev;
 }
 
@@ -608,12 +657,11 @@ Result<core::ImuSample> IioDevice::readOnce() const {
     return s;
 }
 
-Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
+core::Status IioDevice::checkBufferFree(const fs::path& enable_file, unsigned length) const {
     if (bufferRunning()) {
         return makeError(ErrorCode::kInvalidArgument,
                          describe() + ": the buffer is already running");
     }
-    const fs::path enable_file = sysfs_dir_ / "buffer" / "enable";
     if (!pathExists(enable_file)) {
         return makeError(ErrorCode::kNotFound, describe() + ": no buffer (no " +
                                                    enable_file.string() +
@@ -627,29 +675,32 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
         return makeError(ErrorCode::kUnavailable, enable_file.string() + " is " + quote(*enabled) +
                                                       ": the buffer is in use (another reader?)");
     }
-    if (options.length == 0) {
+    if (length == 0) {
         return makeError(ErrorCode::kInvalidArgument, describe() + ": buffer length 0");
     }
+    return {};
+}
 
-    // The channels to capture.
-    std::vector<std::string> wanted = options.channels;
+void IioDevice::addDefaultBufferChannels(std::vector<std::string>& wanted) const {
     const auto buffered = [&](const char* n) {
         const IioChannel* c = channel(n);
         return c != nullptr && c->scan_index.has_value();
     };
-    if (wanted.empty()) {
-        for (const char* n : kAccel) {
+    for (const char* n : kAccel) {
+        wanted.emplace_back(n);
+    }
+    if (std::all_of(kGyro.begin(), kGyro.end(), buffered)) {
+        for (const char* n : kGyro) {
             wanted.emplace_back(n);
         }
-        if (std::all_of(kGyro.begin(), kGyro.end(), buffered)) {
-            for (const char* n : kGyro) {
-                wanted.emplace_back(n);
-            }
-        }
-        if (buffered("timestamp")) {
-            wanted.emplace_back("timestamp");
-        }
     }
+    if (buffered("timestamp")) {
+        wanted.emplace_back("timestamp");
+    }
+}
+
+Result<std::vector<std::size_t>> IioDevice::chooseBufferChannels(
+    const std::vector<std::string>& wanted) const {
     std::vector<std::size_t> chosen;
     for (const std::string& n : wanted) {
         const IioChannel* c = channel(n);
@@ -673,8 +724,10 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
     std::sort(chosen.begin(), chosen.end(), [&](std::size_t a, std::size_t b) {
         return *channels_[a].scan_index < *channels_[b].scan_index;
     });
+    return chosen;
+}
 
-    // Scan elements on or off.
+core::Status IioDevice::enableScanElements(const std::vector<std::size_t>& chosen) const {
     for (std::size_t i = 0; i < channels_.size(); ++i) {
         if (!channels_[i].scan_index) {
             continue;
@@ -686,7 +739,10 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
             return w.error();
         }
     }
-    // The layout: each element aligned to its size, the scan to the largest.
+    return {};
+}
+
+void IioDevice::layOutScan(const std::vector<std::size_t>& chosen) {
     elements_.clear();
     buffer_names_.clear();
     timestamp_element_.reset();
@@ -704,7 +760,9 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
         largest = std::max(largest, bytes);
     }
     scan_bytes_ = alignUp(offset, largest);
+}
 
+core::Status IioDevice::writeTriggerAndLength(const IioBufferOptions& options) const {
     if (!options.trigger.empty()) {
         const fs::path trigger_file = sysfs_dir_ / "trigger" / "current_trigger";
         if (!pathExists(trigger_file)) {
@@ -720,6 +778,49 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
     if (auto w = writeAttr(sysfs_dir_ / "buffer" / "length", std::to_string(options.length)); !w) {
         return w.error();
     }
+    return {};
+}
+
+core::Error IioDevice::explainEnableRefused(core::Error e) const {
+    if (e.message.find(drivers::base::errnoText(EINVAL)) != std::string::npos) {
+        const fs::path trigger_file = sysfs_dir_ / "trigger" / "current_trigger";
+        auto current = readAttr(trigger_file);
+        e.message += current && current->empty()
+                         ? " (no trigger is set in " + trigger_file.string() +
+                               ": name one in IioBufferOptions::trigger)"
+                         : std::string(
+                               " (the device refused this set of channels or its "
+                               "trigger)");
+    }
+    return e;
+}
+
+Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
+    const fs::path enable_file = sysfs_dir_ / "buffer" / "enable";
+    if (auto ok = checkBufferFree(enable_file, options.length); !ok) {
+        return ok.error();
+    }
+
+    // The channels to capture.
+    std::vector<std::string> wanted = options.channels;
+    if (wanted.empty()) {
+        addDefaultBufferChannels(wanted);
+    }
+    auto chosen = chooseBufferChannels(wanted);
+    if (!chosen) {
+        return chosen.error();
+    }
+
+    // Scan elements on or off.
+    if (auto ok = enableScanElements(*chosen); !ok) {
+        return ok.error();
+    }
+    // The layout: each element aligned to its size, the scan to the largest.
+    layOutScan(*chosen);
+
+    if (auto ok = writeTriggerAndLength(options); !ok) {
+        return ok.error();
+    }
     base::UniqueFd fd(::open(dev_path_.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC));
     if (!fd.isValid()) {
         const int err = errno;
@@ -727,18 +828,7 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
                          dev_path_.string() + ": cannot open: " + drivers::base::errnoText(err));
     }
     if (auto w = writeAttr(enable_file, "1"); !w) {
-        core::Error e = w.error();
-        if (e.message.find(drivers::base::errnoText(EINVAL)) != std::string::npos) {
-            const fs::path trigger_file = sysfs_dir_ / "trigger" / "current_trigger";
-            auto current = readAttr(trigger_file);
-            e.message += current && current->empty()
-                             ? " (no trigger is set in " + trigger_file.string() +
-                                   ": name one in IioBufferOptions::trigger)"
-                             : std::string(
-                                   " (the device refused this set of channels or its "
-                                   "trigger)");
-        }
-        return e;
+        return explainEnableRefused(w.error());
     }
     fd_ = std::move(fd);
     pending_.clear();

@@ -68,6 +68,48 @@ core::Result<Probe> probeSocketFile(const std::filesystem::path& path, const soc
     return osError(path, "cannot check the existing socket", err);
 }
 
+// The directory of `path` exists.
+core::Status checkSocketDirectory(const std::filesystem::path& path) {
+    const std::filesystem::path parent =
+        path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+    struct stat st = {};
+    if (::stat(parent.c_str(), &st) != 0) {
+        return osError(path, "directory " + parent.string(), errno);
+    }
+    if (!S_ISDIR(st.st_mode)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         path.string() + ": " + parent.string() + " is not a directory");
+    }
+    return {};
+}
+
+// A socket file left at `path` by a process that is gone is removed; one
+// something listens on, or a file that is not a socket, is an error.
+core::Status removeStaleSocket(const std::filesystem::path& path, const sockaddr_un& addr,
+                               socklen_t addr_len) {
+    struct stat st = {};
+    if (::lstat(path.c_str(), &st) == 0) {
+        if (!S_ISSOCK(st.st_mode)) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             path.string() + ": exists and is not a socket (not replacing it)");
+        }
+        auto probe = probeSocketFile(path, addr, addr_len);
+        if (!probe) {
+            return probe.error();
+        }
+        if (*probe == Probe::kLive) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             path.string() + ": already in use by another process");
+        }
+        if (*probe == Probe::kStale && ::unlink(path.c_str()) != 0 && errno != ENOENT) {
+            return osError(path, "cannot remove the stale socket", errno);
+        }
+    } else if (errno != ENOENT) {
+        return osError(path, "cannot inspect", errno);
+    }
+    return {};
+}
+
 bool setFlags(int fd) {
     const int fl = ::fcntl(fd, F_GETFL);
     const int fd_flags = ::fcntl(fd, F_GETFD);
@@ -145,15 +187,8 @@ core::Result<ListeningSocket> listenUnix(const UnixListenOptions& options) {
                          path.string() + ": socket path must be 1 to " +
                              std::to_string(sizeof(addr.sun_path) - 1) + " bytes long");
     }
-    const std::filesystem::path parent =
-        path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-    struct stat st = {};
-    if (::stat(parent.c_str(), &st) != 0) {
-        return osError(path, "directory " + parent.string(), errno);
-    }
-    if (!S_ISDIR(st.st_mode)) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         path.string() + ": " + parent.string() + " is not a directory");
+    if (auto ok = checkSocketDirectory(path); !ok) {
+        return ok.error();
     }
 
     gid_t gid = static_cast<gid_t>(-1);
@@ -165,24 +200,8 @@ core::Result<ListeningSocket> listenUnix(const UnixListenOptions& options) {
         gid = *g;
     }
 
-    if (::lstat(path.c_str(), &st) == 0) {
-        if (!S_ISSOCK(st.st_mode)) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             path.string() + ": exists and is not a socket (not replacing it)");
-        }
-        auto probe = probeSocketFile(path, addr, addr_len);
-        if (!probe) {
-            return probe.error();
-        }
-        if (*probe == Probe::kLive) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             path.string() + ": already in use by another process");
-        }
-        if (*probe == Probe::kStale && ::unlink(path.c_str()) != 0 && errno != ENOENT) {
-            return osError(path, "cannot remove the stale socket", errno);
-        }
-    } else if (errno != ENOENT) {
-        return osError(path, "cannot inspect", errno);
+    if (auto ok = removeStaleSocket(path, addr, addr_len); !ok) {
+        return ok.error();
     }
 
     ListeningSocket out;
@@ -196,6 +215,7 @@ core::Result<ListeningSocket> listenUnix(const UnixListenOptions& options) {
         return osError(path, "cannot bind", errno);
     }
     out.created_file = true;
+    struct stat st = {};
     if (::lstat(path.c_str(), &st) == 0) {
         out.file_dev = st.st_dev;
         out.file_ino = st.st_ino;

@@ -523,8 +523,8 @@ private:
         return true;
     }
 
-    // Chooses the pixel format and validates the size; configures the camera.
-    core::Result<bool> configureStream() {
+    // The formats to try, in order: the option's, or the preferred ones for auto.
+    core::Result<std::vector<camera::PixelFormat>> wantedFormats() const {
         std::vector<camera::PixelFormat> wanted;
         switch (options_.pixel_format) {
             case camera::PixelFormat::kAuto: {
@@ -548,6 +548,81 @@ private:
                                  " is not supported by the libcamera driver (use auto, YUYV, "
                                  "NV12, YUV420, RGB888, BGR888, XRGB8888 or XBGR8888)");
         }
+        return wanted;
+    }
+
+    // Configures the camera with `candidate` (libcamera's `format`) at `asked`:
+    // true when configured, false when the camera rejects it (the reason
+    // appended to `rejected`).
+    core::Result<bool> configureFormat(camera::PixelFormat candidate,
+                                       const libcamera::PixelFormat& format,
+                                       const libcamera::Size& asked, std::string& rejected) {
+        // A fresh configuration per candidate: validate() edits it.
+        auto config = generateStreamConfiguration(*camera_);
+        if (!config) {
+            return error(ErrorCode::kNotFound, "offers no viewfinder or video stream");
+        }
+        libcamera::StreamConfiguration& stream = config->at(0);
+        stream.pixelFormat = format;
+        stream.size = asked;
+        stream.bufferCount = static_cast<unsigned>(options_.buffers);
+        if (config->validate() == libcamera::CameraConfiguration::Invalid) {
+            rejected +=
+                std::string(rejected.empty() ? "" : ", ") + toString(candidate) + " (invalid)";
+            return false;
+        }
+        const auto raw = scaledFormat(stream.pixelFormat);
+        if (!raw) {
+            rejected += std::string(rejected.empty() ? "" : ", ") + toString(candidate) +
+                        " (became " + stream.pixelFormat.toString() + ")";
+            return false;
+        }
+        if (stream.size != asked) {
+            session_notes_.push_back(describe() + ": asked for " + sizeText(asked) +
+                                     ", the camera gives " + sizeText(stream.size) + " (used)");
+        }
+        if (stream.bufferCount != static_cast<unsigned>(options_.buffers)) {
+            session_notes_.push_back(
+                describe() + ": asked for " + std::to_string(options_.buffers) +
+                " buffers, the camera uses " + std::to_string(stream.bufferCount));
+        }
+        const int rc = camera_->configure(config.get());
+        if (rc < 0) {
+            return libcameraError("cannot configure " + stream.toString(), rc);
+        }
+        stream_ = stream.stream();
+        if (stream_ == nullptr) {
+            return error(ErrorCode::kIo, "configured without a stream");
+        }
+        format_ = *raw;
+        width_px_ = static_cast<int>(stream.size.width);
+        height_px_ = static_cast<int>(stream.size.height);
+        stride_bytes_ = stream.stride;
+        config_ = std::move(config);
+        return true;
+    }
+
+    // None of `wanted` could be configured at `asked`: what was offered and why.
+    core::Error noUsableFormatError(const std::vector<camera::PixelFormat>& wanted,
+                                    const libcamera::Size& asked, const std::string& offered_text,
+                                    const std::string& rejected) const {
+        std::string scaled_formats;
+        for (const camera::PixelFormat f : wanted) {
+            scaled_formats += std::string(scaled_formats.empty() ? "" : ", ") + toString(f);
+        }
+        return error(ErrorCode::kInvalidArgument,
+                     "no usable pixel format at " + sizeText(asked) + " (the stream offers " +
+                         (offered_text.empty() ? std::string("none") : offered_text) +
+                         "; scaled converts " + scaled_formats +
+                         (rejected.empty() ? std::string() : "; rejected: " + rejected) + ")");
+    }
+
+    // Chooses the pixel format and validates the size; configures the camera.
+    core::Result<bool> configureStream() {
+        auto wanted = wantedFormats();
+        if (!wanted) {
+            return wanted.error();
+        }
         auto probe = generateStreamConfiguration(*camera_);
         if (!probe) {
             return error(ErrorCode::kNotFound, "offers no viewfinder or video stream");
@@ -560,65 +635,18 @@ private:
         const libcamera::Size asked(static_cast<unsigned>(options_.width_px),
                                     static_cast<unsigned>(options_.height_px));
         std::string rejected;
-        for (const camera::PixelFormat candidate : wanted) {
+        for (const camera::PixelFormat candidate : *wanted) {
             const libcamera::PixelFormat format = libcameraFormat(candidate);
             if (!offered.empty() &&
                 std::find(offered.begin(), offered.end(), format) == offered.end()) {
                 continue;
             }
-            // A fresh configuration per candidate: validate() edits it.
-            auto config = generateStreamConfiguration(*camera_);
-            if (!config) {
-                return error(ErrorCode::kNotFound, "offers no viewfinder or video stream");
+            auto configured = configureFormat(candidate, format, asked, rejected);
+            if (!configured || *configured) {
+                return configured;
             }
-            libcamera::StreamConfiguration& stream = config->at(0);
-            stream.pixelFormat = format;
-            stream.size = asked;
-            stream.bufferCount = static_cast<unsigned>(options_.buffers);
-            if (config->validate() == libcamera::CameraConfiguration::Invalid) {
-                rejected +=
-                    std::string(rejected.empty() ? "" : ", ") + toString(candidate) + " (invalid)";
-                continue;
-            }
-            const auto raw = scaledFormat(stream.pixelFormat);
-            if (!raw) {
-                rejected += std::string(rejected.empty() ? "" : ", ") + toString(candidate) +
-                            " (became " + stream.pixelFormat.toString() + ")";
-                continue;
-            }
-            if (stream.size != asked) {
-                session_notes_.push_back(describe() + ": asked for " + sizeText(asked) +
-                                         ", the camera gives " + sizeText(stream.size) + " (used)");
-            }
-            if (stream.bufferCount != static_cast<unsigned>(options_.buffers)) {
-                session_notes_.push_back(
-                    describe() + ": asked for " + std::to_string(options_.buffers) +
-                    " buffers, the camera uses " + std::to_string(stream.bufferCount));
-            }
-            const int rc = camera_->configure(config.get());
-            if (rc < 0) {
-                return libcameraError("cannot configure " + stream.toString(), rc);
-            }
-            stream_ = stream.stream();
-            if (stream_ == nullptr) {
-                return error(ErrorCode::kIo, "configured without a stream");
-            }
-            format_ = *raw;
-            width_px_ = static_cast<int>(stream.size.width);
-            height_px_ = static_cast<int>(stream.size.height);
-            stride_bytes_ = stream.stride;
-            config_ = std::move(config);
-            return true;
         }
-        std::string scaled_formats;
-        for (const camera::PixelFormat f : wanted) {
-            scaled_formats += std::string(scaled_formats.empty() ? "" : ", ") + toString(f);
-        }
-        return error(ErrorCode::kInvalidArgument,
-                     "no usable pixel format at " + sizeText(asked) + " (the stream offers " +
-                         (offered_text.empty() ? std::string("none") : offered_text) +
-                         "; scaled converts " + scaled_formats +
-                         (rejected.empty() ? std::string() : "; rejected: " + rejected) + ")");
+        return noUsableFormatError(*wanted, asked, offered_text, rejected);
     }
 
     // Buffers from libcamera's allocator, each mapped once, one request each.

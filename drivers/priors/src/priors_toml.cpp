@@ -197,68 +197,53 @@ Result<std::vector<Scalar>> numberArray(const Reporter& rep, const toml::node& n
     return out;
 }
 
-Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, const toml::table& t,
-                               int default_bins) {
-    const std::string base = "classes." + name;
-    ClassSpec spec;
-    for (const auto& [k, node] : t) {
-        const std::string key(k.str());
-        std::string full = base;
-        full += '.';
-        full += key;
-        if (key == "upright") {
-            if (!node.is_boolean()) {
-                return rep.at(&node, full, "must be true or false (got " + show(node) + ")");
-            }
-            spec.upright = node.as_boolean()->get();
-        } else if (key == "source") {
-            if (!node.is_string() || node.as_string()->get().empty()) {
-                return rep.at(&node, full, "must be a non-empty string (got " + show(node) + ")");
-            }
-            spec.source = node.as_string()->get();
-        } else if (key == "bins") {
-            const auto* i = node.as_integer();
-            if (i == nullptr || i->get() < 1 || i->get() > HeightPrior::kMaxBins) {
-                return rep.at(&node, full,
-                              "must be an integer in [1, " + std::to_string(HeightPrior::kMaxBins) +
-                                  "] (got " + show(node) + ")");
-            }
-            spec.bins = static_cast<int>(i->get());
-        } else if (auto* array = spec.arrayKey(key)) {
-            auto arr = numberArray(rep, node, full);
-            if (!arr) {
-                return arr.error();
-            }
-            array->set(std::move(arr.value()), node);
-        } else if (auto* field = spec.numberKey(key)) {
-            const auto v = number(node);
-            if (!v) {
-                return rep.at(&node, full, "must be a number (got " + show(node) + ")");
-            }
-            field->set(*v, node);
-        } else {
-            return rep.at(&node, full,
-                          "unknown key (allowed: upright, source, mean_m, std_m, min_m, max_m, "
-                          "bins, heights_m, probabilities, bin_width_m, partial_probability, "
-                          "width_mean_m, width_std_m)");
+// One key of a class table into `spec` (full: its dotted name, for messages).
+core::Status readClassKey(const Reporter& rep, const std::string& key, const std::string& full,
+                          const toml::node& node, ClassSpec& spec) {
+    if (key == "upright") {
+        if (!node.is_boolean()) {
+            return rep.at(&node, full, "must be true or false (got " + show(node) + ")");
         }
+        spec.upright = node.as_boolean()->get();
+    } else if (key == "source") {
+        if (!node.is_string() || node.as_string()->get().empty()) {
+            return rep.at(&node, full, "must be a non-empty string (got " + show(node) + ")");
+        }
+        spec.source = node.as_string()->get();
+    } else if (key == "bins") {
+        const auto* i = node.as_integer();
+        if (i == nullptr || i->get() < 1 || i->get() > HeightPrior::kMaxBins) {
+            return rep.at(&node, full,
+                          "must be an integer in [1, " + std::to_string(HeightPrior::kMaxBins) +
+                              "] (got " + show(node) + ")");
+        }
+        spec.bins = static_cast<int>(i->get());
+    } else if (auto* array = spec.arrayKey(key)) {
+        auto arr = numberArray(rep, node, full);
+        if (!arr) {
+            return arr.error();
+        }
+        array->set(std::move(arr.value()), node);
+    } else if (auto* field = spec.numberKey(key)) {
+        const auto v = number(node);
+        if (!v) {
+            return rep.at(&node, full, "must be a number (got " + show(node) + ")");
+        }
+        field->set(*v, node);
+    } else {
+        return rep.at(&node, full,
+                      "unknown key (allowed: upright, source, mean_m, std_m, min_m, max_m, "
+                      "bins, heights_m, probabilities, bin_width_m, partial_probability, "
+                      "width_mean_m, width_std_m)");
     }
-    if (!spec.upright) {
-        return rep.at(&t, base + ".upright", "missing (true or false is required)");
-    }
-    if (!spec.source) {
-        return rep.at(&t, base + ".source", "missing (say where the numbers come from)");
-    }
-    const bool normal_form = spec.mean_m || spec.std_m || spec.min_m || spec.max_m || spec.bins;
-    const bool explicit_form = spec.heights_m || spec.probabilities || spec.bin_width_m;
-    if (normal_form == explicit_form) {
-        return rep.at(&t, base,
-                      "give exactly one form: mean_m/std_m/min_m/max_m[/bins] or "
-                      "heights_m/probabilities[/bin_width_m]");
-    }
-    if (auto err = checkRanges(rep, base, spec)) {
-        return *err;
-    }
+    return {};
+}
+
+// The class's height prior in the form its keys give (normal_form: mean/std,
+// otherwise the explicit histogram).
+Result<HeightPrior> makeClassPrior(const Reporter& rep, const std::string& name,
+                                   const std::string& base, const toml::table& t,
+                                   const ClassSpec& spec, bool normal_form, int default_bins) {
     Result<HeightPrior> prior = makeError(ErrorCode::kParse, "");
     if (normal_form) {
         for (const auto& [key, v] : {std::pair{"mean_m", spec.mean_m},
@@ -283,16 +268,61 @@ Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, con
     if (!prior) {
         return rep.at(&t, base, prior.error().message);
     }
+    return prior;
+}
+
+// The optional partial probability and width of the class, set on `prior`.
+core::Status setClassExtras(const Reporter& rep, const std::string& base, const ClassSpec& spec,
+                            HeightPrior& prior) {
     if (spec.partial_probability) {
-        if (auto set = prior->setPartialProbability(*spec.partial_probability); !set) {
+        if (auto set = prior.setPartialProbability(*spec.partial_probability); !set) {
             return rep.at(spec.partial_probability.node, base + ".partial_probability",
                           set.error().message);
         }
     }
     if (spec.width_mean_m) {
-        if (auto set = prior->setWidth(*spec.width_mean_m, *spec.width_std_m); !set) {
+        if (auto set = prior.setWidth(*spec.width_mean_m, *spec.width_std_m); !set) {
             return rep.at(spec.width_mean_m.node, base + ".width_mean_m", set.error().message);
         }
+    }
+    return {};
+}
+
+Result<HeightPrior> parseClass(const Reporter& rep, const std::string& name, const toml::table& t,
+                               int default_bins) {
+    const std::string base = "classes." + name;
+    ClassSpec spec;
+    for (const auto& [k, node] : t) {
+        const std::string key(k.str());
+        std::string full = base;
+        full += '.';
+        full += key;
+        if (auto ok = readClassKey(rep, key, full, node, spec); !ok) {
+            return ok.error();
+        }
+    }
+    if (!spec.upright) {
+        return rep.at(&t, base + ".upright", "missing (true or false is required)");
+    }
+    if (!spec.source) {
+        return rep.at(&t, base + ".source", "missing (say where the numbers come from)");
+    }
+    const bool normal_form = spec.mean_m || spec.std_m || spec.min_m || spec.max_m || spec.bins;
+    const bool explicit_form = spec.heights_m || spec.probabilities || spec.bin_width_m;
+    if (normal_form == explicit_form) {
+        return rep.at(&t, base,
+                      "give exactly one form: mean_m/std_m/min_m/max_m[/bins] or "
+                      "heights_m/probabilities[/bin_width_m]");
+    }
+    if (auto err = checkRanges(rep, base, spec)) {
+        return *err;
+    }
+    auto prior = makeClassPrior(rep, name, base, t, spec, normal_form, default_bins);
+    if (!prior) {
+        return prior;
+    }
+    if (auto ok = setClassExtras(rep, base, spec, *prior); !ok) {
+        return ok.error();
     }
     return prior;
 }

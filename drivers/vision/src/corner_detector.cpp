@@ -206,6 +206,89 @@ void structureResponse(const cv::Mat& gray, const cv::Rect& roi, int block_size,
     }
 }
 
+// The response of the region inside the border (row-major, `cols` per row)
+// and the mask over that region (none when the mask is empty).
+struct ResponseView {
+    const float* response = nullptr;
+    std::size_t cols = 0;
+    int rows = 0;   // the region's height
+    int width = 0;  // the region's width
+    const cv::Mat* mask = nullptr;
+    int border = 0;
+
+    [[nodiscard]] const float* at(int y, int x) const {
+        return response + static_cast<std::size_t>(y) * cols + static_cast<std::size_t>(x);
+    }
+    [[nodiscard]] const uchar* maskRow(int y) const {
+        return mask->empty() ? nullptr : mask->ptr<uchar>(y + border) + border;
+    }
+};
+
+// The strongest response where the mask allows (as cv::minMaxLoc would);
+// false when the mask allows no pixel.
+bool strongestResponse(const ResponseView& view, float& max_response) {
+    bool any = false;
+    for (int y = 0; y < view.rows; ++y) {
+        const float* row = view.at(y, 0);
+        const uchar* m = view.maskRow(y);
+        for (int x = 0; x < view.width; ++x) {
+            if (m == nullptr || m[x] != 0) {
+                max_response = any ? std::max(max_response, row[x]) : row[x];
+                any = true;
+            }
+        }
+    }
+    return any;
+}
+
+// The local maxima (3x3) above the threshold where the mask allows, in raster order.
+void collectLocalMaxima(const ResponseView& view, float threshold,
+                        std::vector<Candidate>& candidates) {
+    candidates.clear();
+    for (int y = 1; y < view.rows - 1; ++y) {
+        const float* above = view.at(y - 1, 0);
+        const float* row = view.at(y, 0);
+        const float* below = view.at(y + 1, 0);
+        const uchar* m = view.maskRow(y);
+        for (int x = 1; x < view.width - 1; ++x) {
+            const float v = row[x];
+            if (!(v > threshold) || (m != nullptr && m[x] == 0)) {
+                continue;
+            }
+            // v equals the maximum of its 3x3 neighbourhood (cv::dilate's test).
+            if (v < row[x - 1] || v < row[x + 1] || v < above[x - 1] || v < above[x] ||
+                v < above[x + 1] || v < below[x - 1] || v < below[x] || v < below[x + 1]) {
+                continue;
+            }
+            candidates.push_back({v, x, y});
+        }
+    }
+}
+
+// Up to `wanted` candidates, strongest first, each at least min_distance from
+// those picked before it (region coordinates); reorders `candidates` (a heap).
+void pickSpreadCorners(std::vector<Candidate>& candidates, double min_distance, std::size_t wanted,
+                       std::vector<cv::Point>& picked) {
+    std::make_heap(candidates.begin(), candidates.end(), weaker);
+    const double min_d2 = min_distance * min_distance;
+    auto heap_end = candidates.end();
+    picked.clear();
+    picked.reserve(std::min(wanted, candidates.capacity()));  // once per size of request
+    while (heap_end != candidates.begin() && picked.size() < wanted) {
+        std::pop_heap(candidates.begin(), heap_end, weaker);
+        --heap_end;
+        const cv::Point p(heap_end->x, heap_end->y);
+        const bool crowded = std::any_of(picked.begin(), picked.end(), [&](const cv::Point& q) {
+            const double dx = p.x - q.x;
+            const double dy = p.y - q.y;
+            return dx * dx + dy * dy < min_d2;
+        });
+        if (!crowded) {
+            picked.push_back(p);
+        }
+    }
+}
+
 }  // namespace
 
 void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig& cfg,
@@ -236,28 +319,15 @@ void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig&
     scratch.reserve(static_cast<std::size_t>(roi.height), static_cast<std::size_t>(roi.width),
                     static_cast<std::size_t>(block_size));
     structureResponse(gray, roi, block_size, cfg.use_harris, scratch);
-    const auto cols = static_cast<std::size_t>(roi.width);
-    const auto at = [&](int y, int x) -> const float* {
-        return scratch.response.data() + static_cast<std::size_t>(y) * cols +
-               static_cast<std::size_t>(x);
-    };
-    const auto mask_row = [&](int y) -> const uchar* {
-        return mask.empty() ? nullptr : mask.ptr<uchar>(y + border) + border;
-    };
+    const ResponseView view{scratch.response.data(),
+                            static_cast<std::size_t>(roi.width),
+                            roi.height,
+                            roi.width,
+                            &mask,
+                            border};
 
-    // The strongest response where the mask allows (as cv::minMaxLoc would).
     float max_response = 0;
-    bool any = false;
-    for (int y = 0; y < roi.height; ++y) {
-        const float* row = at(y, 0);
-        const uchar* m = mask_row(y);
-        for (int x = 0; x < roi.width; ++x) {
-            if (m == nullptr || m[x] != 0) {
-                max_response = any ? std::max(max_response, row[x]) : row[x];
-                any = true;
-            }
-        }
-    }
+    const bool any = strongestResponse(view, max_response);
     if (!any || !(max_response > 0)) {
         return;
     }
@@ -267,46 +337,10 @@ void detectCorners(const cv::Mat& gray, const cv::Mat& mask, const CornerConfig&
     // goodFeaturesToTrack does, then a greedy pick in order of strength that
     // keeps min_distance_px between corners. Only as many candidates as needed
     // are taken from the heap, so a rich image does not pay for a full sort.
-    std::vector<Candidate>& candidates = scratch.candidates;
-    candidates.clear();
-    for (int y = 1; y < roi.height - 1; ++y) {
-        const float* above = at(y - 1, 0);
-        const float* row = at(y, 0);
-        const float* below = at(y + 1, 0);
-        const uchar* m = mask_row(y);
-        for (int x = 1; x < roi.width - 1; ++x) {
-            const float v = row[x];
-            if (!(v > threshold) || (m != nullptr && m[x] == 0)) {
-                continue;
-            }
-            // v equals the maximum of its 3x3 neighbourhood (cv::dilate's test).
-            if (v < row[x - 1] || v < row[x + 1] || v < above[x - 1] || v < above[x] ||
-                v < above[x + 1] || v < below[x - 1] || v < below[x] || v < below[x + 1]) {
-                continue;
-            }
-            candidates.push_back({v, x, y});
-        }
-    }
-    std::make_heap(candidates.begin(), candidates.end(), weaker);
-    const double min_d2 = min_distance * min_distance;
-    const auto wanted = static_cast<std::size_t>(cfg.max_corners);
-    auto heap_end = candidates.end();
+    collectLocalMaxima(view, threshold, scratch.candidates);
     std::vector<cv::Point>& picked = scratch.picked;
-    picked.clear();
-    picked.reserve(std::min(wanted, candidates.capacity()));  // once per size of request
-    while (heap_end != candidates.begin() && picked.size() < wanted) {
-        std::pop_heap(candidates.begin(), heap_end, weaker);
-        --heap_end;
-        const cv::Point p(heap_end->x, heap_end->y);
-        const bool crowded = std::any_of(picked.begin(), picked.end(), [&](const cv::Point& q) {
-            const double dx = p.x - q.x;
-            const double dy = p.y - q.y;
-            return dx * dx + dy * dy < min_d2;
-        });
-        if (!crowded) {
-            picked.push_back(p);
-        }
-    }
+    pickSpreadCorners(scratch.candidates, min_distance, static_cast<std::size_t>(cfg.max_corners),
+                      picked);
     out.reserve(picked.size());
     for (const cv::Point& p : picked) {
         out.emplace_back(static_cast<Scalar>(p.x + border), static_cast<Scalar>(p.y + border));

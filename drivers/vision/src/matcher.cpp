@@ -46,6 +46,42 @@ struct Ellipse {
     }
 };
 
+// The gate ellipse of a prediction at center_px with innovation covariance
+// S; false when the centre is absurdly far out or S is not positive definite.
+bool makeGateEllipse(const Vec2& center_px, const Mat2& S, double chi2_gate, Ellipse& e) {
+    e.cx = static_cast<double>(center_px.x());
+    e.cy = static_cast<double>(center_px.y());
+    e.s00 = static_cast<double>(S(0, 0));
+    e.s11 = static_cast<double>(S(1, 1));
+    e.s01 = 0.5 * (static_cast<double>(S(0, 1)) + static_cast<double>(S(1, 0)));
+    e.gate = chi2_gate;
+    if (!(std::abs(e.cx) < kMaxCoordinatePx) || !(std::abs(e.cy) < kMaxCoordinatePx)) {
+        return false;
+    }
+    const double det = e.s00 * e.s11 - e.s01 * e.s01;
+    return std::isfinite(det) && e.s00 > 0 && e.s11 > 0 && det > 0;
+}
+
+// The ellipse's rows [y_first, y_last]; false when it is too uncertain to
+// search: an extent beyond the pixel budget, then the exact count.
+bool fitsSearchBudget(const Ellipse& e, const MatchConfig& cfg, int& y_first, int& y_last) {
+    const double max_pixels = cfg.max_search_pixels;
+    if (2 * e.halfHeight() + 1 > max_pixels || 2 * e.halfWidth() + 1 > max_pixels) {
+        return false;
+    }
+    y_first = static_cast<int>(std::ceil(e.cy - e.halfHeight()));
+    y_last = static_cast<int>(std::floor(e.cy + e.halfHeight()));
+    std::int64_t inside = 0;
+    for (int y = y_first; y <= y_last; ++y) {
+        int xa = 0;
+        int xb = 0;
+        if (e.rowSpan(y, xa, xb)) {
+            inside += xb - xa + 1;
+        }
+    }
+    return inside <= cfg.max_search_pixels;
+}
+
 // Centres scored together: two 4-float registers of accumulators.
 constexpr std::size_t kBlock = 8;
 
@@ -327,35 +363,12 @@ std::optional<Match> Matcher::match(const cv::Mat& gray, const Patch& patch, con
         return std::nullopt;
     }
     Ellipse e;
-    e.cx = static_cast<double>(center_px.x());
-    e.cy = static_cast<double>(center_px.y());
-    e.s00 = static_cast<double>(S(0, 0));
-    e.s11 = static_cast<double>(S(1, 1));
-    e.s01 = 0.5 * (static_cast<double>(S(0, 1)) + static_cast<double>(S(1, 0)));
-    e.gate = cfg.chi2_gate;
-    if (!(std::abs(e.cx) < kMaxCoordinatePx) || !(std::abs(e.cy) < kMaxCoordinatePx)) {
+    if (!makeGateEllipse(center_px, S, cfg.chi2_gate, e)) {
         return std::nullopt;
     }
-    const double det = e.s00 * e.s11 - e.s01 * e.s01;
-    if (!std::isfinite(det) || !(e.s00 > 0) || !(e.s11 > 0) || !(det > 0)) {
-        return std::nullopt;
-    }
-    // Too uncertain to search: an extent beyond the pixel budget, then the exact count.
-    const double max_pixels = cfg.max_search_pixels;
-    if (2 * e.halfHeight() + 1 > max_pixels || 2 * e.halfWidth() + 1 > max_pixels) {
-        return std::nullopt;
-    }
-    const int y_first = static_cast<int>(std::ceil(e.cy - e.halfHeight()));
-    const int y_last = static_cast<int>(std::floor(e.cy + e.halfHeight()));
-    std::int64_t inside = 0;
-    for (int y = y_first; y <= y_last; ++y) {
-        int xa = 0;
-        int xb = 0;
-        if (e.rowSpan(y, xa, xb)) {
-            inside += xb - xa + 1;
-        }
-    }
-    if (inside > cfg.max_search_pixels) {
+    int y_first = 0;
+    int y_last = 0;
+    if (!fitsSearchBudget(e, cfg, y_first, y_last)) {
         return std::nullopt;
     }
     if (!prepareTemplate(patch, cfg)) {

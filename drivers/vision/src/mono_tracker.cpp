@@ -18,12 +18,10 @@ using core::Vec2;
 using core::Vec3;
 namespace slam = core::slam;
 
-namespace {
-
 // Consecutive stage times of one frame (TrackStats::stage_us): each next() reads
 // the clock once and returns the microseconds since the previous read, so the
 // stages tile the frame without gaps. No allocation; about 20 ns per read.
-class StageLap {
+class MonoTracker::StageLap {
 public:
     double next() {
         const auto now = std::chrono::steady_clock::now();
@@ -35,6 +33,18 @@ public:
 private:
     std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
+
+namespace {
+
+// The filter's update report into the frame's stats.
+void copyUpdateReport(const slam::UpdateReport& report, TrackStats& stats) {
+    stats.predicted = report.predicted;
+    stats.matched = report.matched;
+    stats.inliers = report.low_innovation_inliers;
+    stats.rescued = report.rescued;
+    stats.nis_sum = report.nis_sum;
+    stats.nis_count = report.nis_count;
+}
 
 }  // namespace
 
@@ -606,84 +616,74 @@ void MonoTracker::updateGyroBias(const slam::GyroRate& rate, const core::Mat3& R
     }
 }
 
-TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
-                                     const slam::ImuWindow* imu) {
-    TrackStats stats;
-    if (gray.empty() || gray.type() != CV_8UC1 || gray.cols != slam_.camera().width() ||
-        gray.rows != slam_.camera().height()) {
-        stats.health = slam_.health();
-        return stats;
+void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
+    slam_.initialise(t_ns, gravity_down_C_);
+    last_good_pose_ = slam_.pose();
+    clearAppearances();
+    previous_frame_good_ = true;  // the map's origin: a reference for the gyro bias
+    has_map_ = true;
+    stats.new_map = true;
+    stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
+    stats.features = static_cast<int>(slam_.features().size());
+    stats.visible = stats.added;
+    stats.health = slam_.health();
+}
+
+bool MonoTracker::relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats,
+                                  StageLap& lap) {
+    stats.health = slam::SlamHealth::kRelocalising;
+    stats.features = static_cast<int>(slam_.features().size());
+    if (static_cast<double>(t_ns - lost_t_ns_) * 1e-9 > config_.relocalise_s) {
+        relocalising_ = false;  // given up: the caller starts a new map
+        stats.health = slam::SlamHealth::kLost;
+        return false;
     }
-    StageLap lap;
-    if (!has_map_) {
-        slam_.initialise(t_ns, gravity_down_C_);
-        last_good_pose_ = slam_.pose();
-        clearAppearances();
-        previous_frame_good_ = true;  // the map's origin: a reference for the gyro bias
-        has_map_ = true;
-        stats.new_map = true;
-        stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
-        stats.features = static_cast<int>(slam_.features().size());
-        stats.visible = stats.added;
-        stats.health = slam_.health();
-        stats.stage_us.map = lap.next();
-        return stats;
+    const bool back = tryRelocalise(t_ns, gray, stats);
+    stats.relocalise_us = lap.next();
+    if (!back) {
+        return false;
     }
-    pyramid_built_ = 0;
-    const slam::GyroRate* rate = nullptr;
-    slam::GyroIntegration gyro;
-    const bool bias_reference = previous_frame_good_;
-    const core::Mat3 R_prev_CtoW = slam_.pose().R_CtoW;
-    const std::int64_t t_prev_ns = slam_.timestampNs();
-    previous_frame_good_ = false;
-    if (relocalising_) {
-        stats.health = slam::SlamHealth::kRelocalising;
-        stats.features = static_cast<int>(slam_.features().size());
-        if (static_cast<double>(t_ns - lost_t_ns_) * 1e-9 > config_.relocalise_s) {
-            relocalising_ = false;  // given up: the caller starts a new map
-            stats.health = slam::SlamHealth::kLost;
-            return stats;
-        }
-        const bool back = tryRelocalise(t_ns, gray, stats);
-        stats.relocalise_us = lap.next();
-        if (!back) {
-            return stats;
-        }
-        relocalising_ = false;
-        stats.relocalised = true;
-    } else {
-        if (imu != nullptr && config_.use_gyro) {
-            slam::GyroModel model;
-            model.R_ItoC = imu->R_ItoC;
-            model.bias_I_radps = imu->R_ItoC.transpose() * gyro_bias_C_;
-            model.noise_density = static_cast<Scalar>(config_.gyro_noise_density);
-            model.bias_sigma_radps = static_cast<Scalar>(config_.gyro_bias_sigma_radps);
-            model.max_gap_ns = static_cast<std::int64_t>(config_.gyro_max_gap_s * 1e9);
-            gyro = slam::integrateGyro(imu->samples, slam_.timestampNs(), t_ns, model);
-            stats.gyro = gyro.coverage;
-            rate = gyro.coverage == slam::GyroCoverage::kOk ? &gyro.rate : nullptr;
-        }
-        const slam::SlamHealth predicted = slam_.predict(t_ns, rate);
-        stats.stage_us.predict = lap.next();
-        if (predicted != slam::SlamHealth::kOk) {
-            stats.health = predicted;
-            stats.gyro.reset();  // nothing was predicted, with the gyro or without
-            return stats;
-        }
+    relocalising_ = false;
+    stats.relocalised = true;
+    return true;
+}
+
+const slam::GyroRate* MonoTracker::integrateGyroForFrame(std::int64_t t_ns,
+                                                         const slam::ImuWindow* imu,
+                                                         slam::GyroIntegration& gyro,
+                                                         TrackStats& stats) const {
+    if (imu == nullptr || !config_.use_gyro) {
+        return nullptr;
     }
-    const auto preds = slam_.predictMeasurements();
+    slam::GyroModel model;
+    model.R_ItoC = imu->R_ItoC;
+    model.bias_I_radps = imu->R_ItoC.transpose() * gyro_bias_C_;
+    model.noise_density = static_cast<Scalar>(config_.gyro_noise_density);
+    model.bias_sigma_radps = static_cast<Scalar>(config_.gyro_bias_sigma_radps);
+    model.max_gap_ns = static_cast<std::int64_t>(config_.gyro_max_gap_s * 1e9);
+    gyro = slam::integrateGyro(imu->samples, slam_.timestampNs(), t_ns, model);
+    stats.gyro = gyro.coverage;
+    return gyro.coverage == slam::GyroCoverage::kOk ? &gyro.rate : nullptr;
+}
+
+bool MonoTracker::isCoarseFrame(std::span<const slam::FeaturePrediction> preds) const {
+    int over_budget = 0;
+    for (const auto& pr : preds) {
+        over_budget += searchLevel(pr.S) != 0 ? 1 : 0;
+    }
+    return !preds.empty() && static_cast<double>(over_budget) >=
+                                 config_.coarse_min_fraction * static_cast<double>(preds.size());
+}
+
+void MonoTracker::searchFeatures(const cv::Mat& gray,
+                                 std::span<const slam::FeaturePrediction> preds, TrackStats& stats,
+                                 StageLap& lap) {
     matches_.clear();
     // The pyramid is for a camera whose motion is uncertain (a long frame
     // gap, fast motion): then most ellipses outgrow the budget together. A
     // few large ones on a normal frame are searched as before (not at all):
     // a coarse match there is more often wrong than useful.
-    int over_budget = 0;
-    for (const auto& pr : preds) {
-        over_budget += searchLevel(pr.S) != 0 ? 1 : 0;
-    }
-    const bool coarse_frame =
-        !preds.empty() && static_cast<double>(over_budget) >=
-                              config_.coarse_min_fraction * static_cast<double>(preds.size());
+    const bool coarse_frame = isCoarseFrame(preds);
     for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
         const auto& pr = preds[static_cast<size_t>(i)];
         FeatureAppearance* a = appearanceOf(pr.id);
@@ -713,26 +713,12 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
             matches_.push_back({i, m->px});
         }
     }
-    stats.stage_us.search += lap.next();
-    const auto report = slam_.update(matches_);
-    if (!report.bad_frame) {
-        last_good_pose_ = slam_.pose();  // where relocalisation's guided search looks
-        if (config_.relocalise_s > 0) {
-            refreshDescriptors(gray, preds);
-        }
-        if (rate != nullptr && bias_reference && config_.gyro_bias_time_s > 0) {
-            updateGyroBias(*rate, R_prev_CtoW, t_prev_ns, t_ns);
-        }
-    }
-    stats.stage_us.update = lap.next();
-    stats.predicted = report.predicted;
-    stats.matched = report.matched;
-    stats.inliers = report.low_innovation_inliers;
-    stats.rescued = report.rescued;
-    stats.nis_sum = report.nis_sum;
-    stats.nis_count = report.nis_count;
+}
+
+void MonoTracker::manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, bool bad_frame,
+                                       TrackStats& stats) {
     stats.health = slam_.manageMap();
-    previous_frame_good_ = !report.bad_frame && stats.health == slam::SlamHealth::kOk;
+    previous_frame_good_ = !bad_frame && stats.health == slam::SlamHealth::kOk;
     if (stats.health == slam::SlamHealth::kLost && config_.relocalise_s > 0 &&
         !slam_.features().empty()) {
         // Keep the map and look for the camera in it from the next frame on.
@@ -746,6 +732,59 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         stats.added = addFeatures(gray, config_.slam.min_visible - stats.visible, false);
     }
     stats.features = static_cast<int>(slam_.features().size());
+}
+
+TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
+                                     const slam::ImuWindow* imu) {
+    TrackStats stats;
+    if (gray.empty() || gray.type() != CV_8UC1 || gray.cols != slam_.camera().width() ||
+        gray.rows != slam_.camera().height()) {
+        stats.health = slam_.health();
+        return stats;
+    }
+    StageLap lap;
+    if (!has_map_) {
+        startNewMap(t_ns, gray, stats);
+        stats.stage_us.map = lap.next();
+        return stats;
+    }
+    pyramid_built_ = 0;
+    const slam::GyroRate* rate = nullptr;
+    slam::GyroIntegration gyro;
+    const bool bias_reference = previous_frame_good_;
+    const core::Mat3 R_prev_CtoW = slam_.pose().R_CtoW;
+    const std::int64_t t_prev_ns = slam_.timestampNs();
+    previous_frame_good_ = false;
+    if (relocalising_) {
+        if (!relocaliseFrame(t_ns, gray, stats, lap)) {
+            return stats;
+        }
+    } else {
+        rate = integrateGyroForFrame(t_ns, imu, gyro, stats);
+        const slam::SlamHealth predicted = slam_.predict(t_ns, rate);
+        stats.stage_us.predict = lap.next();
+        if (predicted != slam::SlamHealth::kOk) {
+            stats.health = predicted;
+            stats.gyro.reset();  // nothing was predicted, with the gyro or without
+            return stats;
+        }
+    }
+    const auto preds = slam_.predictMeasurements();
+    searchFeatures(gray, preds, stats, lap);
+    stats.stage_us.search += lap.next();
+    const auto report = slam_.update(matches_);
+    if (!report.bad_frame) {
+        last_good_pose_ = slam_.pose();  // where relocalisation's guided search looks
+        if (config_.relocalise_s > 0) {
+            refreshDescriptors(gray, preds);
+        }
+        if (rate != nullptr && bias_reference && config_.gyro_bias_time_s > 0) {
+            updateGyroBias(*rate, R_prev_CtoW, t_prev_ns, t_ns);
+        }
+    }
+    stats.stage_us.update = lap.next();
+    copyUpdateReport(report, stats);
+    manageMapAfterUpdate(t_ns, gray, report.bad_frame, stats);
     stats.stage_us.map = lap.next();
     return stats;
 }

@@ -183,6 +183,25 @@ private:
         std::size_t bytes = 0;
     };
 
+    // The steps of startBuffer().
+    // The buffer is not running, exists, is not enabled by another reader, and
+    // `length` scans is not 0.
+    [[nodiscard]] core::Status checkBufferFree(const std::filesystem::path& enable_file,
+                                               unsigned length) const;
+    // Appends accel_x/y/z, anglvel_x/y/z when all three can be buffered, and
+    // timestamp when it can.
+    void addDefaultBufferChannels(std::vector<std::string>& wanted) const;
+    // Indices into channels_ of `wanted`, each once, in scan_index order.
+    [[nodiscard]] core::Result<std::vector<std::size_t>> chooseBufferChannels(
+        const std::vector<std::string>& wanted) const;
+    // Each scan element on when chosen, off otherwise.
+    [[nodiscard]] core::Status enableScanElements(const std::vector<std::size_t>& chosen) const;
+    // elements_, buffer_names_, timestamp_element_ and scan_bytes_ for `chosen`.
+    void layOutScan(const std::vector<std::size_t>& chosen);
+    [[nodiscard]] core::Status writeTriggerAndLength(const IioBufferOptions& options) const;
+    // The error of writing 1 to buffer/enable, with the likely reason on EINVAL.
+    [[nodiscard]] core::Error explainEnableRefused(core::Error e) const;
+
     std::string name_;
     std::filesystem::path sysfs_dir_;
     std::filesystem::path dev_path_;

@@ -190,6 +190,29 @@ private:
     };
 
     MonoTracker(core::slam::EkfSlam slam, const TrackerConfig& config);
+
+    // The steps of processFrame(). StageLap (mono_tracker.cpp) times them.
+    class StageLap;
+    // The first frame of a map: initialise the filter, then the first features.
+    void startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats);
+    // A frame while relocalising: true when the camera is back in the map
+    // (the frame's search and update follow), false when the frame ends here.
+    bool relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats, StageLap& lap);
+    // The gyro's rate over the frame interval (in `gyro`) when the IMU window
+    // covers it; nullptr otherwise (the constant-velocity model runs).
+    const core::slam::GyroRate* integrateGyroForFrame(std::int64_t t_ns,
+                                                      const core::slam::ImuWindow* imu,
+                                                      core::slam::GyroIntegration& gyro,
+                                                      TrackStats& stats) const;
+    // Enough ellipses outgrow the pixel budget for the pyramid to be used
+    // (coarse_min_fraction).
+    [[nodiscard]] bool isCoarseFrame(std::span<const core::slam::FeaturePrediction> preds) const;
+    // Active search of every predicted feature with its patch: into matches_.
+    void searchFeatures(const cv::Mat& gray, std::span<const core::slam::FeaturePrediction> preds,
+                        TrackStats& stats, StageLap& lap);
+    // After the update: map management, relocalisation on loss, new features.
+    void manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, bool bad_frame,
+                              TrackStats& stats);
     // One step of the on-line gyro bias estimate (gyro_bias_time_s) after a
     // good update of a frame predicted with `rate`.
     void updateGyroBias(const core::slam::GyroRate& rate, const core::Mat3& R_prev_CtoW,
