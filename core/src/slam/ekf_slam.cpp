@@ -284,22 +284,6 @@ bool EkfSlam::ekfUpdate(int count) {
         return true;
     }
     const Eigen::Index m = 2 * Eigen::Index{count};
-    buildInnovation(count);
-    // The factorisation, the solves and the covariance downdate are written as
-    // plain loops over contiguous columns: Eigen's blocked LLT, triangular
-    // solve and rankUpdate malloc() their workspace once m reaches its
-    // blocking size (tests/integration/steady_state_alloc_test.cpp counts it).
-    if (!choleskyInnovation(m)) {
-        return false;
-    }
-    applyKalmanGain(m);
-    downdateCovariance(m);
-    symmetrize();
-    return true;
-}
-
-void EkfSlam::buildInnovation(int count) {
-    const Eigen::Index m = 2 * Eigen::Index{count};
     auto PHt = PHt_.topLeftCorner(n_, m);
     auto S = S_.topLeftCorner(m, m);
     auto nu = nu_.head(m);
@@ -324,6 +308,35 @@ void EkfSlam::buildInnovation(int count) {
             c.proj.H_feature.leftCols(d) * PHt.middleRows(f.offset, d);
     }
     S.diagonal().array() += config_.pixel_sigma_px * config_.pixel_sigma_px;
+    // The factorisation, the solves and the covariance downdate are written as
+    // plain loops over contiguous columns: Eigen's blocked LLT, triangular
+    // solve and rankUpdate malloc() their workspace once m reaches its
+    // blocking size (tests/integration/steady_state_alloc_test.cpp counts it).
+    if (!choleskyInnovation(m)) {
+        return false;
+    }
+    // Wt = L^-1 (P H^T)^T, column r = L^-1 (row r of P H^T): then K nu = Wt^T L^-1 nu
+    // and K S K^T = Wt^T Wt. Forward substitution by columns of L (contiguous).
+    auto Wt = Wt_.topLeftCorner(m, n_);
+    Wt = PHt.transpose();
+    for (Eigen::Index r = 0; r < n_; ++r) {
+        auto w = Wt.col(r);
+        for (Eigen::Index i = 0; i < m; ++i) {
+            w(i) /= S(i, i);
+            w.segment(i + 1, m - i - 1) -= w(i) * S.col(i).segment(i + 1, m - i - 1);
+        }
+    }
+    // L^-1 nu, the same way.
+    for (Eigen::Index i = 0; i < m; ++i) {
+        nu(i) /= S(i, i);
+        nu.segment(i + 1, m - i - 1) -= nu(i) * S.col(i).segment(i + 1, m - i - 1);
+    }
+    for (Eigen::Index r = 0; r < n_; ++r) {
+        x_(r) += Wt.col(r).dot(nu);
+    }
+    downdateCovariance(m);
+    symmetrize();
+    return true;
 }
 
 bool EkfSlam::choleskyInnovation(Eigen::Index m) {
@@ -348,31 +361,6 @@ bool EkfSlam::choleskyInnovation(Eigen::Index m) {
         }
     }
     return true;
-}
-
-void EkfSlam::applyKalmanGain(Eigen::Index m) {
-    auto PHt = PHt_.topLeftCorner(n_, m);
-    auto S = S_.topLeftCorner(m, m);
-    auto nu = nu_.head(m);
-    // Wt = L^-1 (P H^T)^T, column r = L^-1 (row r of P H^T): then K nu = Wt^T L^-1 nu
-    // and K S K^T = Wt^T Wt. Forward substitution by columns of L (contiguous).
-    auto Wt = Wt_.topLeftCorner(m, n_);
-    Wt = PHt.transpose();
-    for (Eigen::Index r = 0; r < n_; ++r) {
-        auto w = Wt.col(r);
-        for (Eigen::Index i = 0; i < m; ++i) {
-            w(i) /= S(i, i);
-            w.segment(i + 1, m - i - 1) -= w(i) * S.col(i).segment(i + 1, m - i - 1);
-        }
-    }
-    // L^-1 nu, the same way.
-    for (Eigen::Index i = 0; i < m; ++i) {
-        nu(i) /= S(i, i);
-        nu.segment(i + 1, m - i - 1) -= nu(i) * S.col(i).segment(i + 1, m - i - 1);
-    }
-    for (Eigen::Index r = 0; r < n_; ++r) {
-        x_(r) += Wt.col(r).dot(nu);
-    }
 }
 
 void EkfSlam::downdateCovariance(Eigen::Index m) {

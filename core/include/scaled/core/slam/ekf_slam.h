@@ -244,12 +244,11 @@ private:
     void recordAcceptedMatches(int nc, UpdateReport& report);
     // EKF update with the candidates in cand_[0..count); false if S is not PD.
     bool ekfUpdate(int count);
-    // ekfUpdate()'s steps on the workspace's first m = 2 count rows: P H^T, nu and
-    // S = H P H^T + R; S = L L^T in place (false if S is not PD); x += K nu;
-    // P -= K S K^T on the lower triangle.
-    void buildInnovation(int count);
+    // ekfUpdate()'s steps on the workspace's first m = 2 count rows: S = L L^T
+    // in place (false if S is not PD); P -= K S K^T on the lower triangle.
+    // (The products and the gain stay in ekfUpdate(): moving them changes
+    // GCC's inlining and so its fused multiply-adds on aarch64.)
     bool choleskyInnovation(Eigen::Index m);
-    void applyKalmanGain(Eigen::Index m);
     void downdateCovariance(Eigen::Index m);
     void removeDims(int offset, int dims);
     void removeSlot(int slot);
