@@ -61,35 +61,8 @@ Result<bool> checkOptions(const GravityOptions& o) {
     return true;
 }
 
-}  // namespace
-
-Scalar angleBetween(const Vec3& a, const Vec3& b) {
-    const Scalar na = a.norm();
-    const Scalar nb = b.norm();
-    if (!(na > 0) || !(nb > 0)) {
-        return 0;
-    }
-    // atan2 of |a x b| and a . b: accurate at small angles, unlike acos.
-    return std::atan2(a.cross(b).norm(), a.dot(b));
-}
-
-RotationDefect rotationDefect(const Mat3& R_in) {
-    const Eigen::Matrix3d& R = R_in.cast<double>();
-    RotationDefect d;
-    d.orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    d.determinant = R.determinant();
-    return d;
-}
-
-bool isRotation(const RotationDefect& d) {
-    return d.orthogonality <= kRotationTolerance && d.determinant > 0;
-}
-
-Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, const Mat3& R_ItoC,
-                                            const GravityOptions& options) {
-    if (auto ok = checkOptions(options); !ok) {
-        return ok.error();
-    }
+// R_ItoC a rotation, the samples in time order, at least one.
+Result<bool> checkInputs(std::span<const ImuSample> samples, const Mat3& R_ItoC) {
     const RotationDefect defect = rotationDefect(R_ItoC);
     if (!R_ItoC.allFinite() || !isRotation(defect)) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -108,7 +81,13 @@ Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, 
     if (samples.empty()) {
         return makeError(ErrorCode::kDegenerate, "gravity: no accelerometer samples");
     }
+    return true;
+}
 
+// The samples in the window [t_begin_ns, t_end_ns] that the options select.
+std::span<const ImuSample> windowOf(std::span<const ImuSample> samples,
+                                    const GravityOptions& options, int64_t& t_begin_ns,
+                                    int64_t& t_end_ns) {
     // The window [t_begin, t_end]; the saturating arithmetic keeps extreme
     // timestamps from overflowing.
     constexpr int64_t kMin = std::numeric_limits<int64_t>::min();
@@ -126,15 +105,13 @@ Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, 
                                         [](const ImuSample& s, int64_t t) { return s.t_ns < t; });
     const auto last = std::upper_bound(first, samples.end(), t_end,
                                        [](int64_t t, const ImuSample& s) { return t < s.t_ns; });
-    const std::span<const ImuSample> window(first, last);
-    const std::string where = "[" + seconds(t_begin) + ", " + seconds(t_end) + "] s";
-    if (window.size() < options.min_samples) {
-        return makeError(ErrorCode::kDegenerate, "gravity: " + std::to_string(window.size()) +
-                                                     " accelerometer samples in " + where +
-                                                     ", need at least " +
-                                                     std::to_string(options.min_samples));
-    }
+    t_begin_ns = t_begin;
+    t_end_ns = t_end;
+    return {first, last};
+}
 
+// The window's mean, magnitude, spread and mean rate (window not empty).
+Result<GravityEstimate> windowStatistics(std::span<const ImuSample> window) {
     Vec3 sum = Vec3::Zero();
     Scalar rate_sum = 0;
     std::size_t rate_count = 0;
@@ -164,7 +141,11 @@ Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, 
     if (rate_count > 0) {
         est.mean_rate_radps = rate_sum / static_cast<Scalar>(rate_count);
     }
+    return est;
+}
 
+// Why the window does not look static ("" when it does), reasons joined by "; ".
+std::string reasonsNotStatic(const GravityEstimate& est, const GravityOptions& options) {
     std::vector<std::string> reasons;
     const Scalar off = std::abs(est.magnitude_mps2 - options.gravity_mps2);
     if (!(off <= options.magnitude_tolerance_mps2)) {
@@ -183,14 +164,68 @@ Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, 
                           " rad/s > " + fixed(static_cast<double>(options.max_rate_radps)) +
                           " (rotating)");
     }
-    if (!reasons.empty()) {
-        std::string message =
-            "gravity: not static in " + where + " (" + std::to_string(est.samples) + " samples): ";
-        for (std::size_t k = 0; k < reasons.size(); ++k) {
-            message += (k > 0 ? "; " : "") + reasons[k];
-        }
-        return makeError(ErrorCode::kDegenerate, message);
+    std::string joined;
+    for (std::size_t k = 0; k < reasons.size(); ++k) {
+        joined += (k > 0 ? "; " : "") + reasons[k];
     }
+    return joined;
+}
+
+}  // namespace
+
+Scalar angleBetween(const Vec3& a, const Vec3& b) {
+    const Scalar na = a.norm();
+    const Scalar nb = b.norm();
+    if (!(na > 0) || !(nb > 0)) {
+        return 0;
+    }
+    // atan2 of |a x b| and a . b: accurate at small angles, unlike acos.
+    return std::atan2(a.cross(b).norm(), a.dot(b));
+}
+
+RotationDefect rotationDefect(const Mat3& R_in) {
+    const Eigen::Matrix3d& R = R_in.cast<double>();
+    RotationDefect d;
+    d.orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    d.determinant = R.determinant();
+    return d;
+}
+
+bool isRotation(const RotationDefect& d) {
+    return d.orthogonality <= kRotationTolerance && d.determinant > 0;
+}
+
+Result<GravityEstimate> estimateGravityDown(std::span<const ImuSample> samples, const Mat3& R_ItoC,
+                                            const GravityOptions& options) {
+    if (auto ok = checkOptions(options); !ok) {
+        return ok.error();
+    }
+    if (auto ok = checkInputs(samples, R_ItoC); !ok) {
+        return ok.error();
+    }
+    int64_t t_begin = 0;
+    int64_t t_end = 0;
+    const std::span<const ImuSample> window = windowOf(samples, options, t_begin, t_end);
+    const std::string where = "[" + seconds(t_begin) + ", " + seconds(t_end) + "] s";
+    if (window.size() < options.min_samples) {
+        return makeError(ErrorCode::kDegenerate, "gravity: " + std::to_string(window.size()) +
+                                                     " accelerometer samples in " + where +
+                                                     ", need at least " +
+                                                     std::to_string(options.min_samples));
+    }
+
+    auto stats = windowStatistics(window);
+    if (!stats) {
+        return stats.error();
+    }
+    GravityEstimate est = *stats;
+    const std::string reasons = reasonsNotStatic(est, options);
+    if (!reasons.empty()) {
+        return makeError(ErrorCode::kDegenerate, "gravity: not static in " + where + " (" +
+                                                     std::to_string(est.samples) +
+                                                     " samples): " + reasons);
+    }
+    const auto n = static_cast<Scalar>(window.size());
     // |f_mean| is within the tolerance of gravity, so not zero.
     est.down_inI = -est.mean_accel_mps2 / est.magnitude_mps2;
     est.down_inC = (R_ItoC * est.down_inI).normalized();

@@ -111,14 +111,36 @@ FixedLikelihood::FixedLikelihood(std::size_t bins)
       has_suffix_(kPriorBins + 1, 0),
       terms_(kPriorBins, 0) {}
 
-bool FixedLikelihood::evaluate(const VerticalExtent& extent, const HeightPrior& prior,
-                               std::span<LogQ16> log_l) {
-    // ---- Per observation: floating point, O(histogram). ----
+// What evaluate() computes once per observation, in fixed point.
+struct FixedLikelihood::Observation {
+    std::size_t M = 0;  // bins of the prior
+    // var = a + b d^2
+    bool has_a = false;
+    std::int64_t log2_a = 0;  // Q24
+    std::int64_t log2_b = 0;  // Q24
+    // D = d_mant 2^(d_exp - 30)
+    std::int64_t d_mant = 0;
+    int d_exp = 0;
+    bool partial = false;
+    std::int64_t log_full = 0;      // Q16 nats
+    std::int64_t log_partial = 0;   // Q16 nats
+    std::int64_t log_sqrt_2pi = 0;  // 0.5 ln(2 pi), Q16 nats
+};
+
+// Windows over the prior's heights: they only move up as d_j grows.
+struct FixedLikelihood::BinCursor {
+    std::size_t lo = 0;
+    std::size_t hi = 0;
+    std::size_t k_partial = 0;
+};
+
+bool FixedLikelihood::prepareObservation(const VerticalExtent& extent, const HeightPrior& prior,
+                                         Observation& obs) {
     const auto D = static_cast<double>(extent.D);
     const std::size_t M = prior.size();
     if (M == 0 || M > heights_.size() || !(D > 0) || !std::isfinite(D) ||
-        log_l.size() != log2_d_.size() || !std::isfinite(extent.sigma_D_paper) ||
-        !std::isfinite(extent.sigma_D_feature) || !std::isfinite(extent.sigma_D_box)) {
+        !std::isfinite(extent.sigma_D_paper) || !std::isfinite(extent.sigma_D_feature) ||
+        !std::isfinite(extent.sigma_D_box)) {
         return false;
     }
     const auto heights = prior.heights();
@@ -126,6 +148,7 @@ bool FixedLikelihood::evaluate(const VerticalExtent& extent, const HeightPrior& 
     if (!(static_cast<double>(heights[M - 1]) < kMaxLengthM)) {
         return false;
     }
+    obs.M = M;
     for (std::size_t m = 0; m < M; ++m) {
         heights_[m] = toQ(static_cast<double>(heights[m]), fixed::kLengthFracBits);
         log_probs_[m] = toQ(static_cast<double>(log_probs[m]), kLogFracBits);
@@ -144,22 +167,29 @@ bool FixedLikelihood::evaluate(const VerticalExtent& extent, const HeightPrior& 
         const auto sb = static_cast<double>(extent.sigma_D_box);
         b += sf * sf + sb * sb;
     }
-    const bool has_a = a > 0;
-    const std::int64_t log2_a = has_a ? toLog2Q24(a) : 0;
-    const std::int64_t log2_b = toLog2Q24(b);
-    std::int64_t d_mant = 0;
-    int d_exp = 0;
-    splitMantissa(D, &d_mant, &d_exp);
+    obs.has_a = a > 0;
+    obs.log2_a = obs.has_a ? toLog2Q24(a) : 0;
+    obs.log2_b = toLog2Q24(b);
+    splitMantissa(D, &obs.d_mant, &obs.d_exp);
 
+    preparePartialVisibility(prior, obs);
+    // -0.5 ln(2 pi), Q16 nats.
+    obs.log_sqrt_2pi = toQ(0.5 * std::log(2 * std::numbers::pi), kLogFracBits);
+    return true;
+}
+
+// The mixture weights and the suffix sums ln sum_{m >= k} p_m / H_m of partial visibility.
+void FixedLikelihood::preparePartialVisibility(const HeightPrior& prior, Observation& obs) {
+    const std::size_t M = obs.M;
+    const auto heights = prior.heights();
+    const auto log_probs = prior.logProbabilities();
     const double partial_weight = prior.partialProbability() >= 0
                                       ? static_cast<double>(prior.partialProbability())
                                       : static_cast<double>(config_.partial_weight);
-    const bool partial = config_.partial_visibility && partial_weight > 0;
-    std::int64_t log_full = 0;
-    std::int64_t log_partial = 0;
-    if (partial) {
-        log_full = toQ(std::log1p(-partial_weight), kLogFracBits);
-        log_partial = toQ(std::log(partial_weight), kLogFracBits);
+    obs.partial = config_.partial_visibility && partial_weight > 0;
+    if (obs.partial) {
+        obs.log_full = toQ(std::log1p(-partial_weight), kLogFracBits);
+        obs.log_partial = toQ(std::log(partial_weight), kLogFracBits);
         double suffix = 0;
         log_suffix_[M] = 0;
         has_suffix_[M] = 0;
@@ -169,82 +199,101 @@ bool FixedLikelihood::evaluate(const VerticalExtent& extent, const HeightPrior& 
             log_suffix_[m] = suffix > 0 ? toLnQ16(suffix) : 0;
         }
     }
-    // -0.5 ln(2 pi), Q16 nats.
-    const std::int64_t log_sqrt_2pi = toQ(0.5 * std::log(2 * std::numbers::pi), kLogFracBits);
+}
+
+std::int64_t FixedLikelihood::windowLogSumQ16(std::int64_t x, std::int64_t reach,
+                                              const fixed::Exp2Split& inv_sigma, std::size_t M,
+                                              BinCursor& cursor) {
+    constexpr std::int64_t kWindowSigmas = 8;
+    std::size_t& lo = cursor.lo;
+    std::size_t& hi = cursor.hi;
+    // The window of heights within 8 sigma of x (as evaluateLogLikelihood).
+    while (lo < M && heights_[lo] < x - reach) {
+        ++lo;
+    }
+    hi = std::max(hi, lo);
+    while (hi < M && heights_[hi] <= x + reach) {
+        ++hi;
+    }
+    std::size_t first = lo;
+    std::size_t last = hi;
+    if (first == last) {
+        first = lo > 0 ? lo - 1 : lo;
+        last = std::min(M, lo + 1);
+    }
+    static_assert(kWindowSigmas == 8, "reach above is 2^3 sigma");
+    std::int64_t best = std::numeric_limits<std::int64_t>::min();
+    for (std::size_t m = first; m < last; ++m) {
+        const std::int64_t z =
+            standardisedQ20(x - heights_[m], inv_sigma.mantissa, inv_sigma.exponent);
+        // z^2 / 2: Q40 -> Q16 nats.
+        const std::int64_t term = log_probs_[m] - ((z * z + (std::int64_t{1} << 24)) >> 25);
+        terms_[m - first] = term;
+        best = std::max(best, term);
+    }
+    std::int64_t sum = 0;  // Q30, >= 1.0 (the best term)
+    for (std::size_t m = first; m < last; ++m) {
+        sum += fixed::expNegQ30(best - terms_[m - first]);
+    }
+    return best + fixed::lnQ16(static_cast<std::uint64_t>(sum), fixed::kProbFracBits);
+}
+
+std::int64_t FixedLikelihood::binValueQ16(std::size_t j, const Observation& obs,
+                                          BinCursor& cursor) {
+    const std::size_t M = obs.M;
+    // x = d_j D in Q32 metres: mantissas multiply exactly (< 2^62).
+    const std::int64_t x = fixed::shiftRound(d_mant_[j] * obs.d_mant, 28 - d_exp_[j] - obs.d_exp);
+    // log2 var = log2(a + b d^2), at least log2(min_sigma^2).
+    const std::int64_t log2_bd2 = obs.log2_b + 2 * log2_d_[j];
+    std::int64_t log2_var = obs.has_a ? fixed::log2AddExp2Q24(obs.log2_a, log2_bd2) : log2_bd2;
+    log2_var = std::max(log2_var, log2_min_var_);
+    // log_norm = -0.5 ln(2 pi) - 0.5 ln var.
+    constexpr int kHalfLnShift = kLog2FracBits + 32 - kLogFracBits + 1;
+    const std::int64_t log_norm =
+        -obs.log_sqrt_2pi -
+        ((log2_var * fixed::kLn2Q32 + (std::int64_t{1} << (kHalfLnShift - 1))) >> kHalfLnShift);
+    // sigma = 2^(log2 var / 2), 1/sigma = 2^(-log2 var / 2), as mantissa/exponent.
+    const fixed::Exp2Split sigma = fixed::exp2Split(log2_var / 2);
+    const fixed::Exp2Split inv_sigma = fixed::exp2Split(-(log2_var / 2));
+    // reach = 8 sigma in Q32 metres = mantissa 2^(exponent - 30 + 32 + 3).
+    const std::int64_t reach = fixed::shiftRound(sigma.mantissa, -(sigma.exponent + 5));
+
+    std::int64_t value = log_norm + windowLogSumQ16(x, reach, inv_sigma, M, cursor);
+
+    if (obs.partial) {
+        while (cursor.k_partial < M && heights_[cursor.k_partial] <= x) {
+            ++cursor.k_partial;
+        }
+        const std::int64_t full = obs.log_full + value;
+        value = has_suffix_[cursor.k_partial] != 0
+                    ? fixed::logAddExpQ16(full, obs.log_partial + log_suffix_[cursor.k_partial])
+                    : full;
+    }
+    if (robust_ && x <= outlier_range_) {
+        value = fixed::logAddExpQ16(log_inlier_ + value, log_outlier_);
+    } else if (robust_) {
+        value += log_inlier_;
+    }
+    if (config_.variance_model == VarianceModel::kPropagated) {
+        value += ln_d_[j];
+    }
+    return value;
+}
+
+bool FixedLikelihood::evaluate(const VerticalExtent& extent, const HeightPrior& prior,
+                               std::span<LogQ16> log_l) {
+    // ---- Per observation: floating point, O(histogram). ----
+    Observation obs;
+    if (log_l.size() != log2_d_.size() || !prepareObservation(extent, prior, obs)) {
+        return false;
+    }
 
     // ---- Per bin: integer only. ----
-    constexpr std::int64_t kWindowSigmas = 8;
-    std::size_t lo = 0;
-    std::size_t hi = 0;
-    std::size_t k_partial = 0;
+    BinCursor cursor;
     std::int64_t best_bin = std::numeric_limits<std::int64_t>::min();
     const std::size_t n = log2_d_.size();
     for (std::size_t j = 0; j < n; ++j) {
-        // x = d_j D in Q32 metres: mantissas multiply exactly (< 2^62).
-        const std::int64_t x = fixed::shiftRound(d_mant_[j] * d_mant, 28 - d_exp_[j] - d_exp);
-        // log2 var = log2(a + b d^2), at least log2(min_sigma^2).
-        const std::int64_t log2_bd2 = log2_b + 2 * log2_d_[j];
-        std::int64_t log2_var = has_a ? fixed::log2AddExp2Q24(log2_a, log2_bd2) : log2_bd2;
-        log2_var = std::max(log2_var, log2_min_var_);
-        // log_norm = -0.5 ln(2 pi) - 0.5 ln var.
-        constexpr int kHalfLnShift = kLog2FracBits + 32 - kLogFracBits + 1;
-        const std::int64_t log_norm =
-            -log_sqrt_2pi -
-            ((log2_var * fixed::kLn2Q32 + (std::int64_t{1} << (kHalfLnShift - 1))) >> kHalfLnShift);
-        // sigma = 2^(log2 var / 2), 1/sigma = 2^(-log2 var / 2), as mantissa/exponent.
-        const fixed::Exp2Split sigma = fixed::exp2Split(log2_var / 2);
-        const fixed::Exp2Split inv_sigma = fixed::exp2Split(-(log2_var / 2));
-        // reach = 8 sigma in Q32 metres = mantissa 2^(exponent - 30 + 32 + 3).
-        const std::int64_t reach = fixed::shiftRound(sigma.mantissa, -(sigma.exponent + 5));
-
-        // The window of heights within 8 sigma of x (as evaluateLogLikelihood).
-        while (lo < M && heights_[lo] < x - reach) {
-            ++lo;
-        }
-        hi = std::max(hi, lo);
-        while (hi < M && heights_[hi] <= x + reach) {
-            ++hi;
-        }
-        std::size_t first = lo;
-        std::size_t last = hi;
-        if (first == last) {
-            first = lo > 0 ? lo - 1 : lo;
-            last = std::min(M, lo + 1);
-        }
-        static_assert(kWindowSigmas == 8, "reach above is 2^3 sigma");
-        std::int64_t best = std::numeric_limits<std::int64_t>::min();
-        for (std::size_t m = first; m < last; ++m) {
-            const std::int64_t z =
-                standardisedQ20(x - heights_[m], inv_sigma.mantissa, inv_sigma.exponent);
-            // z^2 / 2: Q40 -> Q16 nats.
-            const std::int64_t term = log_probs_[m] - ((z * z + (std::int64_t{1} << 24)) >> 25);
-            terms_[m - first] = term;
-            best = std::max(best, term);
-        }
-        std::int64_t sum = 0;  // Q30, >= 1.0 (the best term)
-        for (std::size_t m = first; m < last; ++m) {
-            sum += fixed::expNegQ30(best - terms_[m - first]);
-        }
-        std::int64_t value =
-            log_norm + best + fixed::lnQ16(static_cast<std::uint64_t>(sum), fixed::kProbFracBits);
-
-        if (partial) {
-            while (k_partial < M && heights_[k_partial] <= x) {
-                ++k_partial;
-            }
-            const std::int64_t full = log_full + value;
-            value = has_suffix_[k_partial] != 0
-                        ? fixed::logAddExpQ16(full, log_partial + log_suffix_[k_partial])
-                        : full;
-        }
-        if (robust_ && x <= outlier_range_) {
-            value = fixed::logAddExpQ16(log_inlier_ + value, log_outlier_);
-        } else if (robust_) {
-            value += log_inlier_;
-        }
-        if (config_.variance_model == VarianceModel::kPropagated) {
-            value += ln_d_[j];
-        }
+        const std::int64_t value = binValueQ16(j, obs, cursor);
         values_[j] = value;
         best_bin = std::max(best_bin, value);
     }

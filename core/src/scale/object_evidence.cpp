@@ -334,9 +334,7 @@ int ObjectEvidence::newTrack(int class_index) {
     return slot;
 }
 
-void ObjectEvidence::triangulate(Track& t, int slot) {
-    t.anchored = false;
-    t.has_estimate = false;
+int ObjectEvidence::collectCentreRays(const Track& t, int slot) {
     const auto& k = camera_.intrinsics();
     const Scalar f = (k.fx + k.fy) / 2;
     // The views' box-centre rays (boxes cut by the image border left out:
@@ -357,6 +355,46 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
         r.sigma_angle =
             (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
     }
+    return n;
+}
+
+bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec3& X,
+                                  RayAgreement& out) const {
+    // In front of every view; how many boxes it projects into (with a
+    // margin); the rays' chi-square; the largest angle between two rays.
+    int inside = 0;
+    Scalar chi2 = 0;
+    Scalar min_cos = 1;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        const View& v = view(slot, rays[i].view);
+        const Vec3 e = X - v.pose.p_CinW;
+        const Scalar along = e.dot(rays[i].dir_W);
+        if (!(along > 0)) {
+            return false;
+        }
+        const Scalar s = rays[i].sigma_angle * along;
+        chi2 += (e - along * rays[i].dir_W).squaredNorm() / (s * s);
+        const auto px = camera_.project(v.pose.R_CtoW.transpose() * e);
+        const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
+        const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
+        if (px && px->x() >= v.box.x_min_px - mw && px->x() <= v.box.x_max_px + mw &&
+            px->y() >= v.box.y_min_px - mh && px->y() <= v.box.y_max_px + mh) {
+            ++inside;
+        }
+        for (std::size_t j = 0; j < i; ++j) {
+            min_cos = std::min(min_cos, rays[i].dir_W.dot(rays[j].dir_W));
+        }
+    }
+    out.inside = inside;
+    out.chi2 = chi2;
+    out.min_cos = min_cos;
+    return true;
+}
+
+void ObjectEvidence::triangulate(Track& t, int slot) {
+    t.anchored = false;
+    t.has_estimate = false;
+    const int n = collectCentreRays(t, slot);
     if (n < 2) {
         return;
     }
@@ -388,39 +426,18 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
         X = eig.eigenvectors() *
             (eig.eigenvalues().cwiseInverse().asDiagonal() * (eig.eigenvectors().transpose() * b));
     }
-    // In front of every view; how many boxes it projects into (with a
-    // margin); the rays' chi-square; the largest angle between two rays.
-    int inside = 0;
-    Scalar chi2 = 0;
-    Scalar min_cos = 1;
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-        const View& v = view(slot, rays[i].view);
-        const Vec3 e = X - v.pose.p_CinW;
-        const Scalar along = e.dot(rays[i].dir_W);
-        if (!(along > 0)) {
-            return;
-        }
-        const Scalar s = rays[i].sigma_angle * along;
-        chi2 += (e - along * rays[i].dir_W).squaredNorm() / (s * s);
-        const auto px = camera_.project(v.pose.R_CtoW.transpose() * e);
-        const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
-        const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
-        if (px && px->x() >= v.box.x_min_px - mw && px->x() <= v.box.x_max_px + mw &&
-            px->y() >= v.box.y_min_px - mh && px->y() <= v.box.y_max_px + mh) {
-            ++inside;
-        }
-        for (std::size_t j = 0; j < i; ++j) {
-            min_cos = std::min(min_cos, rays[i].dir_W.dot(rays[j].dir_W));
-        }
+    RayAgreement agreement;
+    if (!rayAgreement(slot, rays, X, agreement)) {
+        return;
     }
-    const Scalar parallax_deg =
-        std::acos(std::clamp(min_cos, Scalar(-1), Scalar(1))) * 180 / std::numbers::pi_v<Scalar>;
+    const Scalar parallax_deg = std::acos(std::clamp(agreement.min_cos, Scalar(-1), Scalar(1))) *
+                                180 / std::numbers::pi_v<Scalar>;
     // A-posteriori variance factor: rays that do not meet as well as their
     // assumed noise says (the box centre moving on the object, a pose error
     // of the map) widen the anchor's covariance accordingly.
     const int dof = 2 * n - 3;
     const Scalar factor =
-        dof > 0 ? std::max(Scalar(1), chi2 / static_cast<Scalar>(dof)) : Scalar(1);
+        dof > 0 ? std::max(Scalar(1), agreement.chi2 / static_cast<Scalar>(dof)) : Scalar(1);
     const Mat3 P = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
                    eig.eigenvectors().transpose() * factor;
     // Its relative depth uncertainty, seen from the latest of those views.
@@ -436,7 +453,7 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
     t.anchor_rel_sigma = rel;
     t.has_estimate = true;
     t.anchored = rel <= config_.max_anchor_rel_sigma && parallax_deg >= config_.min_parallax_deg &&
-                 2 * inside >= n;
+                 2 * agreement.inside >= n;
 }
 
 std::optional<ObjectViewExtent> ObjectEvidence::measureView(const Vec3& p_AinW,
@@ -482,29 +499,20 @@ std::optional<ObjectViewExtent> ObjectEvidence::measureView(const Vec3& p_AinW,
     return x;
 }
 
-void ObjectEvidence::evaluate(Track& t, int slot) {
-    t.dirty = false;
-    t.used = false;
-    t.views_used = 0;
-    t.local_estimate = 0;
-    t.s_1 = t.s_d = t.s_k = 0;
-    if (!t.anchored || t.class_index < 0 || t.class_index >= static_cast<int>(apparent_.size())) {
-        return;
-    }
-    const ApparentHeightPrior& prior = apparent_[static_cast<std::size_t>(t.class_index)];
-    const Scalar ratio = width_ratio_[static_cast<std::size_t>(t.class_index)];
+std::size_t ObjectEvidence::measureViews(const Track& t, int slot, Scalar width_ratio) {
     std::size_t n = 0;
     for (int i = 0; i < t.stored; ++i) {
         const View& v = view(slot, i);
         if (const auto x = measureView(t.p_AinW, v.pose, v.up_W, v.box)) {
             extents_[n] = *x;
-            norm_[n] = x->D / (1 + x->kappa * ratio);
+            norm_[n] = x->D / (1 + x->kappa * width_ratio);
             ++n;
         }
     }
-    if (n == 0) {
-        return;
-    }
+    return n;
+}
+
+std::size_t ObjectEvidence::keepViewsNearReference(std::size_t n) {
     // Views far from the object's reference extent leave the product.
     std::copy_n(norm_.begin(), n, norm_sorted_.begin());
     const auto q_idx = static_cast<std::ptrdiff_t>(
@@ -526,6 +534,50 @@ void ObjectEvidence::evaluate(Track& t, int slot) {
             extents_[kept++] = extents_[i];
         }
     }
+    return kept;
+}
+
+bool ObjectEvidence::evaluateIntoCache(std::span<const ObjectViewExtent> used,
+                                       const ApparentHeightPrior& prior,
+                                       const ObjectLikelihoodConfig& lc, int slot) {
+    if (config_.one_height) {
+        return evaluateObjectLogLikelihood(used, prior, grid_, lc, cache(slot));
+    }
+    // The ablation: views as independent observations, each with its own
+    // height from the class prior.
+    std::span<Scalar> sum = cache(slot);
+    std::fill(sum.begin(), sum.end(), Scalar(0));
+    for (std::size_t i = 0; i < used.size(); ++i) {
+        if (!evaluateObjectLogLikelihood(used.subspan(i, 1), prior, grid_, lc, view_log_l_)) {
+            return false;
+        }
+        for (std::size_t j = 0; j < sum.size(); ++j) {
+            sum[j] += view_log_l_[j];
+        }
+    }
+    const Scalar top = *std::max_element(sum.begin(), sum.end());
+    for (auto& v : sum) {
+        v -= top;
+    }
+    return true;
+}
+
+void ObjectEvidence::evaluate(Track& t, int slot) {
+    t.dirty = false;
+    t.used = false;
+    t.views_used = 0;
+    t.local_estimate = 0;
+    t.s_1 = t.s_d = t.s_k = 0;
+    if (!t.anchored || t.class_index < 0 || t.class_index >= static_cast<int>(apparent_.size())) {
+        return;
+    }
+    const ApparentHeightPrior& prior = apparent_[static_cast<std::size_t>(t.class_index)];
+    const Scalar ratio = width_ratio_[static_cast<std::size_t>(t.class_index)];
+    const std::size_t n = measureViews(t, slot, ratio);
+    if (n == 0) {
+        return;
+    }
+    const std::size_t kept = keepViewsNearReference(n);
     if (kept == 0) {
         return;
     }
@@ -534,27 +586,8 @@ void ObjectEvidence::evaluate(Track& t, int slot) {
     lc.rel_sigma = std::hypot(config_.object_rel_sigma, t.anchor_rel_sigma);
     lc.outlier_weight = likelihood_.robust ? likelihood_.outlier_weight : Scalar(0);
     const std::span<const ObjectViewExtent> used(extents_.data(), kept);
-    if (config_.one_height) {
-        if (!evaluateObjectLogLikelihood(used, prior, grid_, lc, cache(slot))) {
-            return;
-        }
-    } else {
-        // The ablation: views as independent observations, each with its own
-        // height from the class prior.
-        std::span<Scalar> sum = cache(slot);
-        std::fill(sum.begin(), sum.end(), Scalar(0));
-        for (std::size_t i = 0; i < kept; ++i) {
-            if (!evaluateObjectLogLikelihood(used.subspan(i, 1), prior, grid_, lc, view_log_l_)) {
-                return;
-            }
-            for (std::size_t j = 0; j < sum.size(); ++j) {
-                sum[j] += view_log_l_[j];
-            }
-        }
-        const Scalar top = *std::max_element(sum.begin(), sum.end());
-        for (auto& v : sum) {
-            v -= top;
-        }
+    if (!evaluateIntoCache(used, prior, lc, slot)) {
+        return;
     }
     t.used = true;
     t.views_used = static_cast<int>(kept);
@@ -567,20 +600,10 @@ void ObjectEvidence::evaluate(Track& t, int slot) {
     }
 }
 
-ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
-                                                   std::span<const Detection> detections,
-                                                   std::span<const int> class_index,
-                                                   std::span<ObjectAssignment> assignments,
-                                                   std::span<ObservationRecord> records,
-                                                   int* records_written) {
-    ++updates_;
-    UpdateStats stats;
-    const Scalar depth_hint = medianDepth(frame);
-    const int n_det = static_cast<int>(std::min<std::size_t>(
-        {detections.size(), class_index.size(), static_cast<std::size_t>(kMaxDetections)}));
-    for (auto& a : assignments) {
-        a = ObjectAssignment{};
-    }
+void ObjectEvidence::associateDetections(const FrameSnapshot& frame,
+                                         std::span<const Detection> detections,
+                                         std::span<const int> class_index, int n_det,
+                                         Scalar depth_hint, std::span<int> track_of) {
     // Candidate pairs, then greedy assignment by cost.
     candidates_.clear();
     for (int di = 0; di < n_det; ++di) {
@@ -606,8 +629,6 @@ ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
                (a.cost == b.cost &&
                 (a.detection < b.detection || (a.detection == b.detection && a.track < b.track)));
     });
-    std::array<int, kMaxDetections> track_of{};
-    track_of.fill(-1);
     for (const Candidate& c : candidates_) {
         if (track_of[static_cast<std::size_t>(c.detection)] >= 0 ||
             tracks_[static_cast<std::size_t>(c.track)].last_update == updates_) {
@@ -616,6 +637,12 @@ ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
         track_of[static_cast<std::size_t>(c.detection)] = c.track;
         tracks_[static_cast<std::size_t>(c.track)].last_update = updates_;
     }
+}
+
+void ObjectEvidence::addViews(const FrameSnapshot& frame, std::span<const Detection> detections,
+                              std::span<const int> class_index, int n_det, Scalar depth_hint,
+                              std::span<int> track_of, std::span<ObjectAssignment> assignments,
+                              UpdateStats& stats) {
     // New objects for the rest; a view for every associated detection.
     for (int di = 0; di < n_det; ++di) {
         const int ci = class_index[static_cast<std::size_t>(di)];
@@ -650,14 +677,11 @@ ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
             assignments[static_cast<std::size_t>(di)] = {t.id, fresh};
         }
     }
-    for (std::size_t ti = 0; ti < tracks_.size(); ++ti) {
-        Track& t = tracks_[ti];
-        if (!t.active || !t.dirty) {
-            continue;
-        }
-        triangulate(t, static_cast<int>(ti));
-        evaluate(t, static_cast<int>(ti));
-    }
+}
+
+int ObjectEvidence::writeRecords(const FrameSnapshot& frame, std::span<const Detection> detections,
+                                 int n_det, std::span<const int> track_of,
+                                 std::span<ObservationRecord> records, UpdateStats& stats) const {
     // Records: the detections of this update that are views of used objects.
     int written = 0;
     for (int di = 0; di < n_det; ++di) {
@@ -686,6 +710,36 @@ ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
             }
         }
     }
+    return written;
+}
+
+ObjectEvidence::UpdateStats ObjectEvidence::update(const FrameSnapshot& frame,
+                                                   std::span<const Detection> detections,
+                                                   std::span<const int> class_index,
+                                                   std::span<ObjectAssignment> assignments,
+                                                   std::span<ObservationRecord> records,
+                                                   int* records_written) {
+    ++updates_;
+    UpdateStats stats;
+    const Scalar depth_hint = medianDepth(frame);
+    const int n_det = static_cast<int>(std::min<std::size_t>(
+        {detections.size(), class_index.size(), static_cast<std::size_t>(kMaxDetections)}));
+    for (auto& a : assignments) {
+        a = ObjectAssignment{};
+    }
+    std::array<int, kMaxDetections> track_of{};
+    track_of.fill(-1);
+    associateDetections(frame, detections, class_index, n_det, depth_hint, track_of);
+    addViews(frame, detections, class_index, n_det, depth_hint, track_of, assignments, stats);
+    for (std::size_t ti = 0; ti < tracks_.size(); ++ti) {
+        Track& t = tracks_[ti];
+        if (!t.active || !t.dirty) {
+            continue;
+        }
+        triangulate(t, static_cast<int>(ti));
+        evaluate(t, static_cast<int>(ti));
+    }
+    const int written = writeRecords(frame, detections, n_det, track_of, records, stats);
     if (records_written != nullptr) {
         *records_written = written;
     }

@@ -231,6 +231,62 @@ bool isSide(BoxEdge e) {
     return e == BoxEdge::kLeft || e == BoxEdge::kRight;
 }
 
+// Vertical vanishing point inside the box: lambda would pass through it
+// before reaching an edge, so the intersections are not top and bottom.
+bool vanishingPointInBox(const PinholeRadialCamera& camera, const Vec3& v_C,
+                         const BoundingBox& box) {
+    if (std::abs(v_C.z()) > std::numeric_limits<Scalar>::epsilon()) {
+        const Vec2 vp_u = v_C.head<2>() / v_C.z();
+        if (vp_u.norm() <= camera.maxUndistortedRadius() &&
+            inside(box, camera.pixelFromNormalized(camera.distort(vp_u)))) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// The region lambda is intersected with (Region): kOk, or why there is none.
+ExtentStatus intersectionRegion(const PinholeRadialCamera& camera, const Vec3& v_C,
+                                const BoundingBox& box, const Vec2& pi_i, bool compensate_roll,
+                                Region& region) {
+    region = axisAligned(box);
+    if (compensate_roll) {
+        // Image roll at the box centre: the angle of the image of "up" there
+        // from the image's -y axis.
+        const auto centre_ray = camera.unproject(region.centre);
+        if (centre_ray) {
+            const Vec3& q = *centre_ray;  // point at unit depth
+            const Vec2 up_n = v_C.head<2>() - q.head<2>() * v_C.z();
+            const auto& k = camera.intrinsics();
+            const Vec2 up_px(k.fx * up_n.x(), k.fy * up_n.y());
+            if (up_px.norm() > 0) {
+                const Scalar alpha = std::atan2(up_px.x(), -up_px.y());
+                if (auto rc = rollCompensated(box, alpha)) {
+                    region = *rc;
+                } else {
+                    return ExtentStatus::kRollTooLarge;
+                }
+            }
+        }
+        if (!region.contains(pi_i)) {
+            return ExtentStatus::kOutsideBox;
+        }
+    }
+    return ExtentStatus::kOk;
+}
+
+// The parameter s of the point p_FinW + s up_W of Lambda closest to the ray
+// through x (normalised undistorted); nullopt when it is not in front of the camera.
+std::optional<Scalar> closestOnLambda(const CameraPose& pose, const Vec3& p_FinW, const Vec3& up_W,
+                                      const Vec2& x) {
+    const Vec3 ray_W = pose.R_CtoW * Vec3(x.x(), x.y(), 1);
+    const auto st = closestPointParams(p_FinW, up_W, pose.p_CinW, ray_W);
+    if (!st || !(st->t > 0)) {
+        return std::nullopt;
+    }
+    return st->s;
+}
+
 }  // namespace
 
 ExtentStatus computeVerticalExtent(const PinholeRadialCamera& camera, const CameraPose& pose,
@@ -259,38 +315,15 @@ ExtentStatus computeVerticalExtent(const PinholeRadialCamera& camera, const Came
     }
     dir /= dir_norm;  // +dir is the image of "up" (s > 0)
 
-    // Vertical vanishing point inside the box: lambda would pass through it
-    // before reaching an edge, so the intersections are not top and bottom.
-    if (std::abs(v_C.z()) > std::numeric_limits<Scalar>::epsilon()) {
-        const Vec2 vp_u = v_C.head<2>() / v_C.z();
-        if (vp_u.norm() <= camera.maxUndistortedRadius() &&
-            inside(box, camera.pixelFromNormalized(camera.distort(vp_u)))) {
-            return ExtentStatus::kVanishingPointInBox;
-        }
+    if (vanishingPointInBox(camera, v_C, box)) {
+        return ExtentStatus::kVanishingPointInBox;
     }
 
-    Region region = axisAligned(box);
-    if (config.compensate_roll) {
-        // Image roll at the box centre: the angle of the image of "up" there
-        // from the image's -y axis.
-        const auto centre_ray = camera.unproject(region.centre);
-        if (centre_ray) {
-            const Vec3& q = *centre_ray;  // point at unit depth
-            const Vec2 up_n = v_C.head<2>() - q.head<2>() * v_C.z();
-            const auto& k = camera.intrinsics();
-            const Vec2 up_px(k.fx * up_n.x(), k.fy * up_n.y());
-            if (up_px.norm() > 0) {
-                const Scalar alpha = std::atan2(up_px.x(), -up_px.y());
-                if (auto rc = rollCompensated(box, alpha)) {
-                    region = *rc;
-                } else {
-                    return ExtentStatus::kRollTooLarge;
-                }
-            }
-        }
-        if (!region.contains(*pi_i)) {
-            return ExtentStatus::kOutsideBox;
-        }
+    Region region;
+    if (const ExtentStatus st =
+            intersectionRegion(camera, v_C, box, *pi_i, config.compensate_roll, region);
+        st != ExtentStatus::kOk) {
+        return st;
     }
     const auto top = exitFromRegion(camera, x0, dir, region);
     const auto bottom = exitFromRegion(camera, x0, -dir, region);
@@ -308,16 +341,8 @@ ExtentStatus computeVerticalExtent(const PinholeRadialCamera& camera, const Came
     // Back-project pi_t and pi_d and take the points of Lambda closest to the rays.
     const Vec2 x_t = x0 + top->t * dir;
     const Vec2 x_d = x0 - bottom->t * dir;
-    const auto closestOnLambda = [&](const Vec2& x) -> std::optional<Scalar> {
-        const Vec3 ray_W = pose.R_CtoW * Vec3(x.x(), x.y(), 1);
-        const auto st = closestPointParams(p_FinW, up_W, pose.p_CinW, ray_W);
-        if (!st || !(st->t > 0)) {
-            return std::nullopt;
-        }
-        return st->s;
-    };
-    const auto s_t = closestOnLambda(x_t);
-    const auto s_d = closestOnLambda(x_d);
+    const auto s_t = closestOnLambda(pose, p_FinW, up_W, x_t);
+    const auto s_d = closestOnLambda(pose, p_FinW, up_W, x_d);
     if (!s_t || !s_d || !(*s_t > 0) || !(*s_d < 0)) {
         return ExtentStatus::kInconsistent;
     }

@@ -295,25 +295,8 @@ bool EkfSlam::ekfUpdate(int count) {
     // plain loops over contiguous columns: Eigen's blocked LLT, triangular
     // solve and rankUpdate malloc() their workspace once m reaches its
     // blocking size (tests/integration/steady_state_alloc_test.cpp counts it).
-    //
-    // In-place Cholesky S = L L^T (lower triangle; S's upper part is not read).
-    for (Eigen::Index j = 0; j < m; ++j) {
-        Scalar d = S(j, j);
-        for (Eigen::Index k = 0; k < j; ++k) {
-            d -= S(j, k) * S(j, k);
-        }
-        if (!(d > 0) || !std::isfinite(d)) {
-            return false;
-        }
-        const Scalar l_jj = std::sqrt(d);
-        S(j, j) = l_jj;
-        for (Eigen::Index i = j + 1; i < m; ++i) {
-            Scalar v = Scalar(0.5) * (S(i, j) + S(j, i));  // symmetrise round-off
-            for (Eigen::Index k = 0; k < j; ++k) {
-                v -= S(i, k) * S(j, k);
-            }
-            S(i, j) = v / l_jj;
-        }
+    if (!choleskyInnovation(m)) {
+        return false;
     }
     // Wt = L^-1 (P H^T)^T, column r = L^-1 (row r of P H^T): then K nu = Wt^T L^-1 nu
     // and K S K^T = Wt^T Wt. Forward substitution by columns of L (contiguous).
@@ -334,6 +317,37 @@ bool EkfSlam::ekfUpdate(int count) {
     for (Eigen::Index r = 0; r < n_; ++r) {
         x_(r) += Wt.col(r).dot(nu);
     }
+    downdateCovariance(m);
+    symmetrize();
+    return true;
+}
+
+bool EkfSlam::choleskyInnovation(Eigen::Index m) {
+    auto S = S_.topLeftCorner(m, m);
+    // In-place Cholesky S = L L^T (lower triangle; S's upper part is not read).
+    for (Eigen::Index j = 0; j < m; ++j) {
+        Scalar d = S(j, j);
+        for (Eigen::Index k = 0; k < j; ++k) {
+            d -= S(j, k) * S(j, k);
+        }
+        if (!(d > 0) || !std::isfinite(d)) {
+            return false;
+        }
+        const Scalar l_jj = std::sqrt(d);
+        S(j, j) = l_jj;
+        for (Eigen::Index i = j + 1; i < m; ++i) {
+            Scalar v = Scalar(0.5) * (S(i, j) + S(j, i));  // symmetrise round-off
+            for (Eigen::Index k = 0; k < j; ++k) {
+                v -= S(i, k) * S(j, k);
+            }
+            S(i, j) = v / l_jj;
+        }
+    }
+    return true;
+}
+
+void EkfSlam::downdateCovariance(Eigen::Index m) {
+    auto Wt = Wt_.topLeftCorner(m, n_);
     // P -= Wt^T Wt on the lower triangle, mirrored by symmetrize(): four
     // columns j at a time, each element the same sum as Wt.col(i).dot(Wt.col(j))
     // (detail::columnDots).
@@ -356,8 +370,6 @@ bool EkfSlam::ekfUpdate(int count) {
             P_(i, j0) -= Wt.col(i).dot(Wt.col(j0));
         }
     }
-    symmetrize();
-    return true;
 }
 
 void EkfSlam::symmetrize() {
@@ -371,6 +383,32 @@ void EkfSlam::symmetrize() {
 UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
     UpdateReport report;
     report.predicted = static_cast<int>(predictions_.size());
+    const int nc = collectCandidates(matches);
+    report.matched = nc;
+
+    ransacLowInnovationInliers(nc, report);
+    const bool ok1 = updateLowInnovationInliers(nc, report);
+    if (ok1 && !inliers_.empty()) {
+        rescueHighInnovationMatches(nc, report);
+    }
+    normalizeQuaternion();
+
+    recordAcceptedMatches(nc, report);
+    const int accepted = report.low_innovation_inliers + report.rescued;
+    report.bad_frame = accepted < config_.min_inliers && !features_.empty();
+    if (report.bad_frame && report.matched == 0) {
+        // A frame where nothing at all matched says more about the frame (a
+        // covered lens, a dark scene, total blur) than about the features: it
+        // does not count against them, so an outage does not empty the map.
+        for (const FeaturePrediction& p : predictions_) {
+            --features_[static_cast<size_t>(p.slot)].attempts;
+        }
+    }
+    bad_frames_ = report.bad_frame ? bad_frames_ + 1 : 0;
+    return report;
+}
+
+int EkfSlam::collectCandidates(std::span<const FeatureMatch> matches) {
     for (const FeaturePrediction& p : predictions_) {
         ++features_[static_cast<size_t>(p.slot)].attempts;
     }
@@ -391,60 +429,62 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
         c.pred_px = c.proj.h_px;
         cand_.push_back(c);
     }
-    const int nc = static_cast<int>(cand_.size());
-    report.matched = nc;
+    return static_cast<int>(cand_.size());
+}
 
+void EkfSlam::ransacLowInnovationInliers(int nc, UpdateReport& report) {
     // 1-point RANSAC: each hypothesis is the EKF state update from one match;
     // the matches it predicts within ransac_threshold_px are its support.
     best_inliers_.clear();
-    if (nc > 0) {
-        const Scalar th2 = config_.ransac_threshold_px * config_.ransac_threshold_px;
-        int hypotheses = config_.ransac_max_hypotheses;
-        Scalar best_sse = 0;
-        FeatureProjection proj;
-        for (int k = 0; k < hypotheses && k < config_.ransac_max_hypotheses; ++k) {
-            const int i = static_cast<int>(nextRandom() % static_cast<std::uint64_t>(nc));
-            const Candidate& c = cand_[static_cast<size_t>(i)];
-            const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
-            const int d = dimOf(f.kind);
-            auto PHt = PHt_.topLeftCorner(n_, 2);
-            PHt.noalias() = P_.topLeftCorner(n_, kPoseDim) * c.proj.H_pose.transpose();
-            PHt.noalias() +=
-                P_.block(0, f.offset, n_, d) * c.proj.H_feature.leftCols(d).transpose();
-            const Mat2 S_inv = c.S.inverse();
-            const Vec2 nu = c.z - c.proj.h_px;
-            x_hyp_.head(n_) = x_.head(n_);
-            x_hyp_.head(n_).noalias() += PHt * (S_inv * nu);
-            inliers_.clear();
-            Scalar sse = 0;
-            for (int j = 0; j < nc; ++j) {
-                const Candidate& cj = cand_[static_cast<size_t>(j)];
-                if (!projectSlot(x_hyp_, cj.slot, false, proj)) {
-                    continue;
-                }
-                const Scalar e2 = (cj.z - proj.h_px).squaredNorm();
-                if (e2 < th2) {
-                    inliers_.push_back(j);
-                    sse += e2;
-                }
+    if (nc <= 0) {
+        return;
+    }
+    const Scalar th2 = config_.ransac_threshold_px * config_.ransac_threshold_px;
+    int hypotheses = config_.ransac_max_hypotheses;
+    Scalar best_sse = 0;
+    FeatureProjection proj;
+    for (int k = 0; k < hypotheses && k < config_.ransac_max_hypotheses; ++k) {
+        const int i = static_cast<int>(nextRandom() % static_cast<std::uint64_t>(nc));
+        const Candidate& c = cand_[static_cast<size_t>(i)];
+        const FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
+        const int d = dimOf(f.kind);
+        auto PHt = PHt_.topLeftCorner(n_, 2);
+        PHt.noalias() = P_.topLeftCorner(n_, kPoseDim) * c.proj.H_pose.transpose();
+        PHt.noalias() += P_.block(0, f.offset, n_, d) * c.proj.H_feature.leftCols(d).transpose();
+        const Mat2 S_inv = c.S.inverse();
+        const Vec2 nu = c.z - c.proj.h_px;
+        x_hyp_.head(n_) = x_.head(n_);
+        x_hyp_.head(n_).noalias() += PHt * (S_inv * nu);
+        inliers_.clear();
+        Scalar sse = 0;
+        for (int j = 0; j < nc; ++j) {
+            const Candidate& cj = cand_[static_cast<size_t>(j)];
+            if (!projectSlot(x_hyp_, cj.slot, false, proj)) {
+                continue;
             }
-            ++report.hypotheses;
-            // Most support wins; equal support goes to the smaller residual.
-            const bool better = inliers_.size() > best_inliers_.size() ||
-                                (inliers_.size() == best_inliers_.size() && sse < best_sse);
-            if (better) {
-                best_inliers_.assign(inliers_.begin(), inliers_.end());
-                best_sse = sse;
-                const Scalar eps = Scalar(best_inliers_.size()) / Scalar(nc);
-                const Scalar need =
-                    eps >= 1 ? Scalar(1)
-                             : std::log(1 - config_.ransac_confidence) / std::log(1 - eps);
-                hypotheses = std::max(config_.ransac_min_hypotheses,
-                                      static_cast<int>(std::ceil(std::min(need, Scalar(1e6)))));
+            const Scalar e2 = (cj.z - proj.h_px).squaredNorm();
+            if (e2 < th2) {
+                inliers_.push_back(j);
+                sse += e2;
             }
         }
+        ++report.hypotheses;
+        // Most support wins; equal support goes to the smaller residual.
+        const bool better = inliers_.size() > best_inliers_.size() ||
+                            (inliers_.size() == best_inliers_.size() && sse < best_sse);
+        if (better) {
+            best_inliers_.assign(inliers_.begin(), inliers_.end());
+            best_sse = sse;
+            const Scalar eps = Scalar(best_inliers_.size()) / Scalar(nc);
+            const Scalar need =
+                eps >= 1 ? Scalar(1) : std::log(1 - config_.ransac_confidence) / std::log(1 - eps);
+            hypotheses = std::max(config_.ransac_min_hypotheses,
+                                  static_cast<int>(std::ceil(std::min(need, Scalar(1e6)))));
+        }
     }
+}
 
+bool EkfSlam::updateLowInnovationInliers(int nc, UpdateReport& report) {
     // Low-innovation inliers: one EKF update with all of them.
     accepted_.assign(static_cast<size_t>(nc), 0);
     inliers_.assign(best_inliers_.begin(), best_inliers_.end());
@@ -455,34 +495,37 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
             accepted_[static_cast<size_t>(i)] = 1;
         }
     }
+    return ok1;
+}
 
+void EkfSlam::rescueHighInnovationMatches(int nc, UpdateReport& report) {
     // Rescue: the other matches, re-predicted after the first update, that
     // now pass the chi-square gate; then a second update with them.
-    if (ok1 && !inliers_.empty()) {
-        inliers_.clear();
-        for (int j = 0; j < nc; ++j) {
-            if (accepted_[static_cast<size_t>(j)] != 0) {
-                continue;
-            }
-            Candidate& c = cand_[static_cast<size_t>(j)];
-            if (!projectSlot(x_, c.slot, true, c.proj)) {
-                continue;
-            }
-            const Mat2 S = innovationCovariance(c.slot, c.proj);
-            const Vec2 nu = c.z - c.proj.h_px;
-            if (nu.dot(S.inverse() * nu) < config_.chi2_gate) {
-                inliers_.push_back(j);
-            }
+    inliers_.clear();
+    for (int j = 0; j < nc; ++j) {
+        if (accepted_[static_cast<size_t>(j)] != 0) {
+            continue;
         }
-        if (ekfUpdate(static_cast<int>(inliers_.size()))) {
-            report.rescued = static_cast<int>(inliers_.size());
-            for (const int i : inliers_) {
-                accepted_[static_cast<size_t>(i)] = 1;
-            }
+        Candidate& c = cand_[static_cast<size_t>(j)];
+        if (!projectSlot(x_, c.slot, true, c.proj)) {
+            continue;
+        }
+        const Mat2 S = innovationCovariance(c.slot, c.proj);
+        const Vec2 nu = c.z - c.proj.h_px;
+        if (nu.dot(S.inverse() * nu) < config_.chi2_gate) {
+            inliers_.push_back(j);
         }
     }
-    normalizeQuaternion();
+    if (ekfUpdate(static_cast<int>(inliers_.size()))) {
+        report.rescued = static_cast<int>(inliers_.size());
+        for (const int i : inliers_) {
+            accepted_[static_cast<size_t>(i)] = 1;
+        }
+    }
+}
 
+void EkfSlam::recordAcceptedMatches(int nc, UpdateReport& report) {
+    // Match counts and the consistency (NIS) by feature age of the accepted matches.
     for (int j = 0; j < nc; ++j) {
         if (accepted_[static_cast<size_t>(j)] != 0) {
             const Candidate& c = cand_[static_cast<size_t>(j)];
@@ -495,18 +538,6 @@ UpdateReport EkfSlam::update(std::span<const FeatureMatch> matches) {
             ++report.nis_count[static_cast<size_t>(bin)];
         }
     }
-    const int accepted = report.low_innovation_inliers + report.rescued;
-    report.bad_frame = accepted < config_.min_inliers && !features_.empty();
-    if (report.bad_frame && report.matched == 0) {
-        // A frame where nothing at all matched says more about the frame (a
-        // covered lens, a dark scene, total blur) than about the features: it
-        // does not count against them, so an outage does not empty the map.
-        for (const FeaturePrediction& p : predictions_) {
-            --features_[static_cast<size_t>(p.slot)].attempts;
-        }
-    }
-    bad_frames_ = report.bad_frame ? bad_frames_ + 1 : 0;
-    return report;
 }
 
 void EkfSlam::normalizeQuaternion() {

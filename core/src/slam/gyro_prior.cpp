@@ -21,6 +21,31 @@ Vec3 rotationVectorOf(Vec4 q) {
     return v * (2 * std::atan2(s, q(0)) / s);
 }
 
+// Finite, non-negative sigmas (not both zero), a non-negative gap.
+bool isValidModel(const GyroModel& model) {
+    return model.R_ItoC.allFinite() && model.bias_I_radps.allFinite() && model.noise_density >= 0 &&
+           model.bias_sigma_radps >= 0 && (model.noise_density > 0 || model.bias_sigma_radps > 0) &&
+           std::isfinite(model.noise_density) && std::isfinite(model.bias_sigma_radps) &&
+           model.max_gap_ns >= 0;
+}
+
+// q times the rotation of the constant rate w over [a_ns, b_ns].
+void integrateConstantRate(Vec4& q, int64_t a_ns, int64_t b_ns, const Vec3& w) {
+    const Scalar dt = Scalar(b_ns - a_ns) * Scalar(1e-9);
+    q = quatMultiply(q, quatFromRotationVector(w * dt));
+}
+
+// The mean rate in the camera frame from the IMU's rotation q over [t0_ns, t1_ns].
+GyroRate meanRateOf(const Vec4& q, int64_t t0_ns, int64_t t1_ns, const GyroModel& model, int used) {
+    GyroRate rate;
+    const Scalar dt = Scalar(t1_ns - t0_ns) * Scalar(1e-9);
+    rate.w_C_radps = model.R_ItoC * rotationVectorOf(q) / dt;
+    rate.sigma_radps = std::sqrt(model.noise_density * model.noise_density / dt +
+                                 model.bias_sigma_radps * model.bias_sigma_radps);
+    rate.samples = used;
+    return rate;
+}
+
 }  // namespace
 
 const char* toString(GyroCoverage coverage) {
@@ -40,12 +65,7 @@ const char* toString(GyroCoverage coverage) {
 GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns, int64_t t1_ns,
                               const GyroModel& model) {
     GyroIntegration out;
-    const bool model_ok = model.R_ItoC.allFinite() && model.bias_I_radps.allFinite() &&
-                          model.noise_density >= 0 && model.bias_sigma_radps >= 0 &&
-                          (model.noise_density > 0 || model.bias_sigma_radps > 0) &&
-                          std::isfinite(model.noise_density) &&
-                          std::isfinite(model.bias_sigma_radps) && model.max_gap_ns >= 0;
-    if (!(t1_ns > t0_ns) || !model_ok) {
+    if (!(t1_ns > t0_ns) || !isValidModel(model)) {
         out.coverage = GyroCoverage::kBadInterval;
         return out;
     }
@@ -54,10 +74,6 @@ GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns,
                                         [](const ImuSample& s, int64_t t) { return s.t_ns < t; });
 
     Vec4 q(1, 0, 0, 0);  // rotation of the IMU frame over [t0, t1], accumulated
-    const auto integrate = [&q](int64_t a_ns, int64_t b_ns, const Vec3& w) {
-        const Scalar dt = Scalar(b_ns - a_ns) * Scalar(1e-9);
-        q = quatMultiply(q, quatFromRotationVector(w * dt));
-    };
     bool have_prev = false;
     int64_t prev_t = 0;
     Vec3 prev_w = Vec3::Zero();
@@ -78,7 +94,8 @@ GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns,
                 return out;
             }
             if (t > t0_ns) {
-                integrate(t0_ns, std::min(t, t1_ns), w);  // constant before the first sample
+                // constant before the first sample
+                integrateConstantRate(q, t0_ns, std::min(t, t1_ns), w);
             }
         } else if (t > t0_ns && prev_t < t1_ns) {
             if (t - prev_t > gap) {
@@ -92,7 +109,7 @@ GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns,
             if (b > a) {
                 const int64_t mid = a + (b - a) / 2;  // ns: rounding is far below any rate change
                 const Scalar f = Scalar(mid - prev_t) / Scalar(t - prev_t);
-                integrate(a, b, prev_w + (w - prev_w) * f);
+                integrateConstantRate(q, a, b, prev_w + (w - prev_w) * f);
             }
         }
         have_prev = true;
@@ -113,14 +130,11 @@ GyroIntegration integrateGyro(std::span<const ImuSample> samples, int64_t t0_ns,
             out.coverage = GyroCoverage::kGap;  // the samples stop short of t1
             return out;
         }
-        integrate(std::max(prev_t, t0_ns), t1_ns, prev_w);  // constant after the last
+        integrateConstantRate(q, std::max(prev_t, t0_ns), t1_ns,
+                              prev_w);  // constant after the last
     }
-    const Scalar dt = Scalar(t1_ns - t0_ns) * Scalar(1e-9);
     out.coverage = GyroCoverage::kOk;
-    out.rate.w_C_radps = model.R_ItoC * rotationVectorOf(q) / dt;
-    out.rate.sigma_radps = std::sqrt(model.noise_density * model.noise_density / dt +
-                                     model.bias_sigma_radps * model.bias_sigma_radps);
-    out.rate.samples = used;
+    out.rate = meanRateOf(q, t0_ns, t1_ns, model, used);
     return out;
 }
 

@@ -68,7 +68,19 @@ public:
 
 private:
     static constexpr auto kPriorBins = static_cast<std::size_t>(HeightPrior::kMaxBins);
+    struct Observation;  // evaluate()'s per-observation terms (fixed_likelihood.cpp)
+    struct BinCursor;    // evaluate()'s windows over the prior, moving up with d
     explicit FixedLikelihood(std::size_t bins);
+    // Per observation, floating point: false where evaluate() returns false.
+    bool prepareObservation(const VerticalExtent& extent, const HeightPrior& prior,
+                            Observation& obs);
+    void preparePartialVisibility(const HeightPrior& prior, Observation& obs);
+    // Per bin, integer only: the unnormalised log L at d_j, Q16 nats.
+    std::int64_t binValueQ16(std::size_t j, const Observation& obs, BinCursor& cursor);
+    // ln sum_m P(h_m) exp(-z_m^2 / 2) over the heights within 8 sigma of x, Q16 nats.
+    std::int64_t windowLogSumQ16(std::int64_t x, std::int64_t reach,
+                                 const fixed::Exp2Split& inv_sigma, std::size_t M,
+                                 BinCursor& cursor);
 
     LikelihoodConfig config_;
     bool robust_ = false;

@@ -294,6 +294,28 @@ private:
     [[nodiscard]] Scalar associationCost(const Track& t, int slot, const FrameSnapshot& frame,
                                          const BoundingBox& box, Scalar depth_hint) const;
     int newTrack(int class_index);
+    // update()'s steps: detections to tracks (greedy by cost) into track_of
+    // (-1: none); new tracks and a view for every detection; the records.
+    void associateDetections(const FrameSnapshot& frame, std::span<const Detection> detections,
+                             std::span<const int> class_index, int n_det, Scalar depth_hint,
+                             std::span<int> track_of);
+    void addViews(const FrameSnapshot& frame, std::span<const Detection> detections,
+                  std::span<const int> class_index, int n_det, Scalar depth_hint,
+                  std::span<int> track_of, std::span<ObjectAssignment> assignments,
+                  UpdateStats& stats);
+    int writeRecords(const FrameSnapshot& frame, std::span<const Detection> detections, int n_det,
+                     std::span<const int> track_of, std::span<ObservationRecord> records,
+                     UpdateStats& stats) const;
+    // How a triangulated anchor agrees with its rays (triangulate()).
+    struct RayAgreement {
+        int inside = 0;      // boxes it projects into, with the margin
+        Scalar chi2 = 0;     // the rays' chi-square
+        Scalar min_cos = 1;  // cosine of the largest angle between two rays
+    };
+    // The usable views' box-centre rays into rays_; returns how many.
+    int collectCentreRays(const Track& t, int slot);
+    // False when X is not in front of every ray's view.
+    bool rayAgreement(int slot, std::span<const Ray> rays, const Vec3& X, RayAgreement& out) const;
     void triangulate(Track& t, int slot);
     // One view measured on the vertical through the anchor: nullopt when the
     // anchor does not project into (a margin around) the box or the geometry
@@ -302,6 +324,14 @@ private:
                                                               const CameraPose& pose,
                                                               const Vec3& up_W,
                                                               const BoundingBox& box) const;
+    // evaluate()'s steps: the views measured with the anchor into extents_ and
+    // norm_ (returns how many); those near the reference extent kept in
+    // front of extents_ (returns how many); their log-likelihood into the
+    // track's cache (false when it cannot be evaluated).
+    std::size_t measureViews(const Track& t, int slot, Scalar width_ratio);
+    std::size_t keepViewsNearReference(std::size_t n);
+    bool evaluateIntoCache(std::span<const ObjectViewExtent> used, const ApparentHeightPrior& prior,
+                           const ObjectLikelihoodConfig& lc, int slot);
     void evaluate(Track& t, int slot);
 
     ObjectConfig config_;

@@ -262,8 +262,24 @@ private:
     std::uint64_t addInverseDepth(const Vec2& px, Scalar rho, Scalar sigma_rho);
     bool projectSlot(const VecX& x, int slot, bool jacobians, FeatureProjection& out) const;
     Mat2 innovationCovariance(int slot, const FeatureProjection& proj) const;
+    // update()'s steps, in order. Candidates: the usable matches, into cand_.
+    int collectCandidates(std::span<const FeatureMatch> matches);
+    // 1-point RANSAC over cand_[0..nc): the largest support into best_inliers_.
+    void ransacLowInnovationInliers(int nc, UpdateReport& report);
+    // One EKF update with best_inliers_; false if it failed.
+    bool updateLowInnovationInliers(int nc, UpdateReport& report);
+    // A second EKF update with the other matches that now pass the chi-square gate.
+    void rescueHighInnovationMatches(int nc, UpdateReport& report);
+    // Per-feature match counts and the report's NIS by feature age.
+    void recordAcceptedMatches(int nc, UpdateReport& report);
     // EKF update with the candidates in cand_[0..count); false if S is not PD.
     bool ekfUpdate(int count);
+    // ekfUpdate()'s steps on the workspace's first m = 2 count rows: S = L L^T
+    // in place (false if S is not PD); P -= K S K^T on the lower triangle.
+    // (The products and the gain stay in ekfUpdate(): moving them changes
+    // GCC's inlining and so its fused multiply-adds on aarch64.)
+    bool choleskyInnovation(Eigen::Index m);
+    void downdateCovariance(Eigen::Index m);
     void removeDims(int offset, int dims);
     void removeSlot(int slot);
     void convertToXyz(int slot);
