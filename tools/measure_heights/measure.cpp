@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstring>
 #include <opencv2/imgproc.hpp>
+#include <optional>
+#include <utility>
 
 namespace scaled::tools::heights {
 
@@ -214,286 +216,425 @@ Shift estimateShift(const cv::Mat& color_bgr, const cv::Mat& depth) {
     return s;
 }
 
-ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box, const Shift& shift,
-                            const ClassRule& rule, const std::vector<Plane>& scene_planes,
-                            bool keep_mask) {
-    ViewMeasurement m;
+namespace {
+
+// Bins of the core's depth histogram (metres, from kMinDepthM).
+constexpr double kCoreBinM = 0.02;
+constexpr int kCoreBins = static_cast<int>((kMaxDepthM - kMinDepthM) / kCoreBinM) + 1;
+
+// A detection box in depth pixels (moved by the colour-to-depth shift).
+struct BoxInDepth {
+    int width_px = 0;  // the depth image
+    int height_px = 0;
+    double box_w_px = 0;  // the detection box (colour pixels)
+    double box_h_px = 0;
+    // The box grown vertically, clamped to the image (inclusive bounds).
+    int x0 = 0;
+    int x1 = 0;
+    int y0 = 0;
+    int y1 = 0;
+    // The core: the central 50 % x 60 % of the box (inclusive, not clamped).
+    int cx0 = 0;
+    int cx1 = 0;
+    int cy0 = 0;
+    int cy1 = 0;
+
+    [[nodiscard]] bool inCore(int u, int v) const {
+        return u >= cx0 && u <= cx1 && v >= cy0 && v <= cy1;
+    }
+};
+
+// The box in depth pixels, grown vertically by 8 % + 4 px on each side so
+// that the residual misregistration cannot cut the object's top or
+// bottom off (depth segmentation removes the background this adds), and its core.
+BoxInDepth boxInDepth(const DepthView& view, const core::BoundingBox& box, const Shift& shift,
+                      double bw, double bh) {
+    BoxInDepth b;
     const int w = view.depth.cols;
     const int h = view.depth.rows;
-    const double bw = box.x_max_px - box.x_min_px;
-    const double bh = box.y_max_px - box.y_min_px;
-    if (bw < 8 || bh < 8) {
-        m.reject = "box too small";
-        return m;
-    }
-    // The box in depth pixels, grown vertically by 8 % + 4 px on each side so
-    // that the residual misregistration cannot cut the object's top or
-    // bottom off (depth segmentation removes the background this adds).
+    b.width_px = w;
+    b.height_px = h;
+    b.box_w_px = bw;
+    b.box_h_px = bh;
     const double grow = 0.08 * bh + 4;
-    const int x0 = std::clamp(
-        static_cast<int>(std::lround(static_cast<double>(box.x_min_px) - shift.dx)), 0, w - 1);
-    const int x1 = std::clamp(
-        static_cast<int>(std::lround(static_cast<double>(box.x_max_px) - shift.dx)), 0, w - 1);
-    const int y0 = std::clamp(
+    b.x0 = std::clamp(static_cast<int>(std::lround(static_cast<double>(box.x_min_px) - shift.dx)),
+                      0, w - 1);
+    b.x1 = std::clamp(static_cast<int>(std::lround(static_cast<double>(box.x_max_px) - shift.dx)),
+                      0, w - 1);
+    b.y0 = std::clamp(
         static_cast<int>(std::lround(static_cast<double>(box.y_min_px) - shift.dy - grow)), 0,
         h - 1);
-    const int y1 = std::clamp(
+    b.y1 = std::clamp(
         static_cast<int>(std::lround(static_cast<double>(box.y_max_px) - shift.dy + grow)), 0,
         h - 1);
-    m.depth_box = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
+    b.cx0 = static_cast<int>(std::lround(static_cast<double>(box.x_min_px) - shift.dx + 0.25 * bw));
+    b.cx1 = static_cast<int>(std::lround(static_cast<double>(box.x_max_px) - shift.dx - 0.25 * bw));
+    b.cy0 = static_cast<int>(std::lround(static_cast<double>(box.y_min_px) - shift.dy + 0.2 * bh));
+    b.cy1 = static_cast<int>(std::lround(static_cast<double>(box.y_max_px) - shift.dy - 0.2 * bh));
+    return b;
+}
 
-    // 1. The core (central 50 % x 60 % of the box): its nearest dominant depth mode.
-    const int cx0 =
-        static_cast<int>(std::lround(static_cast<double>(box.x_min_px) - shift.dx + 0.25 * bw));
-    const int cx1 =
-        static_cast<int>(std::lround(static_cast<double>(box.x_max_px) - shift.dx - 0.25 * bw));
-    const int cy0 =
-        static_cast<int>(std::lround(static_cast<double>(box.y_min_px) - shift.dy + 0.2 * bh));
-    const int cy1 =
-        static_cast<int>(std::lround(static_cast<double>(box.y_max_px) - shift.dy - 0.2 * bh));
-    constexpr double kBin = 0.02;
-    const int nbins = static_cast<int>((kMaxDepthM - kMinDepthM) / kBin) + 1;
-    std::vector<int> hist(static_cast<std::size_t>(nbins), 0);
-    int core_n = 0;
-    for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
-        for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
+// The histogram (kCoreBinM bins) of the valid depths of the core.
+struct CoreDepths {
+    std::vector<int> hist;
+    int count = 0;  // valid pixels
+};
+
+CoreDepths coreDepthHistogram(const DepthView& view, const BoxInDepth& b) {
+    CoreDepths c;
+    c.hist.assign(static_cast<std::size_t>(kCoreBins), 0);
+    for (int v = std::max(b.cy0, 0); v <= std::min(b.cy1, b.height_px - 1); ++v) {
+        for (int u = std::max(b.cx0, 0); u <= std::min(b.cx1, b.width_px - 1); ++u) {
             const float z = view.depth.at<float>(v, u);
             if (validDepth(z)) {
-                ++hist[static_cast<std::size_t>((static_cast<double>(z) - kMinDepthM) / kBin)];
-                ++core_n;
+                ++c.hist[static_cast<std::size_t>((static_cast<double>(z) - kMinDepthM) /
+                                                  kCoreBinM)];
+                ++c.count;
             }
         }
     }
-    if (core_n < 50) {
-        m.reject = "no depth in the box centre";
-        return m;
-    }
-    // Runs of bins holding >= 0.5 % of the core each, gaps of at most one
-    // bin; the nearest run with >= 15 % of the core is the object.
-    const int min_bin = std::max(2, core_n / 200);
-    int run_lo = -1;
-    int run_hi = -1;
-    for (int b = 0; b < nbins;) {
-        if (hist[static_cast<std::size_t>(b)] < min_bin) {
+    return c;
+}
+
+// Runs of bins holding >= 0.5 % of the core each, gaps of at most one
+// bin; the nearest run with >= 15 % of the core is the object. Its first
+// and last bins, or nothing.
+std::optional<std::pair<int, int>> nearestDominantRun(const CoreDepths& c) {
+    const int min_bin = std::max(2, c.count / 200);
+    for (int b = 0; b < kCoreBins;) {
+        if (c.hist[static_cast<std::size_t>(b)] < min_bin) {
             ++b;
             continue;
         }
         int e = b;
         int sum = 0;
         int gap = 0;
-        for (int i = b; i < nbins; ++i) {
-            if (hist[static_cast<std::size_t>(i)] >= min_bin) {
+        for (int i = b; i < kCoreBins; ++i) {
+            if (c.hist[static_cast<std::size_t>(i)] >= min_bin) {
                 e = i;
                 gap = 0;
             } else if (++gap > 1) {
                 break;
             }
-            sum += hist[static_cast<std::size_t>(i)];
+            sum += c.hist[static_cast<std::size_t>(i)];
         }
-        if (sum >= 0.15 * core_n) {
-            run_lo = b;
-            run_hi = e;
-            break;
+        if (sum >= 0.15 * c.count) {
+            return std::pair{b, e};
         }
         b = e + 1;
     }
-    if (run_lo < 0) {
-        m.reject = "no dominant depth mode";
-        return m;
-    }
-    m.near_m = kMinDepthM + run_lo * kBin;
-    // The band: the run, at most ~1.2 box widths deep (an object is about as
-    // deep as it is wide), plus 3 cm of depth noise on each side.
-    const double width_m = bw * m.near_m / static_cast<double>(view.k.fx);
-    const double band_lo = m.near_m - 0.03;
-    const double band_hi =
-        std::min(kMinDepthM + (run_hi + 1) * kBin, m.near_m + std::max(0.10, 1.2 * width_m)) + 0.03;
+    return std::nullopt;
+}
 
-    // 2. Every box pixel in the band is the object; back-project them.
-    std::vector<float> heights;
-    std::vector<int> rows;
+// The depths (metres) taken as the object's.
+struct DepthBand {
+    double near_m = 0;  // the run's nearest depth
+    double lo_m = 0;
+    double hi_m = 0;
+
+    [[nodiscard]] bool contains(double z) const {
+        return z >= kMinDepthM && z <= kMaxDepthM && z >= lo_m && z <= hi_m;
+    }
+};
+
+// The band: the run of bins [run_lo, run_hi], at most ~1.2 box widths deep
+// (an object is about as deep as it is wide), plus 3 cm of depth noise on
+// each side.
+DepthBand objectBand(const DepthView& view, const BoxInDepth& b, int run_lo, int run_hi) {
+    DepthBand band;
+    band.near_m = kMinDepthM + run_lo * kCoreBinM;
+    const double width_m = b.box_w_px * band.near_m / static_cast<double>(view.k.fx);
+    band.lo_m = band.near_m - 0.03;
+    band.hi_m = std::min(kMinDepthM + (run_hi + 1) * kCoreBinM,
+                         band.near_m + std::max(0.10, 1.2 * width_m)) +
+                0.03;
+    return band;
+}
+
+// The box pixels in the band, back-projected.
+struct BandPixels {
+    std::vector<float> heights;  // world up, metres
+    std::vector<int> rows;       // their image rows
+    // World coordinates of those in the core.
     std::vector<double> xs;
     std::vector<double> ys;
     std::vector<double> zs;
-    const auto inCore = [&](int u, int v) { return u >= cx0 && u <= cx1 && v >= cy0 && v <= cy1; };
-    const auto inBand = [&](double z) {
-        return z >= kMinDepthM && z <= kMaxDepthM && z >= band_lo && z <= band_hi;
-    };
-    for (int v = y0; v <= y1; ++v) {
-        for (int u = x0; u <= x1; ++u) {
+};
+
+BandPixels collectBandPixels(const DepthView& view, const BoxInDepth& b, const DepthBand& band) {
+    BandPixels px;
+    for (int v = b.y0; v <= b.y1; ++v) {
+        for (int u = b.x0; u <= b.x1; ++u) {
             const double z = view.depthAt(u, v);
-            if (!inBand(z)) {
+            if (!band.contains(z)) {
                 continue;
             }
             const core::Vec3 p = view.world(u, v, z);
-            heights.push_back(static_cast<float>(view.height(p)));
-            rows.push_back(v);
-            if (inCore(u, v)) {
-                xs.push_back(p.x());
-                ys.push_back(p.y());
-                zs.push_back(p.z());
+            px.heights.push_back(static_cast<float>(view.height(p)));
+            px.rows.push_back(v);
+            if (b.inCore(u, v)) {
+                px.xs.push_back(p.x());
+                px.ys.push_back(p.y());
+                px.zs.push_back(p.z());
             }
         }
     }
-    m.pixels = static_cast<int>(heights.size());
-    if (m.pixels < 100 || xs.size() < 20) {
+    return px;
+}
+
+// The best supported horizontal plane of the object pixels (a table's
+// top dominates its box; cups, books and chair backs on or behind it
+// make smaller peaks): its height, or nothing.
+std::optional<double> topPlaneHeight(const std::vector<float>& heights) {
+    const std::vector<Plane> planes = findPlanes(heights, 0.10);
+    if (planes.empty()) {
+        return std::nullopt;
+    }
+    const auto best =
+        std::max_element(planes.begin(), planes.end(),
+                         [](const Plane& a, const Plane& b) { return a.fraction < b.fraction; });
+    return best->height_m;
+}
+
+// Occlusion check: the object's top must be seen near the box's top
+// (else the nearest mode was something in front, e.g. a table edge
+// before a chair). Tolerance: the residual misregistration.
+bool topOccluded(const BandPixels& px, double top_m, const core::BoundingBox& box,
+                 const Shift& shift, double bh) {
+    std::vector<float> top_rows;
+    for (std::size_t i = 0; i < px.heights.size(); ++i) {
+        if (static_cast<double>(px.heights[i]) >= top_m - 0.03) {
+            top_rows.push_back(static_cast<float>(px.rows[i]));
+        }
+    }
+    const double top_row = percentile(top_rows, 0.05);
+    return top_row - (static_cast<double>(box.y_min_px) - shift.dy) > std::max(0.2 * bh, 30.0);
+}
+
+// The plane an object on a counter stands on: the highest scene plane
+// below the middle of the seed pixels (the core's pixels in the band), or null.
+const Plane* supportingPlane(const DepthView& view, const BoxInDepth& b, const DepthBand& band,
+                             const std::vector<Plane>& scene_planes) {
+    std::vector<float> seed_heights;
+    for (int v = std::max(b.cy0, 0); v <= std::min(b.cy1, b.height_px - 1); ++v) {
+        for (int u = std::max(b.cx0, 0); u <= std::min(b.cx1, b.width_px - 1); ++u) {
+            const double z = view.depthAt(u, v);
+            if (band.contains(z)) {
+                seed_heights.push_back(static_cast<float>(view.height(view.world(u, v, z))));
+            }
+        }
+    }
+    const double seed_mid = percentile(seed_heights, 0.5);
+    const Plane* support = nullptr;
+    for (const Plane& p : scene_planes) {
+        if (p.height_m < seed_mid - 0.005) {
+            support = &p;
+        }
+    }
+    return support;
+}
+
+// Where an object on a counter is grown: the box widened by 30 px + 20 %
+// (residual misregistration), clamped to the image.
+cv::Rect searchWindow(const BoxInDepth& b, const core::BoundingBox& box, const Shift& shift) {
+    const double bw = b.box_w_px;
+    const double bh = b.box_h_px;
+    const int gx = static_cast<int>(30 + 0.2 * bw);
+    const int gy = static_cast<int>(30 + 0.2 * bh);
+    return cv::Rect(static_cast<int>(static_cast<double>(box.x_min_px) - shift.dx) - gx,
+                    static_cast<int>(static_cast<double>(box.y_min_px) - shift.dy) - gy,
+                    static_cast<int>(bw) + 2 * gx, static_cast<int>(bh) + 2 * gy) &
+           cv::Rect(0, 0, b.width_px, b.height_px);
+}
+
+// The plane as this frame sees it (the scene plane is pooled over all
+// frames; pose and depth errors move it by ~1 cm between frames): the
+// median of the window's pixels within 1.5 cm of it (narrow, so that
+// the object's own lowest pixels barely pull it up).
+double localPlaneHeight(const DepthView& view, const cv::Rect& win, const Plane& support) {
+    std::vector<double> local;
+    for (int v = win.y; v < win.y + win.height; ++v) {
+        for (int u = win.x; u < win.x + win.width; ++u) {
+            const double z = view.depthAt(u, v);
+            if (z >= kMinDepthM && z <= kMaxDepthM) {
+                const double hp = view.height(view.world(u, v, z));
+                if (std::abs(hp - support.height_m) < 0.015) {
+                    local.push_back(hp);
+                }
+            }
+        }
+    }
+    return local.size() >= 50 ? median(local) : support.height_m;
+}
+
+// The depth-connected region above a plane, grown inside a window.
+struct Region {
+    cv::Mat seen;                // CV_8UC1, depth-image size: the region
+    std::vector<float> heights;  // of its pixels
+    int on_window_top_edge = 0;  // its pixels on the window's top row
+};
+
+// The region above `floor_h` (metres) grown from the core's pixels in
+// the band inside `win`: 4-neighbours whose depth differs by at most
+// 1 cm + 2 %.
+Region growAbovePlane(const DepthView& view, const BoxInDepth& b, const DepthBand& band,
+                      const cv::Rect& win, double floor_h) {
+    Region r;
+    r.seen = cv::Mat::zeros(b.height_px, b.width_px, CV_8UC1);
+    std::vector<cv::Point> stack;
+    const auto above = [&](int u, int v, double z) {
+        return view.height(view.world(u, v, z)) > floor_h;
+    };
+    for (int v = std::max(b.cy0, 0); v <= std::min(b.cy1, b.height_px - 1); ++v) {
+        for (int u = std::max(b.cx0, 0); u <= std::min(b.cx1, b.width_px - 1); ++u) {
+            const double z = view.depthAt(u, v);
+            if (band.contains(z) && above(u, v, z)) {
+                r.seen.at<std::uint8_t>(v, u) = 255;
+                stack.emplace_back(u, v);
+            }
+        }
+    }
+    while (!stack.empty()) {
+        const cv::Point p = stack.back();
+        stack.pop_back();
+        const double z = view.depthAt(p.x, p.y);
+        r.heights.push_back(static_cast<float>(view.height(view.world(p.x, p.y, z))));
+        if (p.y == win.y) {
+            ++r.on_window_top_edge;
+        }
+        const std::array<cv::Point, 4> nb = {cv::Point(p.x + 1, p.y), cv::Point(p.x - 1, p.y),
+                                             cv::Point(p.x, p.y + 1), cv::Point(p.x, p.y - 1)};
+        for (const cv::Point& q : nb) {
+            if (!win.contains(q) || r.seen.at<std::uint8_t>(q.y, q.x) != 0) {
+                continue;
+            }
+            const double zq = view.depthAt(q.x, q.y);
+            if (zq < kMinDepthM || zq > kMaxDepthM || std::abs(zq - z) > 0.01 + 0.02 * z ||
+                !above(q.x, q.y, zq)) {
+                continue;
+            }
+            r.seen.at<std::uint8_t>(q.y, q.x) = 255;
+            stack.push_back(q);
+        }
+    }
+    return r;
+}
+
+// Objects on counters: the plane they stand on is the highest scene
+// plane below the middle of the seed pixels; the object is the
+// depth-connected region above it (1 cm) grown from the seeds inside
+// the box widened by 30 px + 20 % (residual misregistration), so a
+// box that does not sit exactly on the object in the depth image
+// neither cuts its top off nor takes in the counter. Sets m's pixels,
+// top and bottom (and mask); false with m.reject set when it cannot.
+bool measureOnSupport(const DepthView& view, const BoxInDepth& b, const DepthBand& band,
+                      const core::BoundingBox& box, const Shift& shift,
+                      const std::vector<Plane>& scene_planes, bool keep_mask, ViewMeasurement& m) {
+    const Plane* support = supportingPlane(view, b, band, scene_planes);
+    if (support == nullptr) {
+        m.reject = "no supporting plane";
+        return false;
+    }
+    const cv::Rect win = searchWindow(b, box, shift);
+    const double support_h = localPlaneHeight(view, win, *support);
+    // Object pixels: 2 cm above the plane (its depth noise and roughness).
+    const double floor_h = support_h + 0.02;
+    const Region region = growAbovePlane(view, b, band, win, floor_h);
+    if (region.heights.size() < 50) {
+        m.reject = "too few object pixels above the supporting plane";
+        return false;
+    }
+    if (region.on_window_top_edge > 3) {
+        m.reject = "object region leaves the search window at the top";
+        return false;
+    }
+    const double lowest = percentile(region.heights, 0.01);
+    if (lowest > support_h + 0.05) {
+        m.reject = "object does not reach the supporting plane (occluded?)";
+        return false;
+    }
+    m.pixels = static_cast<int>(region.heights.size());
+    m.top_m = percentile(region.heights, 0.99);
+    m.bottom_m = support_h;
+    if (keep_mask) {
+        m.mask = region.seen;
+    }
+    return true;
+}
+
+// The mask of the box pixels in the band.
+cv::Mat bandMask(const DepthView& view, const BoxInDepth& b, const DepthBand& band) {
+    cv::Mat mask = cv::Mat::zeros(b.height_px, b.width_px, CV_8UC1);
+    for (int v = b.y0; v <= b.y1; ++v) {
+        for (int u = b.x0; u <= b.x1; ++u) {
+            if (band.contains(view.depthAt(u, v))) {
+                mask.at<std::uint8_t>(v, u) = 255;
+            }
+        }
+    }
+    return mask;
+}
+
+}  // namespace
+
+ViewMeasurement measureView(const DepthView& view, const core::BoundingBox& box, const Shift& shift,
+                            const ClassRule& rule, const std::vector<Plane>& scene_planes,
+                            bool keep_mask) {
+    ViewMeasurement m;
+    const double bw = box.x_max_px - box.x_min_px;
+    const double bh = box.y_max_px - box.y_min_px;
+    if (bw < 8 || bh < 8) {
+        m.reject = "box too small";
+        return m;
+    }
+    const BoxInDepth b = boxInDepth(view, box, shift, bw, bh);
+    m.depth_box = cv::Rect(b.x0, b.y0, b.x1 - b.x0 + 1, b.y1 - b.y0 + 1);
+
+    // 1. The core (central 50 % x 60 % of the box): its nearest dominant depth mode.
+    const CoreDepths core_depths = coreDepthHistogram(view, b);
+    if (core_depths.count < 50) {
+        m.reject = "no depth in the box centre";
+        return m;
+    }
+    const auto run = nearestDominantRun(core_depths);
+    if (!run) {
+        m.reject = "no dominant depth mode";
+        return m;
+    }
+    const DepthBand band = objectBand(view, b, run->first, run->second);
+    m.near_m = band.near_m;
+
+    // 2. Every box pixel in the band is the object; back-project them.
+    const BandPixels px = collectBandPixels(view, b, band);
+    m.pixels = static_cast<int>(px.heights.size());
+    if (m.pixels < 100 || px.xs.size() < 20) {
         m.reject = "too few object pixels";
         return m;
     }
-    m.centroid_W = Eigen::Vector3d(median(xs), median(ys), median(zs)).cast<core::Scalar>();
+    m.centroid_W =
+        Eigen::Vector3d(median(px.xs), median(px.ys), median(px.zs)).cast<core::Scalar>();
     // 3. Top and bottom: 1st / 99th percentiles (flying pixels and noise).
-    m.bottom_m = percentile(heights, 0.01);
-    m.top_m = percentile(heights, 0.99);
+    m.bottom_m = percentile(px.heights, 0.01);
+    m.top_m = percentile(px.heights, 0.99);
     if (rule.top == TopRule::kPlane) {
-        // The best supported horizontal plane of the object pixels (a table's
-        // top dominates its box; cups, books and chair backs on or behind it
-        // make smaller peaks).
-        const std::vector<Plane> planes = findPlanes(heights, 0.10);
-        if (planes.empty()) {
+        const std::optional<double> top_m = topPlaneHeight(px.heights);
+        if (!top_m) {
             m.reject = "no horizontal top plane";
             return m;
         }
-        const auto best = std::max_element(
-            planes.begin(), planes.end(),
-            [](const Plane& a, const Plane& b) { return a.fraction < b.fraction; });
-        m.top_m = best->height_m;
+        m.top_m = *top_m;
     }
-    if (rule.bottom == BottomRule::kFloor && rule.top == TopRule::kHighest) {
-        // Occlusion check: the object's top must be seen near the box's top
-        // (else the nearest mode was something in front, e.g. a table edge
-        // before a chair). Tolerance: the residual misregistration.
-        std::vector<float> top_rows;
-        for (std::size_t i = 0; i < heights.size(); ++i) {
-            if (static_cast<double>(heights[i]) >= m.top_m - 0.03) {
-                top_rows.push_back(static_cast<float>(rows[i]));
-            }
-        }
-        const double top_row = percentile(top_rows, 0.05);
-        if (top_row - (static_cast<double>(box.y_min_px) - shift.dy) > std::max(0.2 * bh, 30.0)) {
-            m.reject = "object top not at the box top (occluded?)";
-            return m;
-        }
+    if (rule.bottom == BottomRule::kFloor && rule.top == TopRule::kHighest &&
+        topOccluded(px, m.top_m, box, shift, bh)) {
+        m.reject = "object top not at the box top (occluded?)";
+        return m;
     }
     if (rule.bottom == BottomRule::kObject) {
-        // Objects on counters: the plane they stand on is the highest scene
-        // plane below the middle of the seed pixels; the object is the
-        // depth-connected region above it (1 cm) grown from the seeds inside
-        // the box widened by 30 px + 20 % (residual misregistration), so a
-        // box that does not sit exactly on the object in the depth image
-        // neither cuts its top off nor takes in the counter.
-        std::vector<float> seed_heights;
-        for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
-            for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
-                const double z = view.depthAt(u, v);
-                if (inBand(z)) {
-                    seed_heights.push_back(static_cast<float>(view.height(view.world(u, v, z))));
-                }
-            }
-        }
-        const double seed_mid = percentile(seed_heights, 0.5);
-        const Plane* support = nullptr;
-        for (const Plane& p : scene_planes) {
-            if (p.height_m < seed_mid - 0.005) {
-                support = &p;
-            }
-        }
-        if (support == nullptr) {
-            m.reject = "no supporting plane";
+        if (!measureOnSupport(view, b, band, box, shift, scene_planes, keep_mask, m)) {
             return m;
-        }
-        const int gx = static_cast<int>(30 + 0.2 * bw);
-        const int gy = static_cast<int>(30 + 0.2 * bh);
-        const cv::Rect win =
-            cv::Rect(static_cast<int>(static_cast<double>(box.x_min_px) - shift.dx) - gx,
-                     static_cast<int>(static_cast<double>(box.y_min_px) - shift.dy) - gy,
-                     static_cast<int>(bw) + 2 * gx, static_cast<int>(bh) + 2 * gy) &
-            cv::Rect(0, 0, w, h);
-        // The plane as this frame sees it (the scene plane is pooled over all
-        // frames; pose and depth errors move it by ~1 cm between frames): the
-        // median of the window's pixels within 1.5 cm of it (narrow, so that
-        // the object's own lowest pixels barely pull it up).
-        std::vector<double> local;
-        for (int v = win.y; v < win.y + win.height; ++v) {
-            for (int u = win.x; u < win.x + win.width; ++u) {
-                const double z = view.depthAt(u, v);
-                if (z >= kMinDepthM && z <= kMaxDepthM) {
-                    const double hp = view.height(view.world(u, v, z));
-                    if (std::abs(hp - support->height_m) < 0.015) {
-                        local.push_back(hp);
-                    }
-                }
-            }
-        }
-        const double support_h = local.size() >= 50 ? median(local) : support->height_m;
-        // Object pixels: 2 cm above the plane (its depth noise and roughness).
-        const double floor_h = support_h + 0.02;
-        cv::Mat seen = cv::Mat::zeros(h, w, CV_8UC1);
-        std::vector<cv::Point> stack;
-        std::vector<float> comp;
-        int on_top_edge = 0;
-        const auto above = [&](int u, int v, double z) {
-            return view.height(view.world(u, v, z)) > floor_h;
-        };
-        for (int v = std::max(cy0, 0); v <= std::min(cy1, h - 1); ++v) {
-            for (int u = std::max(cx0, 0); u <= std::min(cx1, w - 1); ++u) {
-                const double z = view.depthAt(u, v);
-                if (inBand(z) && above(u, v, z)) {
-                    seen.at<std::uint8_t>(v, u) = 255;
-                    stack.emplace_back(u, v);
-                }
-            }
-        }
-        while (!stack.empty()) {
-            const cv::Point p = stack.back();
-            stack.pop_back();
-            const double z = view.depthAt(p.x, p.y);
-            comp.push_back(static_cast<float>(view.height(view.world(p.x, p.y, z))));
-            if (p.y == win.y) {
-                ++on_top_edge;
-            }
-            const std::array<cv::Point, 4> nb = {cv::Point(p.x + 1, p.y), cv::Point(p.x - 1, p.y),
-                                                 cv::Point(p.x, p.y + 1), cv::Point(p.x, p.y - 1)};
-            for (const cv::Point& q : nb) {
-                if (!win.contains(q) || seen.at<std::uint8_t>(q.y, q.x) != 0) {
-                    continue;
-                }
-                const double zq = view.depthAt(q.x, q.y);
-                if (zq < kMinDepthM || zq > kMaxDepthM || std::abs(zq - z) > 0.01 + 0.02 * z ||
-                    !above(q.x, q.y, zq)) {
-                    continue;
-                }
-                seen.at<std::uint8_t>(q.y, q.x) = 255;
-                stack.push_back(q);
-            }
-        }
-        if (comp.size() < 50) {
-            m.reject = "too few object pixels above the supporting plane";
-            return m;
-        }
-        if (on_top_edge > 3) {
-            m.reject = "object region leaves the search window at the top";
-            return m;
-        }
-        const double lowest = percentile(comp, 0.01);
-        if (lowest > support_h + 0.05) {
-            m.reject = "object does not reach the supporting plane (occluded?)";
-            return m;
-        }
-        m.pixels = static_cast<int>(comp.size());
-        m.top_m = percentile(comp, 0.99);
-        m.bottom_m = support_h;
-        if (keep_mask) {
-            m.mask = seen;
         }
     } else if (keep_mask) {
-        m.mask = cv::Mat::zeros(h, w, CV_8UC1);
-        for (int v = y0; v <= y1; ++v) {
-            for (int u = x0; u <= x1; ++u) {
-                if (inBand(view.depthAt(u, v))) {
-                    m.mask.at<std::uint8_t>(v, u) = 255;
-                }
-            }
-        }
+        m.mask = bandMask(view, b, band);
     }
     m.ok = true;
     return m;

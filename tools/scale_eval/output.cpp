@@ -1,5 +1,7 @@
 // scale-eval's outputs: the JSON summary and the CSV files for the figures.
 
+#include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -9,6 +11,7 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <scaled/drivers/base/errno_text.h>
@@ -118,19 +121,14 @@ std::string curveRow(const std::vector<float>& c, std::size_t n) {
     return s;
 }
 
-}  // namespace
+// An interval as the JSON array [lo, hi].
+std::string interval(const core::Interval& i) {
+    return "[" + jsonNumber(static_cast<double>(i.lo), 7) + "," +
+           jsonNumber(static_cast<double>(i.hi), 7) + "]";
+}
 
-std::string toJson(const EvalResult& r, const EvalOptions& options) {
-    const auto& cfg = options.config;
-    const bool converged = r.converged_update.has_value();
-    const core::ScaleSummary last =
-        r.frame_rows.empty() ? core::ScaleSummary{} : r.frame_rows.back().scale;
-    const std::optional<double> truth = lastTruth(r, false);
-    const auto interval = [](const core::Interval& i) {
-        return "[" + jsonNumber(static_cast<double>(i.lo), 7) + "," +
-               jsonNumber(static_cast<double>(i.hi), 7) + "]";
-    };
-    std::string s = "{\"dataset\":" + jsonString(r.dataset);
+// The run's counts: frames, epochs, updates, observations.
+void appendCounts(std::string& s, const EvalResult& r, const daemon::PipelineConfig& cfg) {
     s += ",\"frames\":" + std::to_string(r.frames);
     s += ",\"tracked_frames\":" + std::to_string(r.tracked_frames);
     s += ",\"tracking_lost_frames\":" + std::to_string(r.tracking_lost_frames);
@@ -141,6 +139,11 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
     s += ",\"updates\":" + std::to_string(r.updates.size());
     s += ",\"observations\":" + std::to_string(r.observations.size());
     s += ",\"ground_truth\":" + std::string(r.has_ground_truth ? "true" : "false");
+}
+
+// Convergence, the claimed scale and the final posterior (`last`).
+void appendEstimate(std::string& s, const EvalResult& r, const core::ScaleSummary& last) {
+    const bool converged = r.converged_update.has_value();
     s += ",\"converged\":" + std::string(converged ? "true" : "false");
     s += ",\"converged_at_frame\":" +
          (converged ? std::to_string(r.updates[*r.converged_update].frame) : "null");
@@ -157,15 +160,25 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
               ? "null"
               : jsonNumber(static_cast<double>(last.rel_width95), 4)) +
          ",\"observations\":" + std::to_string(last.observations) + "}";
+}
+
+// The ground-truth scale at the end and how far it wanders within a map.
+void appendTruth(std::string& s, const EvalResult& r, const EvalOptions& options,
+                 std::optional<double> truth) {
     s += ",\"scale_true\":" + num(truth, 7);
     s += ",\"scale_true_final\":" + num(truth, 7);
     s += ",\"scale_true_window\":" + num(lastTruth(r, true), 7);
     s += ",\"window_frames\":" + std::to_string(options.window_frames);
-    {
-        const MapScaleDrift drift = mapScaleDrift(r.frame_rows, r.updates);
-        s += ",\"scale_true_window_range\":" + num(drift.window_range, 5);
-        s += ",\"scale_true_window_max_dev\":" + num(drift.window_max_dev, 5);
-    }
+    const MapScaleDrift drift = mapScaleDrift(r.frame_rows, r.updates);
+    s += ",\"scale_true_window_range\":" + num(drift.window_range, 5);
+    s += ",\"scale_true_window_max_dev\":" + num(drift.window_max_dev, 5);
+}
+
+// The estimate's relative errors (`last` against `truth` at the end) and the
+// distance errors.
+void appendErrors(std::string& s, const EvalResult& r, const EvalOptions& options,
+                  const core::ScaleSummary& last, std::optional<double> truth) {
+    const bool converged = r.converged_update.has_value();
     const ErrorStats e = relativeErrors(r.updates, statsFrom(r), false);
     const ErrorStats ew = relativeErrors(r.updates, statsFrom(r), true);
     s += ",\"rel_error\":" + (converged ? stats(e) : "null");
@@ -180,19 +193,21 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
          ",\"median_abs_m\":" + num(r.distance.median_abs_m) +
          ",\"median_rel\":" + num(r.distance.median_rel) +
          ",\"p90_rel\":" + num(r.distance.p90_rel) + "}";
-    {
-        const auto dist = [&](const DistanceErrors& d) {
-            return "{\"pairs\":" + std::to_string(d.pairs) +
-                   ",\"median_rel\":" + num(d.median_rel) + ",\"p90_rel\":" + num(d.p90_rel) +
-                   ",\"median_abs_m\":" + num(d.median_abs_m) + "}";
-        };
-        const MetricTrajectory& m = r.metric;
-        s += ",\"metric_trajectory\":{\"frames\":" + std::to_string(m.frames) +
-             ",\"ate_m\":" + num(m.ate_m) +
-             ",\"ate_percent_of_path\":" + num(m.ate_percent_of_path) +
-             ",\"distance_error_1s\":" + dist(m.distance_1s) +
-             ",\"distance_error_5s\":" + dist(m.distance_5s) + "}";
-    }
+}
+
+// Distance errors as a JSON object.
+std::string distanceJson(const DistanceErrors& d) {
+    return "{\"pairs\":" + std::to_string(d.pairs) + ",\"median_rel\":" + num(d.median_rel) +
+           ",\"p90_rel\":" + num(d.p90_rel) + ",\"median_abs_m\":" + num(d.median_abs_m) + "}";
+}
+
+// The metric trajectory's errors, the depth check and the baselines.
+void appendTrajectoryChecks(std::string& s, const EvalResult& r, const EvalOptions& options) {
+    const MetricTrajectory& m = r.metric;
+    s += ",\"metric_trajectory\":{\"frames\":" + std::to_string(m.frames) +
+         ",\"ate_m\":" + num(m.ate_m) + ",\"ate_percent_of_path\":" + num(m.ate_percent_of_path) +
+         ",\"distance_error_1s\":" + distanceJson(m.distance_1s) +
+         ",\"distance_error_5s\":" + distanceJson(m.distance_5s) + "}";
     s += ",\"depth_check\":{\"features\":" + std::to_string(r.depth.features) +
          ",\"median_rel\":" + num(r.depth.median_rel) +
          ",\"median_abs_m\":" + num(r.depth.median_abs_m) +
@@ -202,9 +217,12 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
          ",\"rel_error\":" + stats(baselineErrors(r, false)) +
          "},\"single_detection\":{\"scale\":" + num(r.baseline_single_scale, 7) +
          ",\"rel_error\":" + stats(baselineErrors(r, true)) + "}}";
-    // Calibration and the served estimate's accuracy, whatever its state.
+}
+
+// Calibration and the served estimate's accuracy, whatever its state.
+void appendCalibration(std::string& s, const EvalResult& r, const EvalOptions& options) {
     const Calibration cal = calibration(r.updates, options.settle_seconds);
-    s += ",\"model\":" + jsonString(core::toString(cfg.estimator.model));
+    s += ",\"model\":" + jsonString(core::toString(options.config.estimator.model));
     s += ",\"truth_geometry\":" + std::string(options.truth_geometry ? "true" : "false");
     s += ",\"ci95_coverage\":" + num(cal.ci95_coverage, 4);
     s += ",\"ci95_coverage_updates\":" + std::to_string(cal.updates);
@@ -216,25 +234,31 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
                                        static_cast<double>(r.frames)
                                  : 0.0,
                     4);
-    {
-        const UpdateRow* last_up = r.updates.empty() ? nullptr : &r.updates.back();
-        int objects_seen = 0;
-        for (const ObjectRow& o : r.objects) {
-            objects_seen = std::max(objects_seen, o.id);
-        }
-        s += ",\"objects\":{\"seen\":" + std::to_string(objects_seen) +
-             ",\"used_final\":" + std::to_string(last_up ? last_up->objects_used : 0) +
-             ",\"views_used_final\":" + std::to_string(last_up ? last_up->views_used : 0) + "}";
-        // What the distinct objects and their classes allow, next to what was reached.
-        s += ",\"information_limit\":{\"rel_width95_final\":" +
-             (last_up && last_up->information_limit > 0 ? jsonNumber(last_up->information_limit, 4)
-                                                        : std::string("null")) +
-             ",\"achieved_rel_width95_final\":" +
-             (last_up && last_up->scale.state != core::ScaleState::kNoData
-                  ? jsonNumber(static_cast<double>(last_up->scale.rel_width95), 4)
-                  : std::string("null")) +
-             "}";
+}
+
+// The objects seen and used, and what they allow next to what was reached.
+void appendObjects(std::string& s, const EvalResult& r) {
+    const UpdateRow* last_up = r.updates.empty() ? nullptr : &r.updates.back();
+    int objects_seen = 0;
+    for (const ObjectRow& o : r.objects) {
+        objects_seen = std::max(objects_seen, o.id);
     }
+    s += ",\"objects\":{\"seen\":" + std::to_string(objects_seen) +
+         ",\"used_final\":" + std::to_string(last_up ? last_up->objects_used : 0) +
+         ",\"views_used_final\":" + std::to_string(last_up ? last_up->views_used : 0) + "}";
+    // What the distinct objects and their classes allow, next to what was reached.
+    s += ",\"information_limit\":{\"rel_width95_final\":" +
+         (last_up && last_up->information_limit > 0 ? jsonNumber(last_up->information_limit, 4)
+                                                    : std::string("null")) +
+         ",\"achieved_rel_width95_final\":" +
+         (last_up && last_up->scale.state != core::ScaleState::kNoData
+              ? jsonNumber(static_cast<double>(last_up->scale.rel_width95), 4)
+              : std::string("null")) +
+         "}";
+}
+
+// Timings and where the vertical and the gyro prior came from; closes the object.
+void appendTimingsAndSources(std::string& s, const EvalResult& r) {
     s += ",\"ms_per_frame\":" + jsonNumber(r.ms_per_frame, 4);
     s += ",\"tracker_ms_per_frame\":" + jsonNumber(r.tracker_ms_per_frame, 4);
     s += ",\"detector_ms_per_update\":" + jsonNumber(r.detector_ms_per_update, 4);
@@ -242,6 +266,123 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
     s += ",\"gravity_source\":" + jsonString(r.gravity_source);
     s += ",\"gyro_source\":" + jsonString(r.gyro_source);
     s += ",\"gyro_frames\":" + std::to_string(r.gyro_frames) + "}";
+}
+
+// Writes one CSV file's header and rows.
+using TableWriter = void (*)(CsvFile&, const EvalResult&);
+
+void writeFrames(CsvFile& f, const EvalResult& r) {
+    f.line(
+        "frame,t_s,tracked,epoch,features_measured,scale_est,ci95_lo,ci95_hi,state,scale_true,"
+        "scale_true_window,rel_error,rel_error_window,baseline_constant_rel_error,"
+        "baseline_single_rel_error");
+    for (const auto& fr : r.frame_rows) {
+        const auto est = estimateOf(fr.scale);
+        const bool has = est.has_value();
+        f.line(std::to_string(fr.frame) + "," + jsonNumber(fr.t_s, 9) + "," +
+               (fr.tracked ? "1" : "0") + "," + std::to_string(fr.epoch) + "," +
+               std::to_string(fr.features_measured) + "," + field(est) + "," +
+               (has ? jsonNumber(static_cast<double>(fr.scale.ci95.lo), 7) : "") + "," +
+               (has ? jsonNumber(static_cast<double>(fr.scale.ci95.hi), 7) : "") + "," +
+               core::toString(fr.scale.state) + "," + field(fr.scale_true) + "," +
+               field(fr.scale_true_window) + "," + field(relError(est, fr.scale_true)) + "," +
+               field(relError(est, fr.scale_true_window)) + "," +
+               field(relError(fr.baseline_constant, fr.scale_true)) + "," +
+               field(relError(fr.baseline_single, fr.scale_true)));
+    }
+}
+
+void writeUpdates(CsvFile& f, const EvalResult& r) {
+    f.line(
+        "update,frame,t_s,epoch,detections,observations,total_observations,scale_est,mean,ci68_lo,"
+        "ci68_hi,ci95_lo,ci95_hi,rel_width95,state,converged,scale_true,scale_true_window,"
+        "rel_error,rel_error_window");
+    for (const auto& u : r.updates) {
+        const auto est = estimateOf(u.scale);
+        const auto v = [&](core::Scalar x) {
+            return est ? jsonNumber(static_cast<double>(x), 7) : std::string();
+        };
+        const bool conv =
+            r.converged_update && static_cast<std::size_t>(u.update) >= *r.converged_update;
+        f.line(std::to_string(u.update) + "," + std::to_string(u.frame) + "," +
+               jsonNumber(u.t_s, 9) + "," + std::to_string(u.epoch) + "," +
+               std::to_string(u.detections) + "," + std::to_string(u.observations) + "," +
+               std::to_string(u.scale.observations) + "," + field(est) + "," + v(u.scale.mean) +
+               "," + v(u.scale.ci68.lo) + "," + v(u.scale.ci68.hi) + "," + v(u.scale.ci95.lo) +
+               "," + v(u.scale.ci95.hi) + "," + v(u.scale.rel_width95) + "," +
+               core::toString(u.scale.state) + "," + (conv ? "1" : "0") + "," +
+               field(u.scale_true) + "," + field(u.scale_true_window) + "," +
+               field(relError(est, u.scale_true)) + "," +
+               field(relError(est, u.scale_true_window)));
+    }
+}
+
+void writeObservations(CsvFile& f, const EvalResult& r) {
+    f.line("update,frame,observation,class,score,D,sigma_D,local_estimate,weight,object_id,kappa");
+    for (std::size_t k = 0; k < r.observations.size(); ++k) {
+        const auto& o = r.observations[k];
+        f.line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," + std::to_string(k) +
+               "," + o.class_name + "," + jsonNumber(o.score, 4) + "," + jsonNumber(o.D, 7) + "," +
+               jsonNumber(o.sigma_D, 5) + "," + jsonNumber(o.local_estimate, 6) + "," +
+               jsonNumber(o.weight, 4) + "," +
+               (o.object_id > 0 ? std::to_string(o.object_id) : std::string()) + "," +
+               (o.object_id > 0 ? jsonNumber(o.kappa, 4) : std::string()));
+    }
+}
+
+// Every object after every update (model object; empty otherwise).
+void writeObjects(CsvFile& f, const EvalResult& r) {
+    f.line(
+        "update,frame,id,class,state,detections,views_used,local_estimate,height_m,height_lo_m,"
+        "height_hi_m,anchor_x,anchor_y,anchor_z,anchor_rel_sigma");
+    for (const ObjectRow& o : r.objects) {
+        const bool used = o.state == "used";
+        const auto opt = [&](double v) { return used && v > 0 ? jsonNumber(v, 6) : std::string(); };
+        f.line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," +
+               std::to_string(o.id) + "," + o.class_name + "," + o.state + "," +
+               std::to_string(o.detections) + "," + std::to_string(o.views_used) + "," +
+               opt(o.local_estimate) + "," + opt(o.height_m) + "," + opt(o.height_lo_m) + "," +
+               opt(o.height_hi_m) + "," + jsonNumber(static_cast<double>(o.anchor.x()), 6) + "," +
+               jsonNumber(static_cast<double>(o.anchor.y()), 6) + "," +
+               jsonNumber(static_cast<double>(o.anchor.z()), 6) + "," +
+               jsonNumber(o.anchor_rel_sigma, 4));
+    }
+}
+
+void writePosteriors(CsvFile& f, const EvalResult& r) {
+    f.line(curveHeader("update", "frame", r.curve_d));
+    for (std::size_t u = 0; u < r.posterior_curves.size() && u < r.updates.size(); ++u) {
+        f.line(std::to_string(u) + "," + std::to_string(r.updates[u].frame) +
+               curveRow(r.posterior_curves[u], r.curve_d.size()));
+    }
+}
+
+void writeLikelihoods(CsvFile& f, const EvalResult& r) {
+    f.line(curveHeader("observation", "update", r.curve_d));
+    for (std::size_t k = 0; k < r.likelihood_curves.size() && k < r.observations.size(); ++k) {
+        if (r.likelihood_curves[k].empty()) {
+            continue;
+        }
+        f.line(std::to_string(k) + "," + std::to_string(r.observations[k].update) +
+               curveRow(r.likelihood_curves[k], r.curve_d.size()));
+    }
+}
+
+}  // namespace
+
+std::string toJson(const EvalResult& r, const EvalOptions& options) {
+    const core::ScaleSummary last =
+        r.frame_rows.empty() ? core::ScaleSummary{} : r.frame_rows.back().scale;
+    const std::optional<double> truth = lastTruth(r, false);
+    std::string s = "{\"dataset\":" + jsonString(r.dataset);
+    appendCounts(s, r, options.config);
+    appendEstimate(s, r, last);
+    appendTruth(s, r, options, truth);
+    appendErrors(s, r, options, last, truth);
+    appendTrajectoryChecks(s, r, options);
+    appendCalibration(s, r, options);
+    appendObjects(s, r);
+    appendTimingsAndSources(s, r);
     return s;
 }
 
@@ -262,116 +403,21 @@ Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
         }
         return &files.back();
     };
-
-    auto frames = open("frames.csv");
-    if (!frames) {
-        return frames.error();
-    }
-    (*frames)->line(
-        "frame,t_s,tracked,epoch,features_measured,scale_est,ci95_lo,ci95_hi,state,scale_true,"
-        "scale_true_window,rel_error,rel_error_window,baseline_constant_rel_error,"
-        "baseline_single_rel_error");
-    for (const auto& f : r.frame_rows) {
-        const auto est = estimateOf(f.scale);
-        const bool has = est.has_value();
-        (*frames)->line(std::to_string(f.frame) + "," + jsonNumber(f.t_s, 9) + "," +
-                        (f.tracked ? "1" : "0") + "," + std::to_string(f.epoch) + "," +
-                        std::to_string(f.features_measured) + "," + field(est) + "," +
-                        (has ? jsonNumber(static_cast<double>(f.scale.ci95.lo), 7) : "") + "," +
-                        (has ? jsonNumber(static_cast<double>(f.scale.ci95.hi), 7) : "") + "," +
-                        core::toString(f.scale.state) + "," + field(f.scale_true) + "," +
-                        field(f.scale_true_window) + "," + field(relError(est, f.scale_true)) +
-                        "," + field(relError(est, f.scale_true_window)) + "," +
-                        field(relError(f.baseline_constant, f.scale_true)) + "," +
-                        field(relError(f.baseline_single, f.scale_true)));
-    }
-
-    auto updates = open("updates.csv");
-    if (!updates) {
-        return updates.error();
-    }
-    (*updates)->line(
-        "update,frame,t_s,epoch,detections,observations,total_observations,scale_est,mean,ci68_lo,"
-        "ci68_hi,ci95_lo,ci95_hi,rel_width95,state,converged,scale_true,scale_true_window,"
-        "rel_error,rel_error_window");
-    for (const auto& u : r.updates) {
-        const auto est = estimateOf(u.scale);
-        const auto v = [&](core::Scalar x) {
-            return est ? jsonNumber(static_cast<double>(x), 7) : std::string();
-        };
-        const bool conv =
-            r.converged_update && static_cast<std::size_t>(u.update) >= *r.converged_update;
-        (*updates)->line(std::to_string(u.update) + "," + std::to_string(u.frame) + "," +
-                         jsonNumber(u.t_s, 9) + "," + std::to_string(u.epoch) + "," +
-                         std::to_string(u.detections) + "," + std::to_string(u.observations) + "," +
-                         std::to_string(u.scale.observations) + "," + field(est) + "," +
-                         v(u.scale.mean) + "," + v(u.scale.ci68.lo) + "," + v(u.scale.ci68.hi) +
-                         "," + v(u.scale.ci95.lo) + "," + v(u.scale.ci95.hi) + "," +
-                         v(u.scale.rel_width95) + "," + core::toString(u.scale.state) + "," +
-                         (conv ? "1" : "0") + "," + field(u.scale_true) + "," +
-                         field(u.scale_true_window) + "," + field(relError(est, u.scale_true)) +
-                         "," + field(relError(est, u.scale_true_window)));
-    }
-
-    auto obs = open("observations.csv");
-    if (!obs) {
-        return obs.error();
-    }
-    (*obs)->line(
-        "update,frame,observation,class,score,D,sigma_D,local_estimate,weight,object_id,kappa");
-    for (std::size_t k = 0; k < r.observations.size(); ++k) {
-        const auto& o = r.observations[k];
-        (*obs)->line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," +
-                     std::to_string(k) + "," + o.class_name + "," + jsonNumber(o.score, 4) + "," +
-                     jsonNumber(o.D, 7) + "," + jsonNumber(o.sigma_D, 5) + "," +
-                     jsonNumber(o.local_estimate, 6) + "," + jsonNumber(o.weight, 4) + "," +
-                     (o.object_id > 0 ? std::to_string(o.object_id) : std::string()) + "," +
-                     (o.object_id > 0 ? jsonNumber(o.kappa, 4) : std::string()));
-    }
-
-    // Every object after every update (model object; empty otherwise).
-    auto objs = open("objects.csv");
-    if (!objs) {
-        return objs.error();
-    }
-    (*objs)->line(
-        "update,frame,id,class,state,detections,views_used,local_estimate,height_m,height_lo_m,"
-        "height_hi_m,anchor_x,anchor_y,anchor_z,anchor_rel_sigma");
-    for (const ObjectRow& o : r.objects) {
-        const bool used = o.state == "used";
-        const auto opt = [&](double v) { return used && v > 0 ? jsonNumber(v, 6) : std::string(); };
-        (*objs)->line(std::to_string(o.update) + "," + std::to_string(o.frame) + "," +
-                      std::to_string(o.id) + "," + o.class_name + "," + o.state + "," +
-                      std::to_string(o.detections) + "," + std::to_string(o.views_used) + "," +
-                      opt(o.local_estimate) + "," + opt(o.height_m) + "," + opt(o.height_lo_m) +
-                      "," + opt(o.height_hi_m) + "," +
-                      jsonNumber(static_cast<double>(o.anchor.x()), 6) + "," +
-                      jsonNumber(static_cast<double>(o.anchor.y()), 6) + "," +
-                      jsonNumber(static_cast<double>(o.anchor.z()), 6) + "," +
-                      jsonNumber(o.anchor_rel_sigma, 4));
-    }
-
-    auto post = open("posterior.csv");
-    if (!post) {
-        return post.error();
-    }
-    (*post)->line(curveHeader("update", "frame", r.curve_d));
-    for (std::size_t u = 0; u < r.posterior_curves.size() && u < r.updates.size(); ++u) {
-        (*post)->line(std::to_string(u) + "," + std::to_string(r.updates[u].frame) +
-                      curveRow(r.posterior_curves[u], r.curve_d.size()));
-    }
-
-    auto lik = open("likelihoods.csv");
-    if (!lik) {
-        return lik.error();
-    }
-    (*lik)->line(curveHeader("observation", "update", r.curve_d));
-    for (std::size_t k = 0; k < r.likelihood_curves.size() && k < r.observations.size(); ++k) {
-        if (r.likelihood_curves[k].empty()) {
-            continue;
+    // Each file is opened and written before the next is opened.
+    const std::array<std::pair<const char*, TableWriter>, 6> tables = {{
+        {"frames.csv", writeFrames},
+        {"updates.csv", writeUpdates},
+        {"observations.csv", writeObservations},
+        {"objects.csv", writeObjects},
+        {"posterior.csv", writePosteriors},
+        {"likelihoods.csv", writeLikelihoods},
+    }};
+    for (const auto& [name, write] : tables) {
+        auto file = open(name);
+        if (!file) {
+            return file.error();
         }
-        (*lik)->line(std::to_string(k) + "," + std::to_string(r.observations[k].update) +
-                     curveRow(r.likelihood_curves[k], r.curve_d.size()));
+        write(**file, r);
     }
 
     auto summary = open("summary.json");

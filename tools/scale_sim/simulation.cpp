@@ -146,109 +146,140 @@ std::optional<BoundingBox> detect(const PinholeRadialCamera& cam, const CameraPo
     return b;
 }
 
-}  // namespace
+// The SLAM frame: p_S = R0 p_W / d + t0, an arbitrary similarity of the world.
+struct SlamFrame {
+    Mat3 R0 = Eigen::AngleAxis<Scalar>(Scalar(0.7),
+                                       Vec3(Scalar(0.3), Scalar(0.5), Scalar(0.8)).normalized())
+                  .toRotationMatrix();
+    Vec3 t0 = Vec3(Scalar(0.4), Scalar(-1.2), Scalar(2.0));
+    Scalar d = 0;  // metres per SLAM unit
 
-ExperimentResult runExperiment(const ExperimentSpec& spec) {
-    ExperimentResult result;
-    result.name = spec.name;
-    auto cam = PinholeRadialCamera::create(spec.camera);
-    if (!cam) {
-        result.error = cam.error().message;
-        return result;
-    }
-    auto est = ScaleEstimator::create(spec.estimator, spec.priors, cam.value());
-    if (!est) {
-        result.error = est.error().message;
-        return result;
-    }
-    ScaleEstimator& estimator = est.value();
-    std::mt19937 rng(spec.seed);
-    std::vector<SimFeature> features = makeFeatures(spec, rng);
-    std::vector<std::vector<Vec3>> silhouettes;
-    for (const auto& o : spec.objects) {
-        silhouettes.push_back(silhouette(o));
+    [[nodiscard]] Vec3 toSlam(const Vec3& p_W) const { return R0 * p_W / d + t0; }
+};
+
+// One experiment's frames: the map the estimator sees at each frame, the
+// detections every detect_every frames and the estimator's updates.
+class ExperimentRun {
+public:
+    ExperimentRun(const ExperimentSpec& spec, const PinholeRadialCamera& cam,
+                  ScaleEstimator& estimator)
+        : spec_(spec),
+          cam_(cam),
+          estimator_(estimator),
+          rng_(spec.seed),
+          features_(makeFeatures(spec, rng_)) {
+        for (const auto& o : spec.objects) {
+            silhouettes_.push_back(silhouette(o));
+        }
+        slam_.d = spec.d_true;
     }
 
-    // SLAM frame: p_S = R0 p_W / d + t0, an arbitrary similarity of the world.
-    const Mat3 R0 = Eigen::AngleAxis<Scalar>(
-                        Scalar(0.7), Vec3(Scalar(0.3), Scalar(0.5), Scalar(0.8)).normalized())
-                        .toRotationMatrix();
-    const Vec3 t0(Scalar(0.4), Scalar(-1.2), Scalar(2.0));
-    const Scalar d = spec.d_true;
-    const auto toSlam = [&](const Vec3& p_W) -> Vec3 { return R0 * p_W / d + t0; };
-
-    std::vector<MapFeature> map;
-    std::vector<core::Detection> detections;
-    std::vector<Scalar> errors;
-    for (int k = 0; k < spec.frames; ++k) {
-        const CameraPose pose_W = worldPose(spec.trajectory, k, spec.frames);
-        const Mat3 R_WtoC = pose_W.R_CtoW.transpose();
-        const Scalar f = cam->intrinsics().fx;
-        map.clear();
-        for (auto& sf : features) {
-            const Vec3 to_cam = pose_W.p_CinW - sf.p_W;
-            const Vec3 p_C = R_WtoC * (sf.p_W - pose_W.p_CinW);
-            const auto px = cam->project(p_C);
-            const bool visible = sf.normal_W.dot(to_cam) > 0 && px && px->x() >= 0 &&
-                                 px->y() >= 0 && px->x() <= Scalar(cam->width() - 1) &&
-                                 px->y() <= Scalar(cam->height() - 1);
-            if (!visible) {
+    // Every frame; the updates that added observations go to result.series.
+    void run(ExperimentResult& result) {
+        for (int k = 0; k < spec_.frames; ++k) {
+            const CameraPose pose_W = worldPose(spec_.trajectory, k, spec_.frames);
+            mapFeatures(k, pose_W);
+            if (k % spec_.detect_every != 0) {
                 continue;
             }
-            if (sf.first_seen < 0) {
-                sf.first_seen = k;
-                sf.depth0 = to_cam.norm();
-                const Vec3 ray = -to_cam.normalized();
-                const Vec3 a = ray.unitOrthogonal();
-                sf.R_ray.col(0) = a;
-                sf.R_ray.col(1) = ray.cross(a);
-                sf.R_ray.col(2) = ray;
-                sf.first_camera_W = pose_W.p_CinW;
-            }
-            sf.baseline = std::max(sf.baseline, (pose_W.p_CinW - sf.first_camera_W).norm());
-            const Scalar sigma_theta = spec.noise.pixel_sigma / f;
-            const Scalar s_perp = sf.depth0 * sigma_theta;
-            const Scalar s0 = sf.depth0 * spec.noise.depth_rel_sigma0;
-            const Scalar tri = sf.baseline / (sf.depth0 * sf.depth0 * sigma_theta);
-            const Scalar s_par = 1 / std::sqrt(1 / (s0 * s0) + tri * tri);
-            const Vec3 sd(s_perp, s_perp, s_par);
-            const Mat3 L = sf.R_ray * sd.asDiagonal();
-            const Vec3 p_est_W = sf.p_W + L * sf.z;
-            MapFeature mf;
-            mf.p_FinW = toSlam(p_est_W);
-            mf.P_FinW = R0 * (L * L.transpose()) * R0.transpose() / (d * d);
-            map.push_back(mf);
+            update(k, pose_W, result);
         }
-        if (k % spec.detect_every != 0) {
-            continue;
-        }
-        detections.clear();
-        for (std::size_t oi = 0; oi < spec.objects.size(); ++oi) {
-            const auto box = detect(*cam, pose_W, silhouettes[oi], spec.noise.box_sigma_px, rng);
-            if (box) {
-                detections.push_back({*box, spec.objects[oi].class_name, 1});
-            }
-        }
-        core::FrameSnapshot snap;
-        snap.pose.R_CtoW = R0 * pose_W.R_CtoW;
-        snap.pose.p_CinW = toSlam(pose_W.p_CinW);
-        snap.up_W = R0 * Vec3::UnitZ();
-        snap.features = map;
-        const core::UpdateStats stats = estimator.update(snap, detections);
-        for (std::size_t i = 0; i < stats.rejected.size(); ++i) {
-            result.rejected[i] += stats.rejected[i];
-        }
-        if (stats.observations == 0) {
-            continue;
-        }
-        UpdatePoint up;
-        up.frame = k;
-        up.observations = stats.observations;
-        up.summary = estimator.summary();
-        up.rel_error = std::abs(up.summary.map / d - 1);
-        result.series.push_back(up);
     }
 
+private:
+    void mapFeatures(int k, const CameraPose& pose_W);
+    void update(int k, const CameraPose& pose_W, ExperimentResult& result);
+
+    const ExperimentSpec& spec_;
+    const PinholeRadialCamera& cam_;
+    ScaleEstimator& estimator_;
+    std::mt19937 rng_;
+    std::vector<SimFeature> features_;
+    std::vector<std::vector<Vec3>> silhouettes_;
+    SlamFrame slam_;
+    std::vector<MapFeature> map_;
+    std::vector<core::Detection> detections_;
+};
+
+// The map at frame k: the visible features with their EKF-like estimates
+// and covariances, in the SLAM frame.
+void ExperimentRun::mapFeatures(int k, const CameraPose& pose_W) {
+    const Mat3& R0 = slam_.R0;
+    const Scalar d = slam_.d;
+    const Mat3 R_WtoC = pose_W.R_CtoW.transpose();
+    const Scalar f = cam_.intrinsics().fx;
+    map_.clear();
+    for (auto& sf : features_) {
+        const Vec3 to_cam = pose_W.p_CinW - sf.p_W;
+        const Vec3 p_C = R_WtoC * (sf.p_W - pose_W.p_CinW);
+        const auto px = cam_.project(p_C);
+        const bool visible = sf.normal_W.dot(to_cam) > 0 && px && px->x() >= 0 && px->y() >= 0 &&
+                             px->x() <= Scalar(cam_.width() - 1) &&
+                             px->y() <= Scalar(cam_.height() - 1);
+        if (!visible) {
+            continue;
+        }
+        if (sf.first_seen < 0) {
+            sf.first_seen = k;
+            sf.depth0 = to_cam.norm();
+            const Vec3 ray = -to_cam.normalized();
+            const Vec3 a = ray.unitOrthogonal();
+            sf.R_ray.col(0) = a;
+            sf.R_ray.col(1) = ray.cross(a);
+            sf.R_ray.col(2) = ray;
+            sf.first_camera_W = pose_W.p_CinW;
+        }
+        sf.baseline = std::max(sf.baseline, (pose_W.p_CinW - sf.first_camera_W).norm());
+        const Scalar sigma_theta = spec_.noise.pixel_sigma / f;
+        const Scalar s_perp = sf.depth0 * sigma_theta;
+        const Scalar s0 = sf.depth0 * spec_.noise.depth_rel_sigma0;
+        const Scalar tri = sf.baseline / (sf.depth0 * sf.depth0 * sigma_theta);
+        const Scalar s_par = 1 / std::sqrt(1 / (s0 * s0) + tri * tri);
+        const Vec3 sd(s_perp, s_perp, s_par);
+        const Mat3 L = sf.R_ray * sd.asDiagonal();
+        const Vec3 p_est_W = sf.p_W + L * sf.z;
+        MapFeature mf;
+        mf.p_FinW = slam_.toSlam(p_est_W);
+        mf.P_FinW = R0 * (L * L.transpose()) * R0.transpose() / (d * d);
+        map_.push_back(mf);
+    }
+}
+
+// The detections at frame k and the estimator's update with them.
+void ExperimentRun::update(int k, const CameraPose& pose_W, ExperimentResult& result) {
+    const Mat3& R0 = slam_.R0;
+    const Scalar d = slam_.d;
+    detections_.clear();
+    for (std::size_t oi = 0; oi < spec_.objects.size(); ++oi) {
+        const auto box = detect(cam_, pose_W, silhouettes_[oi], spec_.noise.box_sigma_px, rng_);
+        if (box) {
+            detections_.push_back({*box, spec_.objects[oi].class_name, 1});
+        }
+    }
+    core::FrameSnapshot snap;
+    snap.pose.R_CtoW = R0 * pose_W.R_CtoW;
+    snap.pose.p_CinW = slam_.toSlam(pose_W.p_CinW);
+    snap.up_W = R0 * Vec3::UnitZ();
+    snap.features = map_;
+    const core::UpdateStats stats = estimator_.update(snap, detections_);
+    for (std::size_t i = 0; i < stats.rejected.size(); ++i) {
+        result.rejected[i] += stats.rejected[i];
+    }
+    if (stats.observations == 0) {
+        return;
+    }
+    UpdatePoint up;
+    up.frame = k;
+    up.observations = stats.observations;
+    up.summary = estimator_.summary();
+    up.rel_error = std::abs(up.summary.map / d - 1);
+    result.series.push_back(up);
+}
+
+// The update from which the state stays converged, the errors from there
+// on against d (metres per SLAM unit), and the final estimate.
+void summarise(Scalar d, ExperimentResult& result) {
+    std::vector<Scalar> errors;
     result.updates = static_cast<int>(result.series.size());
     for (int u = result.updates - 1; u >= 0; --u) {
         if (result.series[static_cast<std::size_t>(u)].summary.state !=
@@ -282,6 +313,26 @@ ExperimentResult runExperiment(const ExperimentSpec& spec) {
         result.final_summary = result.series.back().summary;
         result.final_rel_error = result.series.back().rel_error;
     }
+}
+
+}  // namespace
+
+ExperimentResult runExperiment(const ExperimentSpec& spec) {
+    ExperimentResult result;
+    result.name = spec.name;
+    auto cam = PinholeRadialCamera::create(spec.camera);
+    if (!cam) {
+        result.error = cam.error().message;
+        return result;
+    }
+    auto est = ScaleEstimator::create(spec.estimator, spec.priors, cam.value());
+    if (!est) {
+        result.error = est.error().message;
+        return result;
+    }
+    ExperimentRun run(spec, cam.value(), est.value());
+    run.run(result);
+    summarise(spec.d_true, result);
     return result;
 }
 

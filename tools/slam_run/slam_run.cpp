@@ -58,6 +58,128 @@ std::optional<Vec3> rotationGain(const std::vector<core::CameraPose>& poses,
     return sxy.cwiseQuotient(sxx).cast<core::Scalar>();
 }
 
+// Sums over the frames, averaged into the result at the end.
+struct FrameSums {
+    double track_ms = 0;  // the tracker's time, every frame
+    double measured = 0;  // accepted matches, tracked frames
+    double in_map = 0;    // features in the map, tracked frames
+};
+
+// The end of the run (exclusive): the options' end within the dataset; an
+// error when the range is empty.
+core::Result<std::size_t> endFrame(const drivers::source::SequenceInfo& info,
+                                   const SlamRunOptions& options) {
+    const std::size_t end =
+        std::min(options.end_frame.value_or(info.frame_count), info.frame_count);
+    if (options.first_frame >= end) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "frames: range starts at " + std::to_string(options.first_frame) +
+                                   " but the dataset has " + std::to_string(info.frame_count) +
+                                   " frames");
+    }
+    return end;
+}
+
+// Counts one frame's step into the result and the sums; a tracked frame's
+// pose (and ground truth) goes to the current segment, a lost map starts
+// a new one.
+void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& frame,
+                const drivers::vision::MonoTracker& tracker, FrameSums& sums,
+                std::vector<Segment>& segments, SlamRunResult& result) {
+    if (r.gravity != nullptr) {
+        result.gravity_source = r.gravity->source;
+    }
+    const drivers::vision::TrackStats& stats = r.stats;
+    if (stats.gyro == core::slam::GyroCoverage::kOk) {
+        ++result.gyro_frames;
+    }
+    sums.track_ms += r.track_ms;
+    result.ms_per_frame_max = std::max(result.ms_per_frame_max, r.track_ms);
+    ++result.frames;
+    if (r.ok) {
+        // A frame that starts a replacement map was not tracked.
+        if (!stats.new_map || result.frames == 1) {
+            ++result.tracked_frames;
+        }
+        sums.measured += stats.inliers + stats.rescued;
+        for (std::size_t b = 0; b < result.nis_by_age.size(); ++b) {
+            result.nis_by_age[b] += static_cast<double>(stats.nis_sum[b]);
+            result.nis_by_age_count[b] += stats.nis_count[b];
+        }
+        sums.in_map += stats.features;
+        Segment& seg = segments.back();
+        seg.t_ns.push_back(frame.t_ns);
+        seg.poses.push_back(tracker.filter().pose());
+        seg.gt.push_back(frame.T_CtoW_gt ? std::optional<Vec3>(frame.T_CtoW_gt->p_CinW)
+                                         : std::nullopt);
+        if (frame.T_CtoW_gt) {
+            seg.gt_R.push_back(frame.T_CtoW_gt->R_CtoW);
+        }
+        if (stats.relocalised) {
+            ++result.relocalisations;
+        }
+    } else if (r.map_lost) {
+        // Lost or diverged: the next frame starts a new map (new scale).
+        ++result.reinitialisations;
+        segments.emplace_back();
+    } else {
+        // Lost, the map kept: the tracker looks for the camera in it.
+        ++result.relocalising_frames;
+    }
+}
+
+// The per-frame means from the counts and sums.
+void averageCounts(const FrameSums& sums, SlamRunResult& result) {
+    for (std::size_t b = 0; b < result.nis_by_age.size(); ++b) {
+        result.nis_by_age[b] = result.nis_by_age_count[b] > 0
+                                   ? result.nis_by_age[b] / double(result.nis_by_age_count[b])
+                                   : 0;
+    }
+    result.ms_per_frame = result.frames > 0 ? sums.track_ms / double(result.frames) : 0;
+    result.mean_features_measured =
+        result.tracked_frames > 0 ? sums.measured / double(result.tracked_frames) : 0;
+    result.mean_features_in_map =
+        result.tracked_frames > 0 ? sums.in_map / double(result.tracked_frames) : 0;
+}
+
+// The trajectory of the longest segment and, when every frame of it has
+// ground truth, its metrics against the ground truth.
+void evaluateLongestSegment(const std::vector<Segment>& segments, int window_frames,
+                            SlamRunResult& result) {
+    const auto longest = std::max_element(
+        segments.begin(), segments.end(),
+        [](const Segment& a, const Segment& b) { return a.poses.size() < b.poses.size(); });
+    result.t_ns = longest->t_ns;
+    result.poses = longest->poses;
+    const bool all_gt =
+        !longest->gt.empty() && std::all_of(longest->gt.begin(), longest->gt.end(),
+                                            [](const auto& g) { return g.has_value(); });
+    if (!all_gt) {
+        return;
+    }
+    std::vector<Vec3> est;
+    for (std::size_t k = 0; k < longest->gt.size(); ++k) {
+        result.gt_positions.push_back(*longest->gt[k]);
+        est.push_back(longest->poses[k].p_CinW);
+    }
+    const auto a = core::alignTrajectories(est, result.gt_positions);
+    if (!a) {
+        return;
+    }
+    result.has_gt = true;
+    result.ate_rmse_m = static_cast<double>(a->ate_rmse);
+    result.scale_to_gt = static_cast<double>(a->scale);
+    result.path_length_m = static_cast<double>(core::pathLength(result.gt_positions));
+    const auto drift = core::scaleDriftBetweenThirds(est, result.gt_positions);
+    result.scale_drift_thirds = drift ? static_cast<double>(*drift) : 0;
+    if (auto w = core::slidingWindowScales(est, result.gt_positions, window_frames)) {
+        result.window_scale = std::move(*w);
+    }
+    if (const auto g = rotationGain(longest->poses, longest->gt_R, 30)) {
+        result.rotation_gain_30 = g->cast<double>();
+    }
+}
+
 }  // namespace
 
 core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
@@ -68,14 +190,11 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
         return tracker.error();
     }
     const auto& info = source.info();
-    const std::size_t end =
-        std::min(options.end_frame.value_or(info.frame_count), info.frame_count);
-    if (options.first_frame >= end) {
-        return core::makeError(core::ErrorCode::kInvalidArgument,
-                               "frames: range starts at " + std::to_string(options.first_frame) +
-                                   " but the dataset has " + std::to_string(info.frame_count) +
-                                   " frames");
+    const auto end_frame = endFrame(info, options);
+    if (!end_frame) {
+        return end_frame.error();
     }
+    const std::size_t end = *end_frame;
     if (auto s = source.seek(options.first_frame); !s) {
         return s.error();
     }
@@ -91,9 +210,7 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
     result.gyro_source = gyro_feed->source();
     std::vector<Segment> segments(1);
     drivers::source::Frame frame;
-    double ms_sum = 0;
-    double measured_sum = 0;
-    double map_sum = 0;
+    FrameSums sums;
     daemon::FrameStep step(*tracker);
     const std::size_t stride = std::max<std::size_t>(options.selection.stride, 1);
     for (std::size_t i = options.first_frame; i < end; i += stride) {
@@ -107,93 +224,14 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
         const daemon::FrameStepResult r =
             step.track(frame, gyro_feed->forFrame(frame),
                        [&](const drivers::source::Frame& f) { return gravity->atMapStart(f); });
-        if (r.gravity != nullptr) {
-            result.gravity_source = r.gravity->source;
-        }
-        const drivers::vision::TrackStats& stats = r.stats;
-        if (stats.gyro == core::slam::GyroCoverage::kOk) {
-            ++result.gyro_frames;
-        }
-        ms_sum += r.track_ms;
-        result.ms_per_frame_max = std::max(result.ms_per_frame_max, r.track_ms);
-        ++result.frames;
-        if (r.ok) {
-            // A frame that starts a replacement map was not tracked.
-            if (!stats.new_map || result.frames == 1) {
-                ++result.tracked_frames;
-            }
-            measured_sum += stats.inliers + stats.rescued;
-            for (std::size_t b = 0; b < result.nis_by_age.size(); ++b) {
-                result.nis_by_age[b] += static_cast<double>(stats.nis_sum[b]);
-                result.nis_by_age_count[b] += stats.nis_count[b];
-            }
-            map_sum += stats.features;
-            Segment& seg = segments.back();
-            seg.t_ns.push_back(frame.t_ns);
-            seg.poses.push_back(tracker->filter().pose());
-            seg.gt.push_back(frame.T_CtoW_gt ? std::optional<Vec3>(frame.T_CtoW_gt->p_CinW)
-                                             : std::nullopt);
-            if (frame.T_CtoW_gt) {
-                seg.gt_R.push_back(frame.T_CtoW_gt->R_CtoW);
-            }
-            if (stats.relocalised) {
-                ++result.relocalisations;
-            }
-        } else if (r.map_lost) {
-            // Lost or diverged: the next frame starts a new map (new scale).
-            ++result.reinitialisations;
-            segments.emplace_back();
-        } else {
-            // Lost, the map kept: the tracker looks for the camera in it.
-            ++result.relocalising_frames;
-        }
+        countFrame(r, frame, *tracker, sums, segments, result);
         if (options.progress) {
-            options.progress(i + 1 - options.first_frame, end - options.first_frame, stats);
+            options.progress(i + 1 - options.first_frame, end - options.first_frame, r.stats);
         }
     }
-    for (std::size_t b = 0; b < result.nis_by_age.size(); ++b) {
-        result.nis_by_age[b] = result.nis_by_age_count[b] > 0
-                                   ? result.nis_by_age[b] / double(result.nis_by_age_count[b])
-                                   : 0;
-    }
+    averageCounts(sums, result);
     result.gyro_bias_C = tracker->gyroBiasC();
-    result.ms_per_frame = result.frames > 0 ? ms_sum / double(result.frames) : 0;
-    result.mean_features_measured =
-        result.tracked_frames > 0 ? measured_sum / double(result.tracked_frames) : 0;
-    result.mean_features_in_map =
-        result.tracked_frames > 0 ? map_sum / double(result.tracked_frames) : 0;
-
-    const auto longest = std::max_element(
-        segments.begin(), segments.end(),
-        [](const Segment& a, const Segment& b) { return a.poses.size() < b.poses.size(); });
-    result.t_ns = longest->t_ns;
-    result.poses = longest->poses;
-    const bool all_gt =
-        !longest->gt.empty() && std::all_of(longest->gt.begin(), longest->gt.end(),
-                                            [](const auto& g) { return g.has_value(); });
-    if (all_gt) {
-        std::vector<Vec3> est;
-        for (std::size_t k = 0; k < longest->gt.size(); ++k) {
-            result.gt_positions.push_back(*longest->gt[k]);
-            est.push_back(longest->poses[k].p_CinW);
-        }
-        const auto a = core::alignTrajectories(est, result.gt_positions);
-        if (a) {
-            result.has_gt = true;
-            result.ate_rmse_m = static_cast<double>(a->ate_rmse);
-            result.scale_to_gt = static_cast<double>(a->scale);
-            result.path_length_m = static_cast<double>(core::pathLength(result.gt_positions));
-            const auto drift = core::scaleDriftBetweenThirds(est, result.gt_positions);
-            result.scale_drift_thirds = drift ? static_cast<double>(*drift) : 0;
-            if (auto w =
-                    core::slidingWindowScales(est, result.gt_positions, options.window_frames)) {
-                result.window_scale = std::move(*w);
-            }
-            if (const auto g = rotationGain(longest->poses, longest->gt_R, 30)) {
-                result.rotation_gain_30 = g->cast<double>();
-            }
-        }
-    }
+    evaluateLongestSegment(segments, options.window_frames, result);
     return result;
 }
 
