@@ -1,9 +1,11 @@
 #include "cli.h"
 
+#include <cstddef>
 #include <cstdio>
 #include <exception>
 #include <iostream>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -17,7 +19,34 @@ void configureApp(CLI::App& app, std::string footer) {
     app.allow_extras();
 }
 
+namespace {
+
+// An option that takes a value given last, or followed by another option:
+// "OPTION needs a value" (the hand-written parsers' words); else nullopt.
+std::optional<std::string> missingValue(const CLI::App& app, int argc, const char* const* argv) {
+    const std::vector<std::string_view> args(argv + 1, argv + argc);
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        if (args[i] == "--") {
+            break;
+        }
+        const CLI::Option* option = app.get_option_no_throw(std::string(args[i]));
+        if (option == nullptr || option->get_items_expected_min() == 0) {
+            continue;  // not an option of the app, or a flag
+        }
+        if (i + 1 == args.size() || app.get_option_no_throw(std::string(args[i + 1])) != nullptr) {
+            return std::string(args[i]) + " needs a value";
+        }
+        ++i;
+    }
+    return std::nullopt;
+}
+
+}  // namespace
+
 std::optional<int> parseArgs(CLI::App& app, int argc, const char* const* argv) {
+    if (auto missing = missingValue(app, argc, argv)) {
+        return usageError(app, *missing);
+    }
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -23,8 +23,8 @@ namespace scaled::tools {
 void configureApp(CLI::App& app, std::string footer);
 
 // Parses argv into `app`. nullopt: go on; else main's exit code, its output
-// printed: 0 after --help, kExUsage after a usage error (CLI11's message, or
-// "unknown option X" / "unexpected argument 'X'").
+// printed: 0 after --help, kExUsage after a usage error ("X needs a value",
+// "unknown option X", "unexpected argument 'X'", else CLI11's message).
 std::optional<int> parseArgs(CLI::App& app, int argc, const char* const* argv);
 
 // "TOOL: message" and "Run 'TOOL --help' for the options." on stderr
