@@ -41,15 +41,15 @@ int runGuarded(const char* tool, int (*run)(int, char**), int argc, char** argv)
 
 // One option of a tool whose value is checked by the tool: CLI11 keeps the
 // text, `take` converts and checks it (false: a bad value, the usage error
-// "OPTION: expected EXPECTED, got 'VALUE'", or badValue(OPTION, VALUE) when
-// `expected` is not given).
+// "OPTION: " + bad_value with {} standing for the value, or badValue(OPTION,
+// VALUE) when bad_value is not given).
 template <typename Options>
 struct OptionSpec {
     const char* name = nullptr;       // "--frames", "-v,--verbose"
     const char* type_name = nullptr;  // "A:B"; nullptr: a flag (take gets "")
     const char* help = nullptr;
     bool (*take)(std::string_view value, Options& options) = nullptr;
-    const char* expected = nullptr;  // "paper or propagated"
+    const char* bad_value = nullptr;  // "expected on or off, got '{}'"
 };
 
 // A tool's options as a table of OptionSpecs. Every option may be given more
@@ -92,11 +92,14 @@ public:
                 value = option->results().at(taken[i]++);
             }
             if (!spec.take(value, out)) {
-                if (spec.expected != nullptr) {
-                    return option->get_name() + ": expected " + spec.expected + ", got '" + value +
-                           "'";
+                if (spec.bad_value == nullptr) {
+                    return badValue(option->get_name(), value);
                 }
-                return badValue(option->get_name(), value);
+                std::string message = option->get_name() + ": " + spec.bad_value;
+                if (const auto at = message.find("{}"); at != std::string::npos) {
+                    message.replace(at, 2, value);
+                }
+                return message;
             }
         }
         return std::nullopt;

@@ -212,7 +212,7 @@ constexpr OptionSpec<Options> kOptions[] = {
      }},
     {"--every", "N", "run the detector on every N-th frame (default 10)",
      [](std::string_view v, Options& o) { return parsePositive(v, o.every); },
-     "a positive integer (at most 1000000)"},
+     "not a positive integer: '{}'"},
     {"--classes", "a,b,...",
      "COCO class names (default: chair,cup,dining table,microwave,tv,\n"
      "bottle,sink,oven,refrigerator,book,bowl,potted plant,vase)",
@@ -220,12 +220,12 @@ constexpr OptionSpec<Options> kOptions[] = {
          o.classes = splitClasses(v);
          return !o.classes.empty();
      },
-     "class names separated by commas"},
+     "no class names"},
     {"--min-views", "N",
      "objects seen fewer times are listed but left out of the class\n"
      "summary (default 3)",
      [](std::string_view v, Options& o) { return parsePositive(v, o.min_views); },
-     "a positive integer (at most 1000000)"},
+     "not a positive integer: '{}'"},
     {"--views", nullptr, "also print every single measurement",
      [](std::string_view, Options& o) {
          o.list_views = true;

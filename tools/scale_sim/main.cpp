@@ -80,7 +80,7 @@ constexpr OptionSpec<Options> kOptions[] = {
      }},
     {"--seed", "N", "the simulation's random seed (default 1)",
      [](std::string_view v, Options& o) { return parseUint(v, &o.seed); },
-     "a non-negative integer (at most 9 digits)"},
+     "not a non-negative integer: '{}'"},
     {"--variance", "paper|propagated", "the likelihood's variance model (default paper)",
      [](std::string_view v, Options& o) {
          auto& model = o.config.likelihood.variance_model;
@@ -90,7 +90,7 @@ constexpr OptionSpec<Options> kOptions[] = {
          }
          return false;
      },
-     "paper or propagated"},
+     "expected paper or propagated, got '{}'"},
     {"--weighting", "feature|box", "an observation's weight: per feature or per box",
      [](std::string_view v, Options& o) {
          if (v == "feature" || v == "box") {
@@ -100,7 +100,7 @@ constexpr OptionSpec<Options> kOptions[] = {
          }
          return false;
      },
-     "feature or box"},
+     "expected feature or box, got '{}'"},
     {"--roll-compensation", "on|off", "compensate the camera's roll in the objects' extents",
      [](std::string_view v, Options& o) {
          if (v == "on" || v == "off") {
@@ -109,14 +109,14 @@ constexpr OptionSpec<Options> kOptions[] = {
          }
          return false;
      },
-     "on or off"},
+     "expected on or off, got '{}'"},
     {"--robust", nullptr, "the robust likelihood (outliers)",
      [](std::string_view, Options& o) {
          o.config.likelihood.robust = true;
          return true;
      }},
     {"--drift", "SIGMA_LOG", "the scale's drift per update (sigma of log scale, [0, 1])", takeDrift,
-     "a number in [0, 1]"},
+     "expected a number in [0, 1], got '{}'"},
     {"--arithmetic", "floating|fixed",
      "the posterior's and likelihood's arithmetic (fixed: integer fixed\n"
      "point, docs/numerics.md)",
@@ -129,7 +129,7 @@ constexpr OptionSpec<Options> kOptions[] = {
          }
          return false;
      },
-     "floating or fixed"},
+     "expected floating or fixed, got '{}'"},
 };
 
 // The command line into `o`; nullopt to go on, else the exit code (--help
