@@ -19,7 +19,7 @@ expect() {  # expect RC SUBSTRING -- command...
 
 "$det" --help | grep -q '^usage: scaled-detect' || fail "--help does not print usage"
 expect 64 "--image FILE is required" -- "$det"
-expect 64 "unknown option '--bogus'" -- "$det" --bogus 1
+expect 64 "unknown option --bogus" -- "$det" --bogus 1
 expect 64 "--size needs a value" -- "$det" --image x.png --size
 expect 64 "input_size_px = 100" -- "$det" --image x.png --size 100
 expect 64 "not a number: 'abc'" -- "$det" --image x.png --score abc

@@ -8,12 +8,13 @@
 //            [--verbose]
 //
 // Exit codes (sysexits): 0 ok, 64 usage, 65 bad data, 66 dataset not found,
-// 73 cannot write the trajectory.
+// 73 cannot write the trajectory. The options are on CLI11 (tools/common/cli.h).
 
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -24,6 +25,7 @@
 #include <scaled/drivers/dataset/trajectory_io.h>
 
 #include "args.h"
+#include "cli.h"
 #include "slam_run.h"
 #include "sysexits.h"
 
@@ -32,322 +34,347 @@ namespace {
 using scaled::tools::kExCantCreat;
 using scaled::tools::kExDataErr;
 using scaled::tools::kExNoInput;
-using scaled::tools::kExUsage;
-using scaled::tools::parseIntrinsics;
+using scaled::tools::OptionSpec;
 using scaled::tools::parseNumber;
 
 using scaled::core::Scalar;
+using scaled::drivers::vision::TrackerConfig;
 
-void usage(std::FILE* out) {
-    std::fputs(
-        "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
-        "                [--stride N] [--blank A:B]...\n"
-        "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
-        "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
-        "                [--seed N] [--set KEY=VALUE]... [--window N] [--gyro-sim D:B]\n"
-        "                [--window-out CSV] [--verbose]\n"
-        "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, a folder of\n"
-        "images or a video file, writes the trajectory (TUM format, SLAM units, world = first\n"
-        "camera) and prints a summary.\n"
-        "  --camera FILE  intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt format);\n"
-        "                 overrides the dataset's\n"
-        "  --stride N     every Nth frame of the range (a 30 Hz sequence at 10 Hz: 3)\n"
-        "  --blank A:B    frames A to B-1 delivered black (loss and recovery); repeatable\n"
-        "  --gyro-sim D:B the gyro prior fed by a gyro simulated from the ground truth (200 Hz,\n"
-        "                 white noise D rad/s/sqrt(Hz), a bias drawn with sigma B rad/s from the\n"
-        "                 seed): what a gyro would give on a sequence without one\n"
-        "  --fps HZ       frame rate of an image folder without times.txt, or of a video whose\n"
-        "                 container has none (default 30)\n"
-        "  --window N     tracked frames of the sliding-window Sim(3) scale whose range\n"
-        "                 (max/min) --json reports as window_scale (default 150)\n"
-        "  --window-out F that scale per window as CSV (t_s of the window's last frame, scale),\n"
-        "                 for tools/plot_window_scale.py\n",
-        out);
-}
+constexpr const char* kFooter =
+    "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
+    "                [--stride N] [--blank A:B]...\n"
+    "                [--out TRAJ.txt] [--json] [--camera FILE | --intrinsics fx,fy,cx,cy]\n"
+    "                [--fps HZ] [--max-features N] [--max-measured N] [--no-warp]\n"
+    "                [--seed N] [--set KEY=VALUE]... [--window N] [--gyro-sim D:B]\n"
+    "                [--window-out CSV] [--verbose]\n"
+    "Runs the EKF MonoSLAM tracker over a TUM-layout or KITTI-odometry dataset, a folder of\n"
+    "images or a video file, writes the trajectory (TUM format, SLAM units, world = first\n"
+    "camera) and prints a summary (with ground-truth metrics when the dataset has them).\n"
+    "Options are applied in the order given; a later one overrides an earlier one.\n"
+    "Exit codes (sysexits.h): 0 success; 64 usage; 65 bad data (a dataset, camera file or\n"
+    "frame that does not parse, no intrinsics, nothing to track); 66 the dataset or the\n"
+    "--camera file does not exist; 73 cannot write --out or --window-out.";
+
+// The command line, checked.
+struct Options {
+    std::filesystem::path dataset;
+    std::filesystem::path out;
+    std::filesystem::path window_out;
+    std::filesystem::path camera_file;
+    std::optional<scaled::core::CameraIntrinsics> intrinsics;
+    bool json = false;
+    bool verbose = false;
+    scaled::drivers::dataset::DatasetOptions dataset_options;
+    scaled::tools::SlamRunOptions run;
+};
 
 // --set KEY=VALUE: the tracker's tuning knobs, for experiments.
-bool setParameter(std::string_view kv, scaled::drivers::vision::TrackerConfig& c) {
+struct TrackerKnob {
+    std::string_view key;
+    void (*set)(double value, TrackerConfig& c);
+};
+
+constexpr TrackerKnob kTrackerKnobs[] = {
+    {"sigma_a", [](double v, TrackerConfig& c) { c.slam.motion.sigma_a = Scalar(v); }},
+    {"sigma_alpha", [](double v, TrackerConfig& c) { c.slam.motion.sigma_alpha = Scalar(v); }},
+    {"pixel_sigma_px", [](double v, TrackerConfig& c) { c.slam.pixel_sigma_px = Scalar(v); }},
+    {"init_sigma_v", [](double v, TrackerConfig& c) { c.slam.init_sigma_v = Scalar(v); }},
+    {"init_sigma_w", [](double v, TrackerConfig& c) { c.slam.init_sigma_w = Scalar(v); }},
+    {"rho0", [](double v, TrackerConfig& c) { c.slam.rho0 = Scalar(v); }},
+    {"sigma_rho", [](double v, TrackerConfig& c) { c.slam.sigma_rho = Scalar(v); }},
+    {"linearity_threshold",
+     [](double v, TrackerConfig& c) { c.slam.linearity_threshold = Scalar(v); }},
+    {"max_features", [](double v, TrackerConfig& c) { c.slam.max_features = static_cast<int>(v); }},
+    {"max_measured", [](double v, TrackerConfig& c) { c.slam.max_measured = static_cast<int>(v); }},
+    {"min_visible", [](double v, TrackerConfig& c) { c.slam.min_visible = static_cast<int>(v); }},
+    {"image_margin_px", [](double v, TrackerConfig& c) { c.slam.image_margin_px = Scalar(v); }},
+    {"chi2_gate", [](double v, TrackerConfig& c) { c.slam.chi2_gate = Scalar(v); }},
+    {"ransac_threshold_px",
+     [](double v, TrackerConfig& c) { c.slam.ransac_threshold_px = Scalar(v); }},
+    {"ransac_max_hypotheses",
+     [](double v, TrackerConfig& c) { c.slam.ransac_max_hypotheses = static_cast<int>(v); }},
+    {"ransac_min_hypotheses",
+     [](double v, TrackerConfig& c) { c.slam.ransac_min_hypotheses = static_cast<int>(v); }},
+    {"delete_min_attempts",
+     [](double v, TrackerConfig& c) { c.slam.delete_min_attempts = static_cast<int>(v); }},
+    {"delete_min_ratio", [](double v, TrackerConfig& c) { c.slam.delete_min_ratio = Scalar(v); }},
+    {"min_inliers", [](double v, TrackerConfig& c) { c.slam.min_inliers = static_cast<int>(v); }},
+    {"lost_after_frames",
+     [](double v, TrackerConfig& c) { c.slam.lost_after_frames = static_cast<int>(v); }},
+    {"min_ncc", [](double v, TrackerConfig& c) { c.match.min_ncc = v; }},
+    {"max_search_pixels",
+     [](double v, TrackerConfig& c) { c.match.max_search_pixels = static_cast<int>(v); }},
+    {"relocalise_s", [](double v, TrackerConfig& c) { c.relocalise_s = v; }},
+    {"relocalise_min_inliers",
+     [](double v, TrackerConfig& c) { c.relocalise_min_inliers = static_cast<int>(v); }},
+    {"relocalise_reproj_px", [](double v, TrackerConfig& c) { c.relocalise_reproj_px = v; }},
+    {"relocalise_corners",
+     [](double v, TrackerConfig& c) { c.relocalise_corners = static_cast<int>(v); }},
+    {"relocalise_max_brief_distance",
+     [](double v, TrackerConfig& c) { c.relocalise_max_brief_distance = static_cast<int>(v); }},
+    {"relocalise_search_px", [](double v, TrackerConfig& c) { c.relocalise_search_px = v; }},
+    {"relocalise_max_rel_sigma",
+     [](double v, TrackerConfig& c) { c.relocalise_max_rel_sigma = v; }},
+    {"use_gyro", [](double v, TrackerConfig& c) { c.use_gyro = v != 0; }},
+    {"gyro_noise_density", [](double v, TrackerConfig& c) { c.gyro_noise_density = v; }},
+    {"gyro_bias_sigma_radps", [](double v, TrackerConfig& c) { c.gyro_bias_sigma_radps = v; }},
+    {"gyro_max_gap_s", [](double v, TrackerConfig& c) { c.gyro_max_gap_s = v; }},
+    {"gyro_bias_time_s", [](double v, TrackerConfig& c) { c.gyro_bias_time_s = v; }},
+    {"feature_border_px",
+     [](double v, TrackerConfig& c) { c.feature_border_px = static_cast<int>(v); }},
+    {"pyramid_levels", [](double v, TrackerConfig& c) { c.pyramid_levels = static_cast<int>(v); }},
+    {"coarse_min_fraction", [](double v, TrackerConfig& c) { c.coarse_min_fraction = v; }},
+    {"coarse_max_search_pixels",
+     [](double v, TrackerConfig& c) { c.coarse_max_search_pixels = static_cast<int>(v); }},
+    {"coarse_min_ncc", [](double v, TrackerConfig& c) { c.coarse_min_ncc = v; }},
+    {"patch_size", [](double v, TrackerConfig& c) { c.patch_size = static_cast<int>(v); }},
+    {"patch_source_size",
+     [](double v, TrackerConfig& c) { c.patch_source_size = static_cast<int>(v); }},
+    {"warp_patches", [](double v, TrackerConfig& c) { c.warp_patches = v != 0; }},
+    {"free_radius_px", [](double v, TrackerConfig& c) { c.free_radius_px = static_cast<int>(v); }},
+    {"max_new_per_frame",
+     [](double v, TrackerConfig& c) { c.max_new_per_frame = static_cast<int>(v); }},
+    {"corner_quality", [](double v, TrackerConfig& c) { c.corners.quality_level = v; }},
+    {"corner_min_distance_px",
+     [](double v, TrackerConfig& c) { c.corners.min_distance_px = static_cast<int>(v); }},
+};
+
+bool setParameter(std::string_view kv, TrackerConfig& c) {
     const auto eq = kv.find('=');
     if (eq == std::string_view::npos) {
         return false;
     }
-    const std::string key(kv.substr(0, eq));
+    const std::string_view key = kv.substr(0, eq);
     const std::string val(kv.substr(eq + 1));
     char* end = nullptr;
     const double v = std::strtod(val.c_str(), &end);
     if (val.empty() || end != val.c_str() + val.size()) {
         return false;
     }
-    auto& s = c.slam;
-    const auto i = static_cast<int>(v);
-    if (key == "sigma_a") {
-        s.motion.sigma_a = Scalar(v);
-    } else if (key == "sigma_alpha") {
-        s.motion.sigma_alpha = Scalar(v);
-    } else if (key == "pixel_sigma_px") {
-        s.pixel_sigma_px = Scalar(v);
-    } else if (key == "init_sigma_v") {
-        s.init_sigma_v = Scalar(v);
-    } else if (key == "init_sigma_w") {
-        s.init_sigma_w = Scalar(v);
-    } else if (key == "rho0") {
-        s.rho0 = Scalar(v);
-    } else if (key == "sigma_rho") {
-        s.sigma_rho = Scalar(v);
-    } else if (key == "linearity_threshold") {
-        s.linearity_threshold = Scalar(v);
-    } else if (key == "max_features") {
-        s.max_features = i;
-    } else if (key == "max_measured") {
-        s.max_measured = i;
-    } else if (key == "min_visible") {
-        s.min_visible = i;
-    } else if (key == "image_margin_px") {
-        s.image_margin_px = Scalar(v);
-    } else if (key == "chi2_gate") {
-        s.chi2_gate = Scalar(v);
-    } else if (key == "ransac_threshold_px") {
-        s.ransac_threshold_px = Scalar(v);
-    } else if (key == "ransac_max_hypotheses") {
-        s.ransac_max_hypotheses = i;
-    } else if (key == "ransac_min_hypotheses") {
-        s.ransac_min_hypotheses = i;
-    } else if (key == "delete_min_attempts") {
-        s.delete_min_attempts = i;
-    } else if (key == "delete_min_ratio") {
-        s.delete_min_ratio = Scalar(v);
-    } else if (key == "min_inliers") {
-        s.min_inliers = i;
-    } else if (key == "lost_after_frames") {
-        s.lost_after_frames = i;
-    } else if (key == "min_ncc") {
-        c.match.min_ncc = v;
-    } else if (key == "max_search_pixels") {
-        c.match.max_search_pixels = i;
-    } else if (key == "relocalise_s") {
-        c.relocalise_s = v;
-    } else if (key == "relocalise_min_inliers") {
-        c.relocalise_min_inliers = i;
-    } else if (key == "relocalise_reproj_px") {
-        c.relocalise_reproj_px = v;
-    } else if (key == "relocalise_corners") {
-        c.relocalise_corners = i;
-    } else if (key == "relocalise_max_brief_distance") {
-        c.relocalise_max_brief_distance = i;
-    } else if (key == "relocalise_search_px") {
-        c.relocalise_search_px = v;
-    } else if (key == "relocalise_max_rel_sigma") {
-        c.relocalise_max_rel_sigma = v;
-    } else if (key == "use_gyro") {
-        c.use_gyro = v != 0;
-    } else if (key == "gyro_noise_density") {
-        c.gyro_noise_density = v;
-    } else if (key == "gyro_bias_sigma_radps") {
-        c.gyro_bias_sigma_radps = v;
-    } else if (key == "gyro_max_gap_s") {
-        c.gyro_max_gap_s = v;
-    } else if (key == "gyro_bias_time_s") {
-        c.gyro_bias_time_s = v;
-    } else if (key == "feature_border_px") {
-        c.feature_border_px = i;
-    } else if (key == "pyramid_levels") {
-        c.pyramid_levels = i;
-    } else if (key == "coarse_min_fraction") {
-        c.coarse_min_fraction = v;
-    } else if (key == "coarse_max_search_pixels") {
-        c.coarse_max_search_pixels = i;
-    } else if (key == "coarse_min_ncc") {
-        c.coarse_min_ncc = v;
-    } else if (key == "patch_size") {
-        c.patch_size = i;
-    } else if (key == "patch_source_size") {
-        c.patch_source_size = i;
-    } else if (key == "warp_patches") {
-        c.warp_patches = v != 0;
-    } else if (key == "free_radius_px") {
-        c.free_radius_px = i;
-    } else if (key == "max_new_per_frame") {
-        c.max_new_per_frame = i;
-    } else if (key == "corner_quality") {
-        c.corners.quality_level = v;
-    } else if (key == "corner_min_distance_px") {
-        c.corners.min_distance_px = i;
+    for (const TrackerKnob& knob : kTrackerKnobs) {
+        if (knob.key == key) {
+            knob.set(v, c);
+            return true;
+        }
+    }
+    return false;
+}
+
+bool takeFormat(std::string_view v,
+                std::optional<scaled::drivers::dataset::DatasetFormat>& format) {
+    using scaled::drivers::dataset::DatasetFormat;
+    if (v == "tum") {
+        format = DatasetFormat::kTum;
+    } else if (v == "kitti") {
+        format = DatasetFormat::kKitti;
+    } else if (v == "folder") {
+        format = DatasetFormat::kImageFolder;
+    } else if (v == "video") {
+        format = DatasetFormat::kVideo;
     } else {
         return false;
     }
     return true;
 }
 
-}  // namespace
+// The options in the order of the usage line; `take` checks a value as the
+// hand-written parser did.
+constexpr OptionSpec<Options> kOptions[] = {
+    {"--dataset", "DIR|VIDEO", "the dataset directory, image folder or video file (required)",
+     [](std::string_view v, Options& o) {
+         o.dataset = std::string(v);
+         return true;
+     }},
+    {"--format", "tum|kitti|folder|video", "the dataset's layout (default: detected)",
+     [](std::string_view v, Options& o) { return takeFormat(v, o.dataset_options.format); }},
+    {"--frames", "A:B", "frames A (inclusive) to B (exclusive); either may be omitted",
+     [](std::string_view v, Options& o) {
+         return scaled::tools::parseFrameRange(v, o.run.first_frame, o.run.end_frame);
+     }},
+    {"--stride", "N", "every Nth frame of the range (a 30 Hz sequence at 10 Hz: 3)",
+     [](std::string_view v, Options& o) {
+         return parseNumber(v, o.run.selection.stride) && o.run.selection.stride >= 1;
+     }},
+    {"--blank", "A:B", "frames A to B-1 delivered black (loss and recovery); repeatable",
+     [](std::string_view v, Options& o) {
+         auto r = scaled::drivers::source::parseBlankRange(v);
+         if (r.ok()) {
+             o.run.selection.blank.push_back(*r);
+         }
+         return r.ok();
+     }},
+    {"--out", "TRAJ.txt", "write the trajectory there (TUM format, SLAM units)",
+     [](std::string_view v, Options& o) {
+         o.out = std::string(v);
+         return true;
+     }},
+    {"--json", nullptr, "print the summary as one JSON object",
+     [](std::string_view, Options& o) {
+         o.json = true;
+         return true;
+     }},
+    {"--camera", "FILE",
+     "intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt\n"
+     "format); overrides the dataset's",
+     [](std::string_view v, Options& o) {
+         o.camera_file = std::string(v);
+         return !o.camera_file.empty();
+     }},
+    {"--intrinsics", "fx,fy,cx,cy", "the camera's intrinsics (pixels); overrides the dataset's",
+     [](std::string_view v, Options& o) {
+         scaled::core::CameraIntrinsics k;
+         const bool ok = scaled::tools::parseIntrinsics(v, k);
+         o.intrinsics = k;
+         return ok;
+     }},
+    {"--fps", "HZ",
+     "frame rate of an image folder without times.txt, or of a\n"
+     "video whose container has none (default 30)",
+     [](std::string_view v, Options& o) {
+         double& fps = o.dataset_options.folder_fps;
+         return parseNumber(v, fps) && std::isfinite(fps) && fps > 0 && fps <= 1e9;
+     }},
+    {"--max-features", "N", "the map's features at most (= --set max_features=N)",
+     [](std::string_view v, Options& o) {
+         return parseNumber(v, o.run.tracker.slam.max_features);
+     }},
+    {"--max-measured", "N", "features measured per frame at most (= --set max_measured=N)",
+     [](std::string_view v, Options& o) {
+         return parseNumber(v, o.run.tracker.slam.max_measured);
+     }},
+    {"--no-warp", nullptr, "no patch warping (= --set warp_patches=0)",
+     [](std::string_view, Options& o) {
+         o.run.tracker.warp_patches = false;
+         return true;
+     }},
+    {"--seed", "N", "the tracker's random seed (RANSAC; --gyro-sim's bias)",
+     [](std::string_view v, Options& o) { return parseNumber(v, o.run.tracker.slam.seed); }},
+    {"--set", "KEY=VALUE",
+     "one of the tracker's tuning knobs, e.g. --set sigma_a=2 (the\n"
+     "names of TrackerConfig and SlamConfig: sigma_a, min_ncc,\n"
+     "relocalise_s, ...); repeatable",
+     [](std::string_view v, Options& o) { return setParameter(v, o.run.tracker); }},
+    {"--window", "N",
+     "tracked frames of the sliding-window Sim(3) scale whose\n"
+     "range (max/min) --json reports as window_scale (default 150,\n"
+     "at least 3)",
+     [](std::string_view v, Options& o) {
+         return parseNumber(v, o.run.window_frames) && o.run.window_frames >= 3;
+     }},
+    {"--gyro-sim", "D:B",
+     "the gyro prior fed by a gyro simulated from the ground truth\n"
+     "(200 Hz, white noise D rad/s/sqrt(Hz), a bias drawn with\n"
+     "sigma B rad/s from the seed): what a gyro would give on a\n"
+     "sequence without one",
+     [](std::string_view v, Options& o) {
+         scaled::drivers::imu::SimulatedGyroOptions g;
+         const bool ok = scaled::tools::parseGyroSim(v, g.noise_density, g.bias_sigma_radps);
+         if (ok) {
+             o.run.gyro_sim = g;
+         }
+         return ok;
+     }},
+    {"--window-out", "CSV",
+     "that scale per window as CSV (t_s of the window's last\n"
+     "frame, scale), for tools/plot_window_scale.py",
+     [](std::string_view v, Options& o) {
+         o.window_out = std::string(v);
+         return !o.window_out.empty();
+     }},
+    {"--verbose", nullptr, "a line per frame on stderr (the tracker's statistics)",
+     [](std::string_view, Options& o) {
+         o.verbose = true;
+         return true;
+     }},
+};
 
-int main(int argc, char** argv) {
-    std::filesystem::path dataset;
-    std::filesystem::path out;
-    std::filesystem::path window_out;
-    bool json = false;
-    bool verbose = false;
-    scaled::drivers::dataset::DatasetOptions dopt;
-    scaled::tools::SlamRunOptions ropt;
-    std::optional<scaled::core::CameraIntrinsics> intrinsics;
-    std::filesystem::path camera_file;
-    for (int i = 1; i < argc; ++i) {
-        const std::string_view a = argv[i];
-        auto value = [&]() -> std::optional<std::string_view> {
-            if (i + 1 >= argc) {
-                std::fprintf(stderr, "slam-run: %s needs a value\n", argv[i]);
-                return std::nullopt;
-            }
-            return std::string_view(argv[++i]);
-        };
-        if (a == "--help" || a == "-h") {
-            usage(stdout);
-            return 0;
-        }
-        if (a == "--json") {
-            json = true;
-            continue;
-        }
-        if (a == "--verbose") {
-            verbose = true;
-            continue;
-        }
-        if (a == "--no-warp") {
-            ropt.tracker.warp_patches = false;
-            continue;
-        }
-        const auto v = value();
-        if (!v) {
-            return kExUsage;
-        }
-        bool ok = true;
-        if (a == "--dataset") {
-            dataset = std::string(*v);
-        } else if (a == "--out") {
-            out = std::string(*v);
-        } else if (a == "--window-out") {
-            window_out = std::string(*v);
-            ok = !window_out.empty();
-        } else if (a == "--format") {
-            if (*v == "tum") {
-                dopt.format = scaled::drivers::dataset::DatasetFormat::kTum;
-            } else if (*v == "kitti") {
-                dopt.format = scaled::drivers::dataset::DatasetFormat::kKitti;
-            } else if (*v == "folder") {
-                dopt.format = scaled::drivers::dataset::DatasetFormat::kImageFolder;
-            } else if (*v == "video") {
-                dopt.format = scaled::drivers::dataset::DatasetFormat::kVideo;
-            } else {
-                ok = false;
-            }
-        } else if (a == "--frames") {
-            ok = scaled::tools::parseFrameRange(*v, ropt.first_frame, ropt.end_frame);
-        } else if (a == "--stride") {
-            ok = parseNumber(*v, ropt.selection.stride) && ropt.selection.stride >= 1;
-        } else if (a == "--blank") {
-            auto r = scaled::drivers::source::parseBlankRange(*v);
-            ok = r.ok();
-            if (ok) {
-                ropt.selection.blank.push_back(*r);
-            }
-        } else if (a == "--gyro-sim") {
-            scaled::drivers::imu::SimulatedGyroOptions g;
-            ok = scaled::tools::parseGyroSim(*v, g.noise_density, g.bias_sigma_radps);
-            if (ok) {
-                ropt.gyro_sim = g;
-            }
-        } else if (a == "--intrinsics") {
-            scaled::core::CameraIntrinsics k;
-            ok = parseIntrinsics(*v, k);
-            intrinsics = k;
-        } else if (a == "--camera") {
-            camera_file = std::string(*v);
-            ok = !camera_file.empty();
-        } else if (a == "--fps") {
-            ok = parseNumber(*v, dopt.folder_fps) && std::isfinite(dopt.folder_fps) &&
-                 dopt.folder_fps > 0 && dopt.folder_fps <= 1e9;
-        } else if (a == "--max-features") {
-            ok = parseNumber(*v, ropt.tracker.slam.max_features);
-        } else if (a == "--max-measured") {
-            ok = parseNumber(*v, ropt.tracker.slam.max_measured);
-        } else if (a == "--set") {
-            ok = setParameter(*v, ropt.tracker);
-        } else if (a == "--window") {
-            ok = parseNumber(*v, ropt.window_frames) && ropt.window_frames >= 3;
-        } else if (a == "--seed") {
-            ok = parseNumber(*v, ropt.tracker.slam.seed);
-        } else {
-            std::fprintf(stderr, "slam-run: unknown option %s\n", argv[i - 1]);
-            usage(stderr);
-            return kExUsage;
-        }
-        if (!ok) {
-            std::fprintf(stderr, "slam-run: bad value for %s: '%s'\n", argv[i - 1], argv[i]);
-            return kExUsage;
-        }
+// The command line into `o`; nullopt to go on, else the exit code (--help
+// printed, or the usage error).
+std::optional<int> parseOptions(int argc, char** argv, Options& o) {
+    CLI::App app("slam-run: the EKF MonoSLAM tracker over a dataset, an image folder or a video.",
+                 "slam-run");
+    scaled::tools::configureApp(app, kFooter);
+    scaled::tools::OptionTable<Options> table(kOptions);
+    table.addTo(app);
+    if (auto rc = scaled::tools::parseArgs(app, argc, argv)) {
+        return rc;
     }
-    if (dataset.empty()) {
-        std::fprintf(stderr, "slam-run: --dataset DIR|VIDEO is required\n");
-        usage(stderr);
-        return kExUsage;
+    if (auto bad = table.takeInto(app, o)) {
+        return scaled::tools::usageError(app, *bad);
     }
-    if (intrinsics && !camera_file.empty()) {
-        std::fprintf(stderr, "slam-run: give --camera or --intrinsics, not both\n");
-        return kExUsage;
+    if (o.dataset.empty()) {
+        return scaled::tools::usageError(app, "--dataset DIR|VIDEO is required");
     }
+    if (o.intrinsics && !o.camera_file.empty()) {
+        return scaled::tools::usageError(app, "give --camera or --intrinsics, not both");
+    }
+    return std::nullopt;
+}
+
+// The dataset and the --camera file: there and readable; nullopt when fine,
+// else the exit code (said on stderr).
+std::optional<int> readInputs(Options& o) {
     std::error_code ec;
-    if (!std::filesystem::exists(dataset, ec)) {
+    if (!std::filesystem::exists(o.dataset, ec)) {
         std::fprintf(stderr, "slam-run: %s: no such dataset directory or video file\n",
-                     dataset.c_str());
+                     o.dataset.c_str());
         return kExNoInput;
     }
-    if (!camera_file.empty()) {
-        auto k = scaled::drivers::dataset::readTumCameraFile(camera_file);
+    if (!o.camera_file.empty()) {
+        auto k = scaled::drivers::dataset::readTumCameraFile(o.camera_file);
         if (!k) {
             std::fprintf(stderr, "slam-run: --camera: %s\n", k.error().message.c_str());
             return k.error().code == scaled::core::ErrorCode::kNotFound ? kExNoInput : kExDataErr;
         }
-        dopt.intrinsics = *k;
+        o.dataset_options.intrinsics = *k;
     }
-    auto source = scaled::drivers::dataset::openDataset(dataset, dopt);
-    if (!source) {
-        std::fprintf(stderr, "slam-run: %s\n", source.error().message.c_str());
-        return kExDataErr;
-    }
-    auto& src = **source;
+    return std::nullopt;
+}
+
+// The camera: the dataset's intrinsics or --intrinsics, the image size from
+// the dataset or its first frame; nullopt after saying why not.
+std::optional<scaled::core::PinholeRadialCamera> cameraFor(
+    scaled::drivers::source::FrameSource& src, const Options& o) {
     scaled::core::CameraIntrinsics k = src.info().intrinsics;
-    if (intrinsics) {
+    if (o.intrinsics) {
         // Image size from the dataset when it knows it; else from the first frame.
         const int w = k.width_px;
         const int h = k.height_px;
-        k = *intrinsics;
+        k = *o.intrinsics;
         k.width_px = w;
         k.height_px = h;
     } else if (!src.info().has_intrinsics) {
         std::fprintf(stderr,
                      "slam-run: %s has no camera intrinsics (no camera.txt or calib.txt): give "
                      "--camera FILE or --intrinsics fx,fy,cx,cy\n",
-                     dataset.c_str());
-        return kExDataErr;
+                     o.dataset.c_str());
+        return std::nullopt;
     }
     if (k.width_px <= 0 || k.height_px <= 0) {
         scaled::drivers::source::Frame first;
         if (auto got = src.next(first); !got || !*got) {
-            std::fprintf(stderr, "slam-run: %s: cannot read the first frame%s%s\n", dataset.c_str(),
-                         got ? "" : ": ", got ? "" : got.error().message.c_str());
-            return kExDataErr;
+            std::fprintf(stderr, "slam-run: %s: cannot read the first frame%s%s\n",
+                         o.dataset.c_str(), got ? "" : ": ",
+                         got ? "" : got.error().message.c_str());
+            return std::nullopt;
         }
         k.width_px = first.gray.cols;
         k.height_px = first.gray.rows;
     }
-    const auto camera = scaled::core::PinholeRadialCamera::create(k);
+    auto camera = scaled::core::PinholeRadialCamera::create(k);
     if (!camera) {
         std::fprintf(stderr, "slam-run: %s\n", camera.error().message.c_str());
-        return kExDataErr;
+        return std::nullopt;
     }
-    const bool tty = isatty(STDERR_FILENO) == 1;
-    if (verbose) {
-        ropt.progress = [](std::size_t done, std::size_t,
-                           const scaled::drivers::vision::TrackStats& s) {
+    return *camera;
+}
+
+// The progress on stderr: a line per frame with --verbose, else a status line
+// on a terminal, else nothing.
+void setProgress(const Options& o, scaled::tools::SlamRunOptions& run) {
+    if (o.verbose) {
+        run.progress = [](std::size_t done, std::size_t,
+                          const scaled::drivers::vision::TrackStats& s) {
             std::fprintf(stderr,
                          "frame %zu %s map %d visible %d searched %d matched %d inliers %d "
                          "rescued %d added %d ncc_evals %d coarse %d/%d reloc %d/%d\n",
@@ -356,9 +383,9 @@ int main(int argc, char** argv) {
                          s.search_evaluations, s.coarse_matches, s.coarse_searches,
                          s.relocalise_inliers, s.relocalise_candidates);
         };
-    } else if (tty) {
-        ropt.progress = [](std::size_t done, std::size_t total,
-                           const scaled::drivers::vision::TrackStats& s) {
+    } else if (isatty(STDERR_FILENO) == 1) {
+        run.progress = [](std::size_t done, std::size_t total,
+                          const scaled::drivers::vision::TrackStats& s) {
             if (done % 10 == 0 || done == total) {
                 std::fprintf(stderr, "\r%zu/%zu frames  %s  features %d  measured %d   ", done,
                              total, scaled::core::slam::toString(s.health), s.features,
@@ -369,56 +396,98 @@ int main(int argc, char** argv) {
             }
         };
     }
-    if (ropt.gyro_sim) {
-        ropt.gyro_sim->seed = ropt.tracker.slam.seed;  // one seed per run
-    }
-    const auto result = scaled::tools::runSlam(src, *camera, ropt);
-    if (!result) {
-        std::fprintf(stderr, "slam-run: %s\n", result.error().message.c_str());
-        return kExDataErr;
-    }
+}
+
+// The dataset's notes, but the missing intrinsics the command line gave.
+void printNotes(const scaled::drivers::source::FrameSource& src, const Options& o) {
     for (const auto& note : src.info().notes) {
-        if ((intrinsics || !camera_file.empty()) && note.starts_with("no intrinsics")) {
+        if ((o.intrinsics || !o.camera_file.empty()) && note.starts_with("no intrinsics")) {
             continue;  // given on the command line
         }
         std::fprintf(stderr, "slam-run: note: %s\n", note.c_str());
     }
-    if (!out.empty()) {
-        if (auto w = scaled::drivers::dataset::writeTumTrajectory(out, result->t_ns, result->poses);
-            !w) {
+}
+
+// --out and --window-out; nullopt when written, else the exit code.
+std::optional<int> writeFiles(const scaled::tools::SlamRunResult& r, const Options& o) {
+    if (!o.out.empty()) {
+        if (auto w = scaled::drivers::dataset::writeTumTrajectory(o.out, r.t_ns, r.poses); !w) {
             std::fprintf(stderr, "slam-run: %s\n", w.error().message.c_str());
             return kExCantCreat;
         }
     }
-    if (!window_out.empty()) {
-        if (!result->window_scale) {
+    if (!o.window_out.empty()) {
+        if (!r.window_scale) {
             std::fprintf(stderr,
                          "slam-run: %s: no window scale to write (it needs ground truth for "
                          "every tracked frame and at least --window frames)\n",
-                         window_out.c_str());
+                         o.window_out.c_str());
             return kExDataErr;
         }
-        if (auto w = scaled::tools::writeWindowScales(window_out, *result); !w) {
+        if (auto w = scaled::tools::writeWindowScales(o.window_out, r); !w) {
             std::fprintf(stderr, "slam-run: %s\n", w.error().message.c_str());
             return kExCantCreat;
         }
     }
-    if (json) {
-        std::printf("%s\n", scaled::tools::toJson(*result, dataset.string()).c_str());
-    } else {
-        const auto& r = *result;
-        std::printf("frames %zu, tracked %zu, re-initialisations %d, relocalisations %d\n",
-                    r.frames, r.tracked_frames, r.reinitialisations, r.relocalisations);
-        std::printf("features measured per frame %.1f (map %.1f), %.2f ms per frame (max %.2f)\n",
-                    r.mean_features_measured, r.mean_features_in_map, r.ms_per_frame,
-                    r.ms_per_frame_max);
-        if (r.has_gt) {
-            std::printf(
-                "path %.3f m, ATE %.4f m (%.2f%% of the path), scale %.4f m/unit, "
-                "drift between thirds %.3f\n",
-                r.path_length_m, r.ate_rmse_m, 100 * r.ate_rmse_m / r.path_length_m, r.scale_to_gt,
-                r.scale_drift_thirds);
-        }
+    return std::nullopt;
+}
+
+void printSummary(const scaled::tools::SlamRunResult& r, const Options& o) {
+    if (o.json) {
+        std::printf("%s\n", scaled::tools::toJson(r, o.dataset.string()).c_str());
+        return;
     }
+    std::printf("frames %zu, tracked %zu, re-initialisations %d, relocalisations %d\n", r.frames,
+                r.tracked_frames, r.reinitialisations, r.relocalisations);
+    std::printf("features measured per frame %.1f (map %.1f), %.2f ms per frame (max %.2f)\n",
+                r.mean_features_measured, r.mean_features_in_map, r.ms_per_frame,
+                r.ms_per_frame_max);
+    if (r.has_gt) {
+        std::printf(
+            "path %.3f m, ATE %.4f m (%.2f%% of the path), scale %.4f m/unit, "
+            "drift between thirds %.3f\n",
+            r.path_length_m, r.ate_rmse_m, 100 * r.ate_rmse_m / r.path_length_m, r.scale_to_gt,
+            r.scale_drift_thirds);
+    }
+}
+
+int run(int argc, char** argv) {
+    Options o;
+    if (auto rc = parseOptions(argc, argv, o)) {
+        return *rc;
+    }
+    if (auto rc = readInputs(o)) {
+        return *rc;
+    }
+    auto source = scaled::drivers::dataset::openDataset(o.dataset, o.dataset_options);
+    if (!source) {
+        std::fprintf(stderr, "slam-run: %s\n", source.error().message.c_str());
+        return kExDataErr;
+    }
+    auto& src = **source;
+    const auto camera = cameraFor(src, o);
+    if (!camera) {
+        return kExDataErr;
+    }
+    setProgress(o, o.run);
+    if (o.run.gyro_sim) {
+        o.run.gyro_sim->seed = o.run.tracker.slam.seed;  // one seed per run
+    }
+    const auto result = scaled::tools::runSlam(src, *camera, o.run);
+    if (!result) {
+        std::fprintf(stderr, "slam-run: %s\n", result.error().message.c_str());
+        return kExDataErr;
+    }
+    printNotes(src, o);
+    if (auto rc = writeFiles(*result, o)) {
+        return *rc;
+    }
+    printSummary(*result, o);
     return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    return scaled::tools::runGuarded("slam-run", run, argc, argv);
 }
