@@ -17,6 +17,15 @@ std::string number(double v) {
 
 }  // namespace
 
+const LimitCheck* firstOutside(std::span<const LimitCheck> checks) {
+    for (const LimitCheck& check : checks) {
+        if (!check.limits.contains(check.value)) {
+            return &check;
+        }
+    }
+    return nullptr;
+}
+
 std::string ParamLimits::text() const {
     return std::string("in ") + (lo_open ? "(" : "[") + number(lo) + ", " + number(hi) +
            (hi_open ? ")" : "]");

@@ -13,6 +13,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace scaled::tools {
@@ -109,5 +110,25 @@ private:
     std::span<const OptionSpec<Options>> specs_;
     std::vector<const CLI::Option*> options_;
 };
+
+// A tool's whole command line: `app` configured with the footer, the
+// OptionSpecs added, argv parsed and every value taken into `options` in
+// command-line order. nullopt: go on; else main's exit code, the help or the
+// usage error printed.
+template <typename Options, std::size_t N>
+std::optional<int> parseToolOptions(CLI::App& app, std::string footer,
+                                    const OptionSpec<Options> (&specs)[N], int argc,
+                                    const char* const* argv, Options& options) {
+    configureApp(app, std::move(footer));
+    OptionTable<Options> table(specs);
+    table.addTo(app);
+    if (auto rc = parseArgs(app, argc, argv)) {
+        return rc;
+    }
+    if (auto bad = table.takeInto(app, options)) {
+        return usageError(app, *bad);
+    }
+    return std::nullopt;
+}
 
 }  // namespace scaled::tools

@@ -169,14 +169,8 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
         "scaled-detect: the object detector on one image, to check a model on a scene before\n"
         "trusting the scale it gives.",
         "scaled-detect");
-    scaled::tools::configureApp(app, kFooter);
-    scaled::tools::OptionTable<Options> table(kOptions);
-    table.addTo(app);
-    if (auto rc = scaled::tools::parseArgs(app, argc, argv)) {
+    if (auto rc = scaled::tools::parseToolOptions(app, kFooter, kOptions, argc, argv, o)) {
         return rc;
-    }
-    if (auto bad = table.takeInto(app, o)) {
-        return scaled::tools::usageError(app, *bad);
     }
     if (o.image_path.empty()) {
         return scaled::tools::usageError(app, "--image FILE is required");

@@ -252,14 +252,8 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
         "measure-heights: the true heights of the objects a detector sees in an RGB-D "
         "sequence\nwith ground-truth poses.",
         "measure-heights");
-    scaled::tools::configureApp(app, kFooter);
-    scaled::tools::OptionTable<Options> table(kOptions);
-    table.addTo(app);
-    if (auto rc = scaled::tools::parseArgs(app, argc, argv)) {
+    if (auto rc = scaled::tools::parseToolOptions(app, kFooter, kOptions, argc, argv, o)) {
         return rc;
-    }
-    if (auto bad = table.takeInto(app, o)) {
-        return scaled::tools::usageError(app, *bad);
     }
     if (o.dataset.empty()) {
         return scaled::tools::usageError(app, "--dataset DIR is required");

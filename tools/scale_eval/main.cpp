@@ -68,19 +68,8 @@ struct Options {
 
 bool takeFormat(std::string_view v,
                 std::optional<scaled::drivers::dataset::DatasetFormat>& format) {
-    using scaled::drivers::dataset::DatasetFormat;
-    if (v == "tum") {
-        format = DatasetFormat::kTum;
-    } else if (v == "kitti") {
-        format = DatasetFormat::kKitti;
-    } else if (v == "folder") {
-        format = DatasetFormat::kImageFolder;
-    } else if (v == "video") {
-        format = DatasetFormat::kVideo;
-    } else {
-        return false;
-    }
-    return true;
+    format = scaled::drivers::dataset::parseDatasetFormat(v);
+    return format.has_value();
 }
 
 // The options in the order of the usage line; `take` checks a value as the
@@ -188,14 +177,8 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
         "scale-eval: the tracker, the detector and the metric scale estimator over a recorded\n"
         "sequence, against its ground truth.",
         "scale-eval");
-    configureApp(app, kFooter);
-    OptionTable<Options> table(kOptions);
-    table.addTo(app);
-    if (auto rc = parseArgs(app, argc, argv)) {
+    if (auto rc = parseToolOptions(app, kFooter, kOptions, argc, argv, o)) {
         return rc;
-    }
-    if (auto bad = table.takeInto(app, o)) {
-        return usageError(app, *bad);
     }
     if (o.dataset.empty()) {
         return usageError(app, "--dataset is required");

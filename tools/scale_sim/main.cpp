@@ -136,14 +136,8 @@ constexpr OptionSpec<Options> kOptions[] = {
 // printed, or the usage error).
 std::optional<int> parseOptions(int argc, char** argv, Options& o) {
     CLI::App app("scale-sim: the paper's three experiments in simulation.", "scale-sim");
-    scaled::tools::configureApp(app, kFooter);
-    scaled::tools::OptionTable<Options> table(kOptions);
-    table.addTo(app);
-    if (auto rc = scaled::tools::parseArgs(app, argc, argv)) {
+    if (auto rc = scaled::tools::parseToolOptions(app, kFooter, kOptions, argc, argv, o)) {
         return rc;
-    }
-    if (auto bad = table.takeInto(app, o)) {
-        return scaled::tools::usageError(app, *bad);
     }
     return std::nullopt;
 }

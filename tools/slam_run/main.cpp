@@ -162,19 +162,8 @@ bool setParameter(std::string_view kv, TrackerConfig& c) {
 
 bool takeFormat(std::string_view v,
                 std::optional<scaled::drivers::dataset::DatasetFormat>& format) {
-    using scaled::drivers::dataset::DatasetFormat;
-    if (v == "tum") {
-        format = DatasetFormat::kTum;
-    } else if (v == "kitti") {
-        format = DatasetFormat::kKitti;
-    } else if (v == "folder") {
-        format = DatasetFormat::kImageFolder;
-    } else if (v == "video") {
-        format = DatasetFormat::kVideo;
-    } else {
-        return false;
-    }
-    return true;
+    format = scaled::drivers::dataset::parseDatasetFormat(v);
+    return format.has_value();
 }
 
 // The options in the order of the usage line; `take` checks a value as the
@@ -293,14 +282,8 @@ constexpr OptionSpec<Options> kOptions[] = {
 std::optional<int> parseOptions(int argc, char** argv, Options& o) {
     CLI::App app("slam-run: the EKF MonoSLAM tracker over a dataset, an image folder or a video.",
                  "slam-run");
-    scaled::tools::configureApp(app, kFooter);
-    scaled::tools::OptionTable<Options> table(kOptions);
-    table.addTo(app);
-    if (auto rc = scaled::tools::parseArgs(app, argc, argv)) {
+    if (auto rc = scaled::tools::parseToolOptions(app, kFooter, kOptions, argc, argv, o)) {
         return rc;
-    }
-    if (auto bad = table.takeInto(app, o)) {
-        return scaled::tools::usageError(app, *bad);
     }
     if (o.dataset.empty()) {
         return scaled::tools::usageError(app, "--dataset DIR|VIDEO is required");

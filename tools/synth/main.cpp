@@ -150,14 +150,8 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
         "synth-render: a synthetic sequence of a textured room along a known trajectory, in a\n"
         "TUM-like layout.",
         "synth-render");
-    scaled::tools::configureApp(app, kFooter);
-    scaled::tools::OptionTable<Options> table(kOptions);
-    table.addTo(app);
-    if (auto rc = scaled::tools::parseArgs(app, argc, argv)) {
+    if (auto rc = scaled::tools::parseToolOptions(app, kFooter, kOptions, argc, argv, o)) {
         return rc;
-    }
-    if (auto bad = table.takeInto(app, o)) {
-        return scaled::tools::usageError(app, *bad);
     }
     if (o.out_dir.empty()) {
         return scaled::tools::usageError(app, "--out DIR is required");

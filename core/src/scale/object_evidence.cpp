@@ -71,11 +71,7 @@ const char* toString(ObjectState state) {
 
 Result<bool> validate(const ObjectConfig& c) {
     using L = ObjectLimits;
-    const struct {
-        const char* name;
-        double value;
-        const ParamLimits& limits;
-    } checks[] = {
+    const LimitCheck checks[] = {
         {"max_objects", static_cast<double>(c.max_objects), L::max_objects},
         {"max_views", static_cast<double>(c.max_views), L::max_views},
         {"centre_rel_sigma", static_cast<double>(c.centre_rel_sigma), L::centre_rel_sigma},
@@ -95,10 +91,8 @@ Result<bool> validate(const ObjectConfig& c) {
         {"view_reference_quantile", static_cast<double>(c.view_reference_quantile),
          L::view_reference_quantile},
     };
-    for (const auto& check : checks) {
-        if (!check.limits.contains(check.value)) {
-            return invalid(check.name, static_cast<Scalar>(check.value), check.limits.text());
-        }
+    if (const LimitCheck* bad = firstOutside(checks)) {
+        return invalid(bad->name, static_cast<Scalar>(bad->value), bad->limits.text());
     }
     if (!(c.centre_rel_sigma > 0 || c.centre_sigma_px > 0)) {
         return invalid("centre_rel_sigma", c.centre_rel_sigma,

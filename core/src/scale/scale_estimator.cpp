@@ -23,11 +23,7 @@ std::optional<Error> outOfLimits(const EstimatorConfig& config) {
     using L = EstimatorLimits;
     const auto& lc = config.likelihood;
     const auto& ec = config.extent;
-    const struct {
-        const char* name;
-        double value;
-        const ParamLimits& limits;
-    } checks[] = {
+    const LimitCheck checks[] = {
         {"max_features_per_box", static_cast<double>(config.max_features_per_box),
          L::max_features_per_box},
         {"min_detection_score", static_cast<double>(config.min_detection_score),
@@ -41,13 +37,10 @@ std::optional<Error> outOfLimits(const EstimatorConfig& config) {
         {"border_margin_px", static_cast<double>(ec.border_margin_px), L::border_margin_px},
         {"min_extent_px", static_cast<double>(ec.min_extent_px), L::min_extent_px},
     };
-    for (const auto& check : checks) {
-        if (!check.limits.contains(check.value)) {
-            return makeError(ErrorCode::kInvalidArgument, std::string("scale estimator: ") +
-                                                              check.name + " must be " +
-                                                              check.limits.text() + " (got " +
-                                                              std::to_string(check.value) + ")");
-        }
+    if (const LimitCheck* bad = firstOutside(checks)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         std::string("scale estimator: ") + bad->name + " must be " +
+                             bad->limits.text() + " (got " + std::to_string(bad->value) + ")");
     }
     return std::nullopt;
 }

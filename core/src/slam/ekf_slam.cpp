@@ -23,11 +23,7 @@ Error fieldError(const char* field, Scalar value, const std::string& allowed) {
 // The first parameter outside its SlamLimits, named.
 std::optional<Error> outOfLimits(const SlamConfig& c) {
     using L = SlamLimits;
-    const struct {
-        const char* name;
-        double value;
-        const ParamLimits& limits;
-    } checks[] = {
+    const LimitCheck checks[] = {
         {"sigma_a", static_cast<double>(c.motion.sigma_a), L::sigma_a},
         {"sigma_alpha", static_cast<double>(c.motion.sigma_alpha), L::sigma_alpha},
         {"pixel_sigma_px", static_cast<double>(c.pixel_sigma_px), L::pixel_sigma_px},
@@ -53,10 +49,8 @@ std::optional<Error> outOfLimits(const SlamConfig& c) {
         {"lost_after_frames", static_cast<double>(c.lost_after_frames), L::lost_after_frames},
         {"max_dt_s", static_cast<double>(c.max_dt_s), L::max_dt_s},
     };
-    for (const auto& check : checks) {
-        if (!check.limits.contains(check.value)) {
-            return fieldError(check.name, static_cast<Scalar>(check.value), check.limits.text());
-        }
+    if (const LimitCheck* bad = firstOutside(checks)) {
+        return fieldError(bad->name, static_cast<Scalar>(bad->value), bad->limits.text());
     }
     return std::nullopt;
 }

@@ -15,6 +15,22 @@ using core::ErrorCode;
 using core::makeError;
 using core::Result;
 
+std::optional<DatasetFormat> parseDatasetFormat(std::string_view text) {
+    if (text == "tum") {
+        return DatasetFormat::kTum;
+    }
+    if (text == "kitti") {
+        return DatasetFormat::kKitti;
+    }
+    if (text == "folder") {
+        return DatasetFormat::kImageFolder;
+    }
+    if (text == "video") {
+        return DatasetFormat::kVideo;
+    }
+    return std::nullopt;
+}
+
 Result<std::unique_ptr<source::FrameSource>> openDataset(const std::filesystem::path& path,
                                                          const DatasetOptions& opt) {
     std::error_code ec;

@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <limits>
+#include <span>
 #include <string>
 
 namespace scaled::core {
@@ -39,6 +40,16 @@ constexpr ParamLimits openClosed(double lo, double hi) {
 constexpr ParamLimits open(double lo, double hi) {
     return {lo, hi, true, true};
 }
+// One entry of a table-driven check: a parameter's name, value and limits.
+struct LimitCheck {
+    const char* name;
+    double value;
+    const ParamLimits& limits;
+};
+
+// The first entry whose value is outside its limits, or nullptr.
+[[nodiscard]] const LimitCheck* firstOutside(std::span<const LimitCheck> checks);
+
 inline constexpr double kUnbounded = std::numeric_limits<double>::infinity();
 inline constexpr double kMaxInt64 = 9223372036854775807.0;
 

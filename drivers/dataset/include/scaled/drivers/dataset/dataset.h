@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <string_view>
 
 #include <scaled/core/camera/pinhole_radial.h>
 #include <scaled/core/result.h>
@@ -14,6 +15,10 @@
 namespace scaled::drivers::dataset {
 
 enum class DatasetFormat { kTum, kKitti, kImageFolder, kVideo };
+
+// "tum", "kitti", "folder" or "video" (the tools' --format); nullopt for
+// anything else.
+[[nodiscard]] std::optional<DatasetFormat> parseDatasetFormat(std::string_view text);
 
 struct DatasetOptions {
     // Detected when empty. A regular file -> video. A directory: rgb.txt -> TUM;
