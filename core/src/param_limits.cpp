@@ -1,6 +1,7 @@
 #include <cstdio>
 
 #include <scaled/core/param_limits.h>
+#include <scaled/core/types.h>
 
 namespace scaled::core {
 
@@ -19,11 +20,21 @@ std::string number(double v) {
 
 const LimitCheck* firstOutside(std::span<const LimitCheck> checks) {
     for (const LimitCheck& check : checks) {
-        if (!check.limits.contains(check.value)) {
+        // The bounds as the parameter's type holds them: with Scalar = float
+        // a value set to a bound (0.99, stored as 0.99f) is at the bound, not
+        // past it.
+        ParamLimits limits = check.limits;
+        limits.lo = static_cast<double>(static_cast<Scalar>(limits.lo));
+        limits.hi = static_cast<double>(static_cast<Scalar>(limits.hi));
+        if (!limits.contains(check.value)) {
             return &check;
         }
     }
     return nullptr;
+}
+
+std::string formatLimitValue(double v) {
+    return number(v);
 }
 
 std::string ParamLimits::text() const {

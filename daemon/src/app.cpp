@@ -674,7 +674,7 @@ int runMain(int argc, const char* const* argv) {
     }
     drivers::base::setLogLevel(config->log.level);
     if (auto group = checkSocketGroup(config->socket); !group) {
-        logError(kSocket, "socket.group: " + group.error().message);
+        logError(kMain, "socket.group: " + group.error().message);
         return group.error().code == ErrorCode::kNotFound ? EX_CONFIG : EX_OSERR;
     }
     Daemon daemon(std::move(parsed.cli), std::move(*config));

@@ -90,12 +90,20 @@ Field integer(const char* section, const char* key, T* target, std::int64_t lo, 
 // the bound itself.
 template <typename T>
 Field integer(const char* section, const char* key, T* target, const core::ParamLimits& limits) {
+    // Whole bounds inside what int64 holds: the smallest and largest integer
+    // the limits contain.
     const auto bound = [](double v) {
-        return v >= 9.2e18 ? std::numeric_limits<std::int64_t>::max()
-                           : static_cast<std::int64_t>(v);
+        if (!(v > -9.2e18)) {
+            return std::numeric_limits<std::int64_t>::min();
+        }
+        if (!(v < 9.2e18)) {
+            return std::numeric_limits<std::int64_t>::max();
+        }
+        return static_cast<std::int64_t>(v);
     };
-    return integer(section, key, target, bound(limits.lo) + (limits.lo_open ? 1 : 0),
-                   bound(limits.hi) - (limits.hi_open ? 1 : 0));
+    const double lo = limits.lo_open ? std::floor(limits.lo) + 1 : std::ceil(limits.lo);
+    const double hi = limits.hi_open ? std::ceil(limits.hi) - 1 : std::floor(limits.hi);
+    return integer(section, key, target, bound(lo), bound(hi));
 }
 
 template <typename E>

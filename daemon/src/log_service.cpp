@@ -384,7 +384,7 @@ void LogService::setFault(const std::string& message) {
         faulted_ = true;
         error_ = message;
     }
-    drivers::base::logError(drivers::base::LogCategory{"log"},
+    drivers::base::logError(drivers::base::LogCategory{"scaled"},
                             "field log stopped: " + message + " (the daemon keeps running)");
 }
 

@@ -567,13 +567,17 @@ void Pipeline::trackFrame(TrackingState& state, QueuedFrame& item) {
     if (r.ok) {
         publishPose(frame, epoch);
     }
-    DetectionSchedule schedule;
-    {
-        const std::lock_guard lock(job_mutex_);
-        schedule = schedule_;
-    }
-    if (state.step.detectionDue(r, schedule, frame.t_ns)) {
-        handToDetector(state, item.frame, epoch);
+    if (r.ok && r.frames_in_map > 1) {
+        // Only a tracked frame past the map's first can be due (no lock
+        // otherwise: a SIGHUP reload holds it while it swaps the detector).
+        DetectionSchedule schedule;
+        {
+            const std::lock_guard lock(job_mutex_);
+            schedule = schedule_;
+        }
+        if (state.step.detectionDue(r, schedule, frame.t_ns)) {
+            handToDetector(state, item.frame, epoch);
+        }
     }
     if (events_ != nullptr && config_.log.frame_every > 0 &&
         state.tracked % static_cast<std::uint64_t>(config_.log.frame_every) == 0) {

@@ -146,7 +146,8 @@ namespace {
 // [tracker]: the EKF (core::slam::SlamConfig) and the front end
 std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
     auto& s = t.slam;
-    using L = core::slam::SlamLimits;  // the EKF's ranges are core's
+    using L = core::slam::SlamLimits;          // the EKF's ranges are core's
+    using T = drivers::vision::TrackerLimits;  // the front end's, the vision driver's
     return {
         real("tracker", "sigma_a", &s.motion.sigma_a, L::sigma_a),
         real("tracker", "sigma_alpha", &s.motion.sigma_alpha, L::sigma_alpha),
@@ -171,26 +172,29 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
         integer("tracker", "min_inliers", &s.min_inliers, L::min_inliers),
         integer("tracker", "lost_after_frames", &s.lost_after_frames, L::lost_after_frames),
         real("tracker", "max_dt_s", &s.max_dt_s, L::max_dt_s),
-        integer("tracker", "patch_size", &t.patch_size, 3, 63),
+        integer("tracker", "patch_size", &t.patch_size, T::patch_size),
         boolean("tracker", "warp_patches", &t.warp_patches),
-        integer("tracker", "max_new_per_frame", &t.max_new_per_frame, 0, 1000),
-        real("tracker", "min_ncc", &t.match.min_ncc, -1, 1),
-        integer("tracker", "max_search_pixels", &t.match.max_search_pixels, 1, 1000000),
-        integer("tracker", "pyramid_levels", &t.pyramid_levels, 0, 3),
-        integer("tracker", "coarse_max_search_pixels", &t.coarse_max_search_pixels, 1, 1000000),
-        real("tracker", "coarse_min_fraction", &t.coarse_min_fraction, 0, 1),
-        real("tracker", "coarse_min_ncc", &t.coarse_min_ncc, -1, 1, Bound::kOpen),
-        integer("tracker", "feature_border_px", &t.feature_border_px, 0, 200),
-        real("tracker", "relocalise_s", &t.relocalise_s, 0, 3600),
-        integer("tracker", "relocalise_min_inliers", &t.relocalise_min_inliers, 4, 1000),
-        real("tracker", "relocalise_reproj_px", &t.relocalise_reproj_px, 0, 100, Bound::kOpen),
-        integer("tracker", "relocalise_corners", &t.relocalise_corners, 1, 10000),
-        real("tracker", "relocalise_search_px", &t.relocalise_search_px, 0, 10000),
+        integer("tracker", "max_new_per_frame", &t.max_new_per_frame, T::max_new_per_frame),
+        real("tracker", "min_ncc", &t.match.min_ncc, T::min_ncc),
+        integer("tracker", "max_search_pixels", &t.match.max_search_pixels, T::max_search_pixels),
+        integer("tracker", "pyramid_levels", &t.pyramid_levels, T::pyramid_levels),
+        integer("tracker", "coarse_max_search_pixels", &t.coarse_max_search_pixels,
+                T::coarse_max_search_pixels),
+        real("tracker", "coarse_min_fraction", &t.coarse_min_fraction, T::coarse_min_fraction),
+        real("tracker", "coarse_min_ncc", &t.coarse_min_ncc, T::coarse_min_ncc),
+        integer("tracker", "feature_border_px", &t.feature_border_px, T::feature_border_px),
+        real("tracker", "relocalise_s", &t.relocalise_s, T::relocalise_s),
+        integer("tracker", "relocalise_min_inliers", &t.relocalise_min_inliers,
+                T::relocalise_min_inliers),
+        real("tracker", "relocalise_reproj_px", &t.relocalise_reproj_px, T::relocalise_reproj_px),
+        integer("tracker", "relocalise_corners", &t.relocalise_corners, T::relocalise_corners),
+        real("tracker", "relocalise_search_px", &t.relocalise_search_px, T::relocalise_search_px),
         boolean("tracker", "use_gyro", &t.use_gyro),
-        real("tracker", "gyro_noise_density", &t.gyro_noise_density, 0, 1),
-        real("tracker", "gyro_bias_sigma_radps", &t.gyro_bias_sigma_radps, 0, 10),
-        real("tracker", "gyro_max_gap_s", &t.gyro_max_gap_s, 0, 1, Bound::kOpen),
-        real("tracker", "gyro_bias_time_s", &t.gyro_bias_time_s, 0, 3600),
+        real("tracker", "gyro_noise_density", &t.gyro_noise_density, T::gyro_noise_density),
+        real("tracker", "gyro_bias_sigma_radps", &t.gyro_bias_sigma_radps,
+             T::gyro_bias_sigma_radps),
+        real("tracker", "gyro_max_gap_s", &t.gyro_max_gap_s, T::gyro_max_gap_s),
+        real("tracker", "gyro_bias_time_s", &t.gyro_bias_time_s, T::gyro_bias_time_s),
     };
 }
 

@@ -40,7 +40,7 @@ std::optional<Error> outOfLimits(const EstimatorConfig& config) {
     if (const LimitCheck* bad = firstOutside(checks)) {
         return makeError(ErrorCode::kInvalidArgument,
                          std::string("scale estimator: ") + bad->name + " must be " +
-                             bad->limits.text() + " (got " + std::to_string(bad->value) + ")");
+                             bad->limits.text() + " (got " + formatLimitValue(bad->value) + ")");
     }
     return std::nullopt;
 }

@@ -52,75 +52,53 @@ core::Result<bool> validate(const TrackerConfig& c) {
     if (auto ok = slam::validate(c.slam); !ok) {
         return ok.error();
     }
-    auto bad = [](const std::string& key, auto v, const char* allowed) {
+    auto bad = [](const std::string& key, auto v, const std::string& allowed) {
         return core::makeError(
             core::ErrorCode::kInvalidArgument,
             "tracker." + key + " = " + std::to_string(v) + ": must be " + allowed);
     };
-    if (c.patch_size < 5 || c.patch_size > 31 || c.patch_size % 2 == 0) {
+    using L = TrackerLimits;
+    const auto d = [](auto v) { return static_cast<double>(v); };
+    const core::LimitCheck checks[] = {
+        {"patch_size", d(c.patch_size), L::patch_size},
+        {"feature_border_px", d(c.feature_border_px), L::feature_border_px},
+        {"free_radius_px", d(c.free_radius_px), L::free_radius_px},
+        {"max_new_per_frame", d(c.max_new_per_frame), L::max_new_per_frame},
+        {"relocalise_s", d(c.relocalise_s), L::relocalise_s},
+        {"relocalise_min_inliers", d(c.relocalise_min_inliers), L::relocalise_min_inliers},
+        {"relocalise_reproj_px", d(c.relocalise_reproj_px), L::relocalise_reproj_px},
+        {"relocalise_max_brief_distance", d(c.relocalise_max_brief_distance),
+         L::relocalise_max_brief_distance},
+        {"brief_refresh_frames", d(c.brief_refresh_frames), L::brief_refresh_frames},
+        {"relocalise_corners", d(c.relocalise_corners), L::relocalise_corners},
+        {"relocalise_search_px", d(c.relocalise_search_px), L::relocalise_search_px},
+        {"coarse_max_search_pixels", d(c.coarse_max_search_pixels), L::coarse_max_search_pixels},
+        {"coarse_min_fraction", d(c.coarse_min_fraction), L::coarse_min_fraction},
+        {"pyramid_levels", d(c.pyramid_levels), L::pyramid_levels},
+        {"coarse_min_ncc", d(c.coarse_min_ncc), L::coarse_min_ncc},
+        {"gyro_noise_density", d(c.gyro_noise_density), L::gyro_noise_density},
+        {"gyro_bias_sigma_radps", d(c.gyro_bias_sigma_radps), L::gyro_bias_sigma_radps},
+        {"gyro_bias_time_s", d(c.gyro_bias_time_s), L::gyro_bias_time_s},
+        {"gyro_max_gap_s", d(c.gyro_max_gap_s), L::gyro_max_gap_s},
+        {"min_ncc", d(c.match.min_ncc), L::min_ncc},
+        {"max_search_pixels", d(c.match.max_search_pixels), L::max_search_pixels},
+    };
+    if (const core::LimitCheck* b = core::firstOutside(checks)) {
+        return bad(b->name, b->value, b->limits.text());
+    }
+    if (c.patch_size % 2 == 0) {
         return bad("patch_size", c.patch_size, "odd, in [5, 31]");
     }
     if (c.patch_source_size < 2 * c.patch_size + 1 || c.patch_source_size > 101 ||
         c.patch_source_size % 2 == 0) {
         return bad("patch_source_size", c.patch_source_size, "odd, in [2 patch_size + 1, 101]");
     }
-    if (c.feature_border_px < 0 || c.feature_border_px > 200) {
-        return bad("feature_border_px", c.feature_border_px, "in [0, 200]");
-    }
-    if (c.free_radius_px < 1 || c.free_radius_px > 200) {
-        return bad("free_radius_px", c.free_radius_px, "in [1, 200]");
-    }
-    if (c.max_new_per_frame < 1 || c.max_new_per_frame > c.slam.max_features) {
+    if (c.max_new_per_frame > c.slam.max_features) {
         return bad("max_new_per_frame", c.max_new_per_frame, "in [1, slam.max_features]");
-    }
-    if (!(c.relocalise_s >= 0 && c.relocalise_s <= 3600)) {
-        return bad("relocalise_s", c.relocalise_s, "in [0, 3600]");
-    }
-    if (c.relocalise_min_inliers < 4 || c.relocalise_min_inliers > 1000) {
-        return bad("relocalise_min_inliers", c.relocalise_min_inliers, "in [4, 1000]");
-    }
-    if (!(c.relocalise_reproj_px > 0 && c.relocalise_reproj_px <= 100)) {
-        return bad("relocalise_reproj_px", c.relocalise_reproj_px, "in (0, 100]");
-    }
-    if (c.relocalise_max_brief_distance < 0 || c.relocalise_max_brief_distance > 256) {
-        return bad("relocalise_max_brief_distance", c.relocalise_max_brief_distance, "in [0, 256]");
-    }
-    if (c.brief_refresh_frames < 1 || c.brief_refresh_frames > 100000) {
-        return bad("brief_refresh_frames", c.brief_refresh_frames, "in [1, 100000]");
-    }
-    if (c.relocalise_corners < 1 || c.relocalise_corners > 10000) {
-        return bad("relocalise_corners", c.relocalise_corners, "in [1, 10000]");
-    }
-    if (c.coarse_max_search_pixels < 1 || c.coarse_max_search_pixels > 1000000) {
-        return bad("coarse_max_search_pixels", c.coarse_max_search_pixels, "in [1, 1000000]");
-    }
-    if (!(c.coarse_min_fraction >= 0 && c.coarse_min_fraction <= 1)) {
-        return bad("coarse_min_fraction", c.coarse_min_fraction, "in [0, 1]");
-    }
-    if (c.pyramid_levels < 0 || c.pyramid_levels > 3) {
-        return bad("pyramid_levels", c.pyramid_levels, "in [0, 3]");
-    }
-    if (!(c.coarse_min_ncc > -1 && c.coarse_min_ncc < 1)) {
-        return bad("coarse_min_ncc", c.coarse_min_ncc, "in (-1, 1)");
-    }
-    if (!(c.gyro_noise_density >= 0 && c.gyro_noise_density <= 1)) {
-        return bad("gyro_noise_density", c.gyro_noise_density, "in [0, 1] rad/s/sqrt(Hz)");
-    }
-    if (!(c.gyro_bias_sigma_radps >= 0 && c.gyro_bias_sigma_radps <= 10)) {
-        return bad("gyro_bias_sigma_radps", c.gyro_bias_sigma_radps, "in [0, 10]");
     }
     if (c.use_gyro && !(c.gyro_noise_density > 0 || c.gyro_bias_sigma_radps > 0)) {
         return bad("gyro_bias_sigma_radps", c.gyro_bias_sigma_radps,
                    "> 0 when gyro_noise_density is 0 (a gyro without noise)");
-    }
-    if (!(c.gyro_bias_time_s >= 0 && c.gyro_bias_time_s <= 3600)) {
-        return bad("gyro_bias_time_s", c.gyro_bias_time_s, "in [0, 3600]");
-    }
-    if (!(c.gyro_max_gap_s > 0 && c.gyro_max_gap_s <= 1)) {
-        return bad("gyro_max_gap_s", c.gyro_max_gap_s, "in (0, 1]");
-    }
-    if (!(c.match.min_ncc > -1 && c.match.min_ncc < 1)) {
-        return bad("min_ncc", c.match.min_ncc, "in (-1, 1)");
     }
     return true;
 }

@@ -198,5 +198,23 @@ TEST(ScaleEstimator, RejectsBadConfiguration) {
     EXPECT_FALSE(ScaleEstimator::create(c, priors(), sc.cam).ok());
 }
 
+// EstimatorLimits' bounds are accepted as the configuration stores them, in
+// Scalar: with Scalar = float, 0.99 is 0.99f, a little above the double 0.99.
+TEST(ScaleEstimator, AcceptsItsLimitsAtTheirBounds) {
+    const Scene sc;
+    EstimatorConfig c;
+    c.likelihood.partial_weight = static_cast<Scalar>(EstimatorLimits::partial_weight.hi);
+    c.likelihood.min_sigma_m = static_cast<Scalar>(EstimatorLimits::min_sigma_m.hi);
+    c.max_features_per_box = static_cast<int>(EstimatorLimits::max_features_per_box.hi);
+    c.min_detection_score = static_cast<Scalar>(EstimatorLimits::min_detection_score.hi);
+    auto est = ScaleEstimator::create(c, priors(), sc.cam);
+    EXPECT_TRUE(est.ok()) << est.error().message;
+    c.max_features_per_box = static_cast<int>(EstimatorLimits::max_features_per_box.hi) + 1;
+    auto past = ScaleEstimator::create(c, priors(), sc.cam);
+    ASSERT_FALSE(past.ok());
+    EXPECT_EQ(past.error().message,
+              "scale estimator: max_features_per_box must be in [1, 4096] (got 4097)");
+}
+
 }  // namespace
 }  // namespace scaled::core

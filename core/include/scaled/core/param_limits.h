@@ -47,8 +47,12 @@ struct LimitCheck {
     const ParamLimits& limits;
 };
 
-// The first entry whose value is outside its limits, or nullptr.
+// The first entry whose value is outside its limits (compared at the
+// precision of core::Scalar, the type the parameters are held in), or nullptr.
 [[nodiscard]] const LimitCheck* firstOutside(std::span<const LimitCheck> checks);
+
+// A value or bound as the messages print it ("5000", "0.99", "inf").
+[[nodiscard]] std::string formatLimitValue(double v);
 
 inline constexpr double kUnbounded = std::numeric_limits<double>::infinity();
 inline constexpr double kMaxInt64 = 9223372036854775807.0;

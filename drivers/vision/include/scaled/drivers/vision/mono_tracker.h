@@ -17,6 +17,7 @@
 #include <span>
 #include <vector>
 
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/drivers/vision/brief.h>
@@ -86,6 +87,36 @@ struct TrackerConfig {
     double gyro_bias_time_s = 10;
 };
 
+// The allowed values of the front end's parameters (core/param_limits.h; the
+// EKF's are core::slam::SlamLimits): validate() checks them, the daemon's
+// [tracker] section offers them.
+struct TrackerLimits {
+    static constexpr core::ParamLimits patch_size = core::closed(5, 31);  // and odd
+    static constexpr core::ParamLimits max_new_per_frame =
+        core::closed(1, 1000);  // <= max_features
+    static constexpr core::ParamLimits min_ncc = core::open(-1, 1);
+    static constexpr core::ParamLimits max_search_pixels = core::closed(1, 1e6);
+    static constexpr core::ParamLimits pyramid_levels = core::closed(0, 3);
+    static constexpr core::ParamLimits coarse_max_search_pixels = core::closed(1, 1e6);
+    static constexpr core::ParamLimits coarse_min_fraction = core::closed(0, 1);
+    static constexpr core::ParamLimits coarse_min_ncc = core::open(-1, 1);
+    static constexpr core::ParamLimits feature_border_px = core::closed(0, 200);
+    static constexpr core::ParamLimits free_radius_px = core::closed(1, 200);
+    static constexpr core::ParamLimits relocalise_s = core::closed(0, 3600);
+    static constexpr core::ParamLimits relocalise_min_inliers = core::closed(4, 1000);
+    static constexpr core::ParamLimits relocalise_reproj_px = core::openClosed(0, 100);
+    static constexpr core::ParamLimits relocalise_max_brief_distance = core::closed(0, 256);
+    static constexpr core::ParamLimits brief_refresh_frames = core::closed(1, 100000);
+    static constexpr core::ParamLimits relocalise_corners = core::closed(1, 10000);
+    static constexpr core::ParamLimits relocalise_search_px = core::closed(0, 10000);
+    static constexpr core::ParamLimits gyro_noise_density = core::closed(0, 1);  // rad/s/sqrt(Hz)
+    static constexpr core::ParamLimits gyro_bias_sigma_radps = core::closed(0, 10);
+    static constexpr core::ParamLimits gyro_bias_time_s = core::closed(0, 3600);
+    static constexpr core::ParamLimits gyro_max_gap_s = core::openClosed(0, 1);
+};
+
+// Checks TrackerLimits, core::slam::SlamLimits and the parameters' relations;
+// the message names the key and value.
 core::Result<bool> validate(const TrackerConfig& config);
 
 // Wall time of each stage of MonoTracker::processFrame() on one frame,
