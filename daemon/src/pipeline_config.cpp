@@ -201,6 +201,7 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
 // [detector] and [detection]
 std::vector<Field> detectorFields(PipelineConfig& c) {
     auto& d = c.detector;
+    using D = drivers::detector::DetectorLimits;  // the detector driver's
     return {
         choice("detector", "family", &d.family,
                {{"yolox", drivers::detector::ModelFamily::kYolox},
@@ -208,14 +209,13 @@ std::vector<Field> detectorFields(PipelineConfig& c) {
         path("detector", "model", &d.model_path),
         path("detector", "weights", &d.weights_path),
         path("detector", "names", &d.names_path),
-        integer("detector", "input_size_px", &d.input_size_px, 64, 1280),
-        real("detector", "score_threshold", &d.score_threshold, 0, 1, Bound::kOpen),
-        real("detector", "nms_iou_threshold", &d.nms_iou_threshold, 0, 1, Bound::kOpen),
+        integer("detector", "input_size_px", &d.input_size_px, D::input_size_px),
+        real("detector", "score_threshold", &d.score_threshold, D::score_threshold),
+        real("detector", "nms_iou_threshold", &d.nms_iou_threshold, D::nms_iou_threshold),
         stringList("detector", "classes", &d.classes),
-        integer("detector", "threads", &d.threads, 0, 256),
-        integer("detector", "nice", &d.nice, drivers::detector::kMinNice,
-                drivers::detector::kMaxNice),
-        integer("detector", "max_detections", &d.max_detections, 1, 10000),
+        integer("detector", "threads", &d.threads, D::threads),
+        integer("detector", "nice", &d.nice, D::nice),
+        integer("detector", "max_detections", &d.max_detections, D::max_detections),
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
         real("detection", "period_s", &c.detection.period_s, 0, 3600),
     };

@@ -25,11 +25,7 @@ using core::Scalar;
 
 namespace {
 
-constexpr int kMinInputPx = 64;
-constexpr int kMaxInputPx = 1280;
 constexpr int kInputMultiple = 32;
-constexpr int kMaxThreads = 256;
-constexpr int kMaxDetectionsLimit = 10000;
 constexpr std::size_t kMaxClassNames = 10000;
 constexpr std::uintmax_t kMaxNamesBytes = std::uintmax_t{1} << 20U;
 constexpr int kBoxColumns = 5;  // cx, cy, w, h, objectness
@@ -160,35 +156,37 @@ ModelFamily familyFromPath(const std::filesystem::path& model_path) {
 }
 
 Result<bool> validate(const DetectorConfig& config) {
+    using L = DetectorLimits;
     const int s = config.input_size_px;
-    if (s < kMinInputPx || s > kMaxInputPx || s % kInputMultiple != 0) {
+    if (!L::input_size_px.contains(s) || s % kInputMultiple != 0) {
         return makeError(ErrorCode::kInvalidArgument,
                          fieldError("input_size_px", std::to_string(s),
-                                    "must be a multiple of 32 in [64, 1280]"));
+                                    "must be a multiple of 32 " + L::input_size_px.text()));
     }
-    if (!(config.score_threshold > 0 && config.score_threshold <= 1)) {
-        return makeError(
-            ErrorCode::kInvalidArgument,
-            fieldError("score_threshold", floatText(config.score_threshold), "must be in (0, 1]"));
+    if (!L::score_threshold.contains(static_cast<double>(config.score_threshold))) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         fieldError("score_threshold", floatText(config.score_threshold),
+                                    "must be " + L::score_threshold.text()));
     }
-    if (!(config.nms_iou_threshold > 0 && config.nms_iou_threshold <= 1)) {
+    if (!L::nms_iou_threshold.contains(static_cast<double>(config.nms_iou_threshold))) {
         return makeError(ErrorCode::kInvalidArgument,
                          fieldError("nms_iou_threshold", floatText(config.nms_iou_threshold),
-                                    "must be in (0, 1]"));
+                                    "must be " + L::nms_iou_threshold.text()));
     }
-    if (config.threads < 0 || config.threads > kMaxThreads) {
+    if (!L::threads.contains(config.threads)) {
         return makeError(ErrorCode::kInvalidArgument,
                          fieldError("threads", std::to_string(config.threads),
-                                    "must be in [0, 256] (0: OpenCV's default)"));
+                                    "must be " + L::threads.text() + " (0: OpenCV's default)"));
     }
-    if (config.nice < kMinNice || config.nice > kMaxNice) {
-        return makeError(ErrorCode::kInvalidArgument,
-                         fieldError("nice", std::to_string(config.nice), "must be in [0, 19]"));
+    if (!L::nice.contains(config.nice)) {
+        return makeError(
+            ErrorCode::kInvalidArgument,
+            fieldError("nice", std::to_string(config.nice), "must be " + L::nice.text()));
     }
-    if (config.max_detections < 1 || config.max_detections > kMaxDetectionsLimit) {
+    if (!L::max_detections.contains(config.max_detections)) {
         return makeError(ErrorCode::kInvalidArgument,
                          fieldError("max_detections", std::to_string(config.max_detections),
-                                    "must be in [1, 10000]"));
+                                    "must be " + L::max_detections.text()));
     }
     for (const std::string& name : config.classes) {
         if (name.empty()) {

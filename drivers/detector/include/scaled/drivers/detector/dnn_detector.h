@@ -32,8 +32,10 @@
 #include <string_view>
 #include <vector>
 
+#include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/drivers/detector/object_detector.h>
+#include <scaled/drivers/detector/thread_priority.h>
 
 namespace scaled::drivers::detector {
 
@@ -61,6 +63,17 @@ struct DetectorConfig {
 };
 
 // Checks the ranges (not the files). The message names the field and value.
+// The allowed values of DetectorConfig's numbers (core/param_limits.h):
+// validate() checks them, the daemon's [detector] section offers them.
+struct DetectorLimits {
+    static constexpr core::ParamLimits input_size_px = core::closed(64, 1280);  // a multiple of 32
+    static constexpr core::ParamLimits score_threshold = core::openClosed(0, 1);
+    static constexpr core::ParamLimits nms_iou_threshold = core::openClosed(0, 1);
+    static constexpr core::ParamLimits threads = core::closed(0, 256);  // 0: OpenCV's default
+    static constexpr core::ParamLimits nice = core::closed(kMinNice, kMaxNice);
+    static constexpr core::ParamLimits max_detections = core::closed(1, 10000);
+};
+
 core::Result<bool> validate(const DetectorConfig& config);
 
 // The names file: one non-empty name per line (a trailing newline and '\r'
