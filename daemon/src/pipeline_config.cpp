@@ -121,7 +121,6 @@ Field stringList(const char* section, const char* key, std::vector<std::string>*
 
 namespace {
 
-
 std::string join(const std::vector<std::string>& v) {
     std::string s;
     for (const auto& x : v) {
