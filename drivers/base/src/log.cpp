@@ -83,7 +83,7 @@ bool stderrIsJournal() {
     if (std::sscanf(env, "%llu:%llu", &dev, &ino) != 2) {  // NOLINT(cert-err34-c)
         return false;
     }
-    struct stat st {};
+    struct stat st = {};
     if (::fstat(STDERR_FILENO, &st) != 0) {
         return false;
     }

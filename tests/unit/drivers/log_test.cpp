@@ -61,7 +61,7 @@ TEST(Log, LevelsParseAndFilter) {
 TEST(Log, TheJournalIsRecognisedByStderrsDeviceAndInode) {
     const char* saved = std::getenv("JOURNAL_STREAM");
     const std::string restore = saved != nullptr ? saved : "";
-    struct stat st {};
+    struct stat st = {};
     ASSERT_EQ(::fstat(STDERR_FILENO, &st), 0);
     const std::string mine = std::to_string(static_cast<unsigned long long>(st.st_dev)) + ":" +
                              std::to_string(static_cast<unsigned long long>(st.st_ino));
