@@ -211,15 +211,15 @@ void checkLog(Reporter& r) {
 
 }  // namespace
 
-core::Result<bool> checkSocketGroup(const SocketConfig& socket) {
+core::Status checkSocketGroup(const SocketConfig& socket) {
     if (socket.group.empty()) {
-        return true;
+        return {};
     }
     auto gid = drivers::ipc::lookupGroup(socket.path, socket.group);
     if (!gid) {
         return gid.error();
     }
-    return true;
+    return {};
 }
 
 ConfigCheckReport checkConfiguration(const CommandLine& cli,

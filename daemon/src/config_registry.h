@@ -221,8 +221,8 @@ public:
     bool fail(const std::vector<std::string>& keys, const std::string& what);
     bool fail(core::Error e, std::string key);
     // A nested check's outcome (already in the ProblemList when there is one).
-    bool failed(const core::Result<bool>& nested);
-    [[nodiscard]] core::Result<bool> result() const;
+    bool failed(const core::Status& nested);
+    [[nodiscard]] core::Status result() const;
 
 private:
     const Locator& where_;
@@ -231,24 +231,24 @@ private:
 };
 
 // The pipeline's cross-field checks, each reported at the later key of a pair.
-core::Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where,
-                                 ProblemList* all = nullptr);
+core::Status checkPipeline(const PipelineConfig& c, const Locator& where,
+                           ProblemList* all = nullptr);
 
 // Checks every section and key of `root` against `fields` and sets them
 // (unknown sections and keys, types and ranges; no cross-field checks). On
 // error the bound object may be partly set: callers bind a working copy.
 // With `all`, every problem is kept and the valid keys are still set.
-core::Result<bool> applyFields(const toml::table& root, std::string_view source,
-                               const std::filesystem::path& base_dir,
-                               const std::vector<Field>& fields, ProblemList* all = nullptr);
+core::Status applyFields(const toml::table& root, std::string_view source,
+                         const std::filesystem::path& base_dir, const std::vector<Field>& fields,
+                         ProblemList* all = nullptr);
 
 // `section.key=value` assignments, each checked as applyFields does (paths
 // against the working directory; a bare word is a string). `set_by` records,
 // for each `section.key`, the assignment that set it (for a Locator).
-core::Result<bool> applyAssignments(const std::vector<std::string>& assignments,
-                                    const std::vector<Field>& fields,
-                                    std::vector<std::pair<std::string, std::string>>& set_by,
-                                    ProblemList* all = nullptr);
+core::Status applyAssignments(const std::vector<std::string>& assignments,
+                              const std::vector<Field>& fields,
+                              std::vector<std::pair<std::string, std::string>>& set_by,
+                              ProblemList* all = nullptr);
 
 // A Locator over assignments recorded by applyAssignments; keys not set by
 // them are attributed to `fallback`.

@@ -32,6 +32,7 @@ namespace scaled::daemon {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 using drivers::priors::tomlread::show;
 
 namespace {
@@ -343,8 +344,8 @@ bool checkSocketAndLog(const DaemonConfig& c, config_detail::Checker& check) {
 }
 
 // Cross-field checks of the whole configuration.
-Result<bool> checkDaemon(const DaemonConfig& c, const Locator& where,
-                         config_detail::ProblemList* all = nullptr) {
+Status checkDaemon(const DaemonConfig& c, const Locator& where,
+                   config_detail::ProblemList* all = nullptr) {
     config_detail::Checker check(where, all);
     if (check.failed(config_detail::checkPipeline(c.pipeline, where, all))) {
         return check.result();
@@ -400,8 +401,8 @@ DaemonConfig defaultDaemonConfig() {
     return c;
 }
 
-Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source_name,
-                             const std::filesystem::path& base_dir, DaemonConfig& config) {
+Status applyDaemonToml(std::string_view toml_text, std::string_view source_name,
+                       const std::filesystem::path& base_dir, DaemonConfig& config) {
     auto root = drivers::priors::tomlread::parse(toml_text, source_name);
     if (!root) {
         return root.error();
@@ -415,10 +416,10 @@ Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source
         return ok;
     }
     config = std::move(work);
-    return true;
+    return {};
 }
 
-Result<bool> applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config) {
+Status applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config) {
     auto text = config_detail::readConfigFile(path);
     if (!text) {
         return text.error();
@@ -428,11 +429,10 @@ Result<bool> applyDaemonFile(const std::filesystem::path& path, DaemonConfig& co
         return ok;
     }
     config.file = absolute;
-    return true;
+    return {};
 }
 
-Result<bool> applyDaemonOverrides(const std::vector<std::string>& assignments,
-                                  DaemonConfig& config) {
+Status applyDaemonOverrides(const std::vector<std::string>& assignments, DaemonConfig& config) {
     DaemonConfig work = config;
     std::vector<std::pair<std::string, std::string>> set_by;
     if (auto ok = config_detail::applyAssignments(assignments, daemonFields(work), set_by); !ok) {
@@ -443,7 +443,7 @@ Result<bool> applyDaemonOverrides(const std::vector<std::string>& assignments,
         return ok;
     }
     config = std::move(work);
-    return true;
+    return {};
 }
 
 std::vector<std::string> daemonConfigKeys() {
@@ -456,7 +456,7 @@ std::string toToml(const DaemonConfig& config) {
     return config_detail::fieldsToToml(daemonFields(copy));
 }
 
-Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source) {
+Status applySourceSpec(std::string_view spec, SourceConfig& source) {
     const std::string where = "--source " + std::string(spec);
     const auto colon = spec.find(':');
     const std::string_view kind = spec.substr(0, colon);
@@ -470,7 +470,7 @@ Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source) {
             return fail("sim takes no argument (expected sim)");
         }
         source.kind = SourceKind::kSim;
-        return true;
+        return {};
     }
     const bool known = kind == "replay" || kind == "v4l2" || kind == "libcamera";
     if (!known) {
@@ -490,7 +490,7 @@ Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source) {
         source.kind = kind == "v4l2" ? SourceKind::kV4l2 : SourceKind::kLibcamera;
         source.device = std::string(arg);
     }
-    return true;
+    return {};
 }
 
 namespace {
@@ -682,9 +682,9 @@ std::filesystem::path configFileFor(const CommandLine& cli,
 
 // --source, --socket, --log-dir and --pacing onto `config`, each recorded in
 // `set_by` for a Locator. Without `all` the first problem ends it.
-Result<bool> applyDedicatedOptions(const CommandLine& cli, DaemonConfig& config,
-                                   std::vector<std::pair<std::string, std::string>>& set_by,
-                                   config_detail::ProblemList* all) {
+Status applyDedicatedOptions(const CommandLine& cli, DaemonConfig& config,
+                             std::vector<std::pair<std::string, std::string>>& set_by,
+                             config_detail::ProblemList* all) {
     const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
     config_detail::Checker check(nowhere, all);
     if (cli.source) {

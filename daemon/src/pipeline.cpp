@@ -14,6 +14,7 @@ namespace scaled::daemon {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 
 namespace {
 
@@ -191,7 +192,7 @@ Pipeline::~Pipeline() {
     stop();
 }
 
-Result<bool> Pipeline::start() {
+Status Pipeline::start() {
     if (started_.exchange(true)) {
         return makeError(ErrorCode::kInvalidArgument, "pipeline: already started");
     }
@@ -209,7 +210,7 @@ Result<bool> Pipeline::start() {
     ::pthread_setname_np(detection_thread_.native_handle(), "scaled-detect");
     ::pthread_setname_np(tracking_thread_.native_handle(), "scaled-track");
     ::pthread_setname_np(capture_thread_.native_handle(), "scaled-capture");
-    return true;
+    return {};
 }
 
 void Pipeline::stop() {

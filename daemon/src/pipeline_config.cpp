@@ -28,6 +28,7 @@ namespace scaled::daemon {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 using drivers::priors::tomlread::num;
 using drivers::priors::tomlread::show;
 
@@ -368,7 +369,7 @@ bool Checker::fail(core::Error e, std::string key) {
     return false;
 }
 
-bool Checker::failed(const core::Result<bool>& nested) {
+bool Checker::failed(const core::Status& nested) {
     if (nested) {
         return false;
     }
@@ -378,14 +379,14 @@ bool Checker::failed(const core::Result<bool>& nested) {
     return all_ == nullptr;
 }
 
-core::Result<bool> Checker::result() const {
+core::Status Checker::result() const {
     if (first_) {
         return *first_;
     }
-    return true;
+    return {};
 }
 
-Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where, ProblemList* all) {
+Status checkPipeline(const PipelineConfig& c, const Locator& where, ProblemList* all) {
     Checker check(where, all);
     const auto& g = c.estimator.posterior.grid;
     if (!(g.d_max > g.d_min) && check.fail({"estimator.grid_d_max", "estimator.grid_d_min"},
@@ -436,9 +437,9 @@ Result<bool> checkPipeline(const PipelineConfig& c, const Locator& where, Proble
     return check.result();
 }
 
-Result<bool> applyFields(const toml::table& root, std::string_view source,
-                         const std::filesystem::path& base_dir, const std::vector<Field>& fields,
-                         ProblemList* all) {
+Status applyFields(const toml::table& root, std::string_view source,
+                   const std::filesystem::path& base_dir, const std::vector<Field>& fields,
+                   ProblemList* all) {
     std::vector<std::string> sections;
     for (const auto& f : fields) {
         if (sections.empty() || sections.back() != f.section) {
@@ -506,10 +507,10 @@ Result<bool> applyFields(const toml::table& root, std::string_view source,
     return check.result();
 }
 
-Result<bool> applyAssignments(const std::vector<std::string>& assignments,
-                              const std::vector<Field>& fields,
-                              std::vector<std::pair<std::string, std::string>>& set_by,
-                              ProblemList* all) {
+Status applyAssignments(const std::vector<std::string>& assignments,
+                        const std::vector<Field>& fields,
+                        std::vector<std::pair<std::string, std::string>>& set_by,
+                        ProblemList* all) {
     using drivers::priors::tomlread::parse;
     const Locator nowhere = [](const std::vector<std::string>&) { return std::string(); };
     Checker check(nowhere, all);
@@ -636,7 +637,7 @@ namespace {
 // The pipeline-only API applies a daemon configuration around `config` (the
 // daemon's sections checked against its defaults) and keeps the pipeline.
 template <typename Apply>
-Result<bool> viaDaemon(PipelineConfig& config, Apply&& apply) {
+Status viaDaemon(PipelineConfig& config, Apply&& apply) {
     DaemonConfig work = defaultDaemonConfig();
     work.pipeline = config;
     auto ok = std::forward<Apply>(apply)(work);
@@ -672,19 +673,18 @@ PipelineConfig defaultPipelineConfig() {
     return c;
 }
 
-Result<bool> applyPipelineToml(std::string_view toml_text, std::string_view source_name,
-                               const std::filesystem::path& base_dir, PipelineConfig& config) {
+Status applyPipelineToml(std::string_view toml_text, std::string_view source_name,
+                         const std::filesystem::path& base_dir, PipelineConfig& config) {
     return viaDaemon(config, [&](DaemonConfig& d) {
         return applyDaemonToml(toml_text, source_name, base_dir, d);
     });
 }
 
-Result<bool> applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config) {
+Status applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config) {
     return viaDaemon(config, [&](DaemonConfig& d) { return applyDaemonFile(path, d); });
 }
 
-Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
-                                    PipelineConfig& config) {
+Status applyPipelineOverrides(const std::vector<std::string>& assignments, PipelineConfig& config) {
     return viaDaemon(config, [&](DaemonConfig& d) { return applyDaemonOverrides(assignments, d); });
 }
 

@@ -777,7 +777,7 @@ core::Result<std::unique_ptr<SocketService>> SocketService::create(const SocketC
         config, hub, std::move(release), std::move(listener), std::move(stop_fd)));
 }
 
-core::Result<bool> SocketService::start() {
+core::Status SocketService::start() {
     if (started_ || stopped_) {
         return core::makeError(core::ErrorCode::kInvalidArgument,
                                "socket: service already started or stopped");
@@ -790,7 +790,7 @@ core::Result<bool> SocketService::start() {
     }
     ::pthread_setname_np(thread_.native_handle(), "scaled-socket");
     started_ = true;
-    return true;
+    return {};
 }
 
 void SocketService::stop() {

@@ -94,7 +94,7 @@ std::chrono::steady_clock::time_point steadyTimePoint(std::int64_t t_ns) {
             std::chrono::nanoseconds(t_ns)));
 }
 
-core::Result<bool> checkLines(const GpioConfig& config) {
+core::Status checkLines(const GpioConfig& config) {
     if (config.status_line < -1 || config.heartbeat_line < -1) {
         return makeError(ErrorCode::kInvalidArgument,
                          "gpio: a line offset must be >= 0, or -1 for none (got status_line " +
@@ -111,7 +111,7 @@ core::Result<bool> checkLines(const GpioConfig& config) {
                          "gpio: status_line and heartbeat_line are the same line (" +
                              std::to_string(config.status_line) + ")");
     }
-    return true;
+    return {};
 }
 
 }  // namespace
@@ -261,12 +261,12 @@ LightPattern StatusLights::pattern() const {
     return pattern_;
 }
 
-core::Result<bool> StatusLights::render(std::int64_t now_ns) {
+core::Status StatusLights::render(std::int64_t now_ns) {
     const std::lock_guard lock(mutex_);
     return renderLocked(now_ns);
 }
 
-core::Result<bool> StatusLights::renderLocked(std::int64_t now_ns) {
+core::Status StatusLights::renderLocked(std::int64_t now_ns) {
     if (!outputs_) {
         return makeError(ErrorCode::kUnavailable, "status LEDs: stopped (lines released)");
     }
@@ -274,7 +274,7 @@ core::Result<bool> StatusLights::renderLocked(std::int64_t now_ns) {
         {status_index_, patternLevel(pattern_, now_ns - pattern_start_ns_)},
         {heartbeat_index_, alive_ && blinkLevel(kHeartbeatBlink, now_ns - alive_start_ns_)},
     }};
-    core::Result<bool> result = true;
+    core::Status result;
     for (const auto& [index, level] : wanted) {
         if (index == kNoLine) {
             continue;

@@ -5,14 +5,14 @@
 
 namespace scaled::tools {
 
-core::Result<bool> createOutputDir(const std::string& out_dir) {
+core::Status createOutputDir(const std::string& out_dir) {
     std::error_code ec;
     std::filesystem::create_directories(out_dir, ec);
     if (ec) {
         return core::makeError(core::ErrorCode::kIo,
                                out_dir + ": cannot create the output directory: " + ec.message());
     }
-    return true;
+    return {};
 }
 
 }  // namespace scaled::tools

@@ -10,6 +10,6 @@ namespace scaled::tools {
 
 // Creates the directory `out_dir` (and its parents); a kIo error naming it
 // when that fails.
-core::Result<bool> createOutputDir(const std::string& out_dir);
+core::Status createOutputDir(const std::string& out_dir);
 
 }  // namespace scaled::tools

@@ -12,7 +12,7 @@ namespace scaled::tools {
 
 using core::ErrorCode;
 using core::makeError;
-using core::Result;
+using core::Status;
 
 namespace {
 
@@ -98,8 +98,8 @@ std::string detectionsJson(const std::filesystem::path& image,
     return s;
 }
 
-Result<bool> drawDetections(const cv::Mat& image, const drivers::detector::DetectionResult& result,
-                            const std::filesystem::path& out) {
+Status drawDetections(const cv::Mat& image, const drivers::detector::DetectionResult& result,
+                      const std::filesystem::path& out) {
     try {
         cv::Mat canvas;
         if (image.channels() == 1) {
@@ -131,7 +131,7 @@ Result<bool> drawDetections(const cv::Mat& image, const drivers::detector::Detec
     } catch (const cv::Exception& e) {
         return makeError(ErrorCode::kIo, out.string() + ": cannot write the image (" + e.err + ")");
     }
-    return true;
+    return {};
 }
 
 }  // namespace scaled::tools

@@ -27,8 +27,7 @@ std::string detectionsJson(const std::filesystem::path& image,
                            const drivers::detector::DetectionResult& result);
 
 // The image with boxes and labels, written to `out` (format from its extension).
-core::Result<bool> drawDetections(const cv::Mat& image,
-                                  const drivers::detector::DetectionResult& result,
-                                  const std::filesystem::path& out);
+core::Status drawDetections(const cv::Mat& image, const drivers::detector::DetectionResult& result,
+                            const std::filesystem::path& out);
 
 }  // namespace scaled::tools

@@ -25,7 +25,7 @@ namespace scaled::tools {
 
 using core::ErrorCode;
 using core::makeError;
-using core::Result;
+using core::Status;
 using nlohmann::json;
 
 namespace {
@@ -646,13 +646,13 @@ std::string toText(const FieldLogAnalysis& a) {
     return s;
 }
 
-Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir) {
+Status writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir) {
     if (auto ok = createOutputDir(out_dir); !ok) {
         return ok;
     }
     const std::filesystem::path dir(out_dir);
     const auto write = [&](const char* name, const char* header,
-                           const std::vector<std::string>& rows) -> Result<bool> {
+                           const std::vector<std::string>& rows) -> Status {
         const std::filesystem::path path = dir / name;
         std::ofstream out(path);
         if (!out) {
@@ -670,7 +670,7 @@ Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& 
             return makeError(ErrorCode::kIo,
                              path.string() + ": write failed: " + drivers::base::errnoText(errno));
         }
-        return true;
+        return {};
     };
     if (auto ok = write("frames.csv", kFramesHeader, a.frame_rows); !ok) {
         return ok;

@@ -96,6 +96,6 @@ std::string toText(const FieldLogAnalysis& a);
 // frames.csv, updates.csv, observations.csv, objects.csv, poses.csv, the
 // trajectories' TUM files (and trajectory_metric.tum) and summary.json into
 // `out_dir` (created if needed). Errors name the file.
-core::Result<bool> writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir);
+core::Status writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir);
 
 }  // namespace scaled::tools

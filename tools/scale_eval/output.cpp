@@ -25,6 +25,7 @@ namespace scaled::tools {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 
 namespace {
 
@@ -91,13 +92,13 @@ public:
     explicit CsvFile(const std::filesystem::path& path) : path_(path), out_(path) {}
     [[nodiscard]] bool open() const { return out_.is_open(); }
     void line(const std::string& s) { out_ << s << '\n'; }
-    Result<bool> close() {
+    Status close() {
         out_.close();
         if (out_.fail()) {
             return makeError(ErrorCode::kIo,
                              path_.string() + ": write failed: " + drivers::base::errnoText(errno));
         }
-        return true;
+        return {};
     }
 
 private:
@@ -386,8 +387,7 @@ std::string toJson(const EvalResult& r, const EvalOptions& options) {
     return s;
 }
 
-Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
-                          const std::string& out_dir) {
+Status writeOutputs(const EvalResult& r, const EvalOptions& options, const std::string& out_dir) {
     if (auto ok = createOutputDir(out_dir); !ok) {
         return ok;
     }
@@ -438,7 +438,7 @@ Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
             return ok.error();
         }
     }
-    return true;
+    return {};
 }
 
 }  // namespace scaled::tools

@@ -245,7 +245,7 @@ std::optional<double> truthScale(std::span<const core::Vec3> est, std::span<cons
 // JSON summary (one object, one line) and the CSV files scale_eval_plot.py
 // reads (frames, updates, observations, posterior, likelihoods, summary.json).
 std::string toJson(const EvalResult& r, const EvalOptions& options);
-core::Result<bool> writeOutputs(const EvalResult& r, const EvalOptions& options,
-                                const std::string& out_dir);
+core::Status writeOutputs(const EvalResult& r, const EvalOptions& options,
+                          const std::string& out_dir);
 
 }  // namespace scaled::tools

@@ -198,8 +198,8 @@ void formatTiming(const json& doc, std::ostream& o) {
     }
 }
 
-core::Result<bool> waitUntil(int fd, short events, int interrupt_fd,
-                             std::optional<Clock::time_point> deadline) {
+core::Status waitUntil(int fd, short events, int interrupt_fd,
+                       std::optional<Clock::time_point> deadline) {
     for (;;) {
         int timeout_ms = -1;
         if (deadline) {
@@ -223,7 +223,7 @@ core::Result<bool> waitUntil(int fd, short events, int interrupt_fd,
             return makeError(ErrorCode::kDegenerate, "interrupted");
         }
         if (fds[0].revents != 0) {
-            return true;  // ready, or an error/hangup the next recv/send reports
+            return {};  // ready, or an error/hangup the next recv/send reports
         }
         if (rc == 0) {
             return makeError(ErrorCode::kIo, "timed out waiting for the daemon");
@@ -710,12 +710,11 @@ core::Result<Client> Client::connect(const std::string& path,
     }
 }
 
-core::Result<bool> Client::waitFor(short events, std::optional<Clock::time_point> deadline) {
+core::Status Client::waitFor(short events, std::optional<Clock::time_point> deadline) {
     return waitUntil(fd_.get(), events, interrupt_fd_, deadline);
 }
 
-core::Result<bool> Client::sendLine(std::string_view line,
-                                    std::optional<Clock::time_point> deadline) {
+core::Status Client::sendLine(std::string_view line, std::optional<Clock::time_point> deadline) {
     std::string data(line);
     data += '\n';
     std::size_t sent = 0;
@@ -740,7 +739,7 @@ core::Result<bool> Client::sendLine(std::string_view line,
         }
         return makeError(ErrorCode::kIo, std::string("send: ") + drivers::base::errnoText(errno));
     }
-    return true;
+    return {};
 }
 
 core::Result<std::string> Client::readLine(std::optional<Clock::time_point> deadline) {

@@ -176,7 +176,7 @@ public:
     void setInterruptFd(int fd) { interrupt_fd_ = fd; }
 
     // Sends `line` plus '\n'.
-    core::Result<bool> sendLine(std::string_view line, std::optional<Clock::time_point> deadline);
+    core::Status sendLine(std::string_view line, std::optional<Clock::time_point> deadline);
 
     // The next line without its '\n'. kIo with "closed" in the message when
     // the peer closed the connection (`eof()` is then true), kIo on a timeout,
@@ -190,8 +190,9 @@ public:
 
 private:
     explicit Client(int fd) : fd_(fd) {}
-    // Waits for `events` on the socket; false with `error` set otherwise.
-    core::Result<bool> waitFor(short events, std::optional<Clock::time_point> deadline);
+    // Waits for `events` on the socket: ok when ready, an error on timeout,
+    // interruption or a failed poll.
+    core::Status waitFor(short events, std::optional<Clock::time_point> deadline);
 
     drivers::base::UniqueFd fd_;
     int interrupt_fd_ = -1;

@@ -235,7 +235,7 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
     return result;
 }
 
-core::Result<bool> writeWindowScales(const std::filesystem::path& path, const SlamRunResult& r) {
+core::Status writeWindowScales(const std::filesystem::path& path, const SlamRunResult& r) {
     if (!r.window_scale) {
         return core::makeError(core::ErrorCode::kInvalidArgument,
                                path.string() + ": the run has no window scale");
@@ -258,7 +258,7 @@ core::Result<bool> writeWindowScales(const std::filesystem::path& path, const Sl
     if (!f) {
         return core::makeError(core::ErrorCode::kIo, path.string() + ": write failed");
     }
-    return true;
+    return {};
 }
 
 std::string toJson(const SlamRunResult& r, const std::string& dataset) {

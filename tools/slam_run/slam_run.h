@@ -80,7 +80,7 @@ core::Result<SlamRunResult> runSlam(drivers::source::FrameSource& source,
 
 // The sliding-window scale as CSV: `t_s,scale` (the time of each window's
 // last frame; an empty scale where the window was degenerate).
-core::Result<bool> writeWindowScales(const std::filesystem::path& path, const SlamRunResult& r);
+core::Status writeWindowScales(const std::filesystem::path& path, const SlamRunResult& r);
 
 // The JSON summary slam-run prints (one object, one line).
 std::string toJson(const SlamRunResult& r, const std::string& dataset);

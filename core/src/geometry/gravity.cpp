@@ -36,7 +36,7 @@ bool finite(const Vec3& v) {
     return v.allFinite();
 }
 
-Result<bool> checkOptions(const GravityOptions& o) {
+Status checkOptions(const GravityOptions& o) {
     const auto bad = [](const std::string& what) {
         return makeError(ErrorCode::kInvalidArgument, "gravity: " + what);
     };
@@ -58,11 +58,11 @@ Result<bool> checkOptions(const GravityOptions& o) {
                        ": must be finite and > 0");
         }
     }
-    return true;
+    return {};
 }
 
 // R_ItoC a rotation, the samples in time order, at least one.
-Result<bool> checkInputs(std::span<const ImuSample> samples, const Mat3& R_ItoC) {
+Status checkInputs(std::span<const ImuSample> samples, const Mat3& R_ItoC) {
     const RotationDefect defect = rotationDefect(R_ItoC);
     if (!R_ItoC.allFinite() || !isRotation(defect)) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -81,7 +81,7 @@ Result<bool> checkInputs(std::span<const ImuSample> samples, const Mat3& R_ItoC)
     if (samples.empty()) {
         return makeError(ErrorCode::kDegenerate, "gravity: no accelerometer samples");
     }
-    return true;
+    return {};
 }
 
 // The samples in the window [t_begin_ns, t_end_ns] that the options select.

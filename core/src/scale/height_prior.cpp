@@ -128,17 +128,17 @@ Result<HeightPrior> HeightPrior::fromNormal(std::string class_name, Scalar mean_
     return fromHistogram(std::move(class_name), heights, probs, width, upright);
 }
 
-Result<bool> HeightPrior::setPartialProbability(Scalar probability) {
+Status HeightPrior::setPartialProbability(Scalar probability) {
     if (!(probability < 1) || !std::isfinite(probability)) {
         return makeError(ErrorCode::kInvalidArgument,
                          "prior '" + class_name_ + "': partial_probability must be < 1 (got " +
                              std::to_string(probability) + ")");
     }
     partial_probability_ = probability < 0 ? Scalar(-1) : probability;
-    return true;
+    return {};
 }
 
-Result<bool> HeightPrior::setWidth(Scalar mean_m, Scalar std_m) {
+Status HeightPrior::setWidth(Scalar mean_m, Scalar std_m) {
     if (!(mean_m >= 0) || !std::isfinite(mean_m) || !(std_m >= 0) || !std::isfinite(std_m) ||
         (mean_m == 0 && std_m != 0)) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -148,7 +148,7 @@ Result<bool> HeightPrior::setWidth(Scalar mean_m, Scalar std_m) {
     }
     width_mean_m_ = mean_m;
     width_std_m_ = std_m;
-    return true;
+    return {};
 }
 
 Scalar HeightPrior::relativeSpread() const {

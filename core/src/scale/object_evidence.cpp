@@ -69,7 +69,7 @@ const char* toString(ObjectState state) {
     return "unknown";
 }
 
-Result<bool> validate(const ObjectConfig& c) {
+Status validate(const ObjectConfig& c) {
     using L = ObjectLimits;
     const LimitCheck checks[] = {
         {"max_objects", static_cast<double>(c.max_objects), L::max_objects},
@@ -101,7 +101,7 @@ Result<bool> validate(const ObjectConfig& c) {
     if (!(c.epipolar_depth_max > c.epipolar_depth_min)) {
         return invalid("epipolar_depth_min", c.epipolar_depth_min, "below epipolar_depth_max");
     }
-    return true;
+    return {};
 }
 
 Result<ObjectEvidence> ObjectEvidence::create(
@@ -138,7 +138,7 @@ ObjectEvidence::ObjectEvidence(const ObjectConfig& config, const ExtentConfig& e
                         static_cast<std::size_t>(config.max_objects));
 }
 
-Result<bool> ObjectEvidence::buildPriors(const PriorTable& priors) {
+Status ObjectEvidence::buildPriors(const PriorTable& priors) {
     std::vector<ApparentHeightPrior> apparent;
     std::vector<Scalar> ratio;
     std::vector<Scalar> spread;
@@ -166,10 +166,10 @@ Result<bool> ObjectEvidence::buildPriors(const PriorTable& priors) {
         }
         t.dirty = t.active;
     }
-    return true;
+    return {};
 }
 
-Result<bool> ObjectEvidence::setPriors(const PriorTable& priors) {
+Status ObjectEvidence::setPriors(const PriorTable& priors) {
     return buildPriors(priors);
 }
 

@@ -106,14 +106,14 @@ void ScaleEstimator::reset() {
     }
 }
 
-Result<bool> ScaleEstimator::setPriors(PriorTable priors) {
+Status ScaleEstimator::setPriors(PriorTable priors) {
     if (objects_) {
         if (auto ok = objects_->setPriors(priors); !ok) {
             return ok;
         }
     }
     priors_ = std::move(priors);
-    return true;
+    return {};
 }
 
 const HeightPrior* ScaleEstimator::priorFor(const Detection& det) const {

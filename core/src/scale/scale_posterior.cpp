@@ -29,7 +29,7 @@ const char* toString(PosteriorArithmetic arithmetic) {
     return "unknown";
 }
 
-Result<bool> validate(const PosteriorConfig& config) {
+Status validate(const PosteriorConfig& config) {
     if (!PosteriorLimits::converged_rel_width.contains(config.converged_rel_width)) {
         return makeError(ErrorCode::kInvalidArgument,
                          "posterior: converged_rel_width must be " +
@@ -45,7 +45,7 @@ Result<bool> validate(const PosteriorConfig& config) {
                              PosteriorLimits::drift_sigma_log.text() + " (got " +
                              std::to_string(config.drift_sigma_log) + ")");
     }
-    return true;
+    return {};
 }
 
 Result<ScalePosterior> ScalePosterior::create(const PosteriorConfig& config) {

@@ -57,7 +57,7 @@ std::optional<Error> outOfLimits(const SlamConfig& c) {
 
 }  // namespace
 
-Result<bool> validate(const SlamConfig& c) {
+Status validate(const SlamConfig& c) {
     if (auto bad = outOfLimits(c)) {
         return *bad;
     }
@@ -71,7 +71,7 @@ Result<bool> validate(const SlamConfig& c) {
         return fieldError("ransac_min_hypotheses", Scalar(c.ransac_min_hypotheses),
                           "in [1, ransac_max_hypotheses]");
     }
-    return true;
+    return {};
 }
 
 const char* toString(SlamHealth health) {

@@ -25,7 +25,7 @@ Result<SlamSnapshot> SlamSnapshot::create(int max_features) {
     return s;
 }
 
-Result<bool> SlamSnapshot::reserve(int max_features) {
+Status SlamSnapshot::reserve(int max_features) {
     if (max_features < 0 || max_features > kMaxCapacity) {
         return makeError(ErrorCode::kInvalidArgument,
                          "SlamSnapshot: max_features = " + std::to_string(max_features) +
@@ -36,7 +36,7 @@ Result<bool> SlamSnapshot::reserve(int max_features) {
     const auto n = static_cast<std::size_t>(max_features);
     features_.reserve(n);
     info_.reserve(n);
-    return true;
+    return {};
 }
 
 void SlamSnapshot::clear() {

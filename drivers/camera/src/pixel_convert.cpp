@@ -126,7 +126,7 @@ Layout layoutOf(const RawImage& raw) {
     return layout;
 }
 
-core::Result<bool> checkRaw(const RawImage& raw, const std::string& source) {
+core::Status checkRaw(const RawImage& raw, const std::string& source) {
     const char* name = toString(raw.format);
     if (raw.format == PixelFormat::kAuto) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -151,7 +151,7 @@ core::Result<bool> checkRaw(const RawImage& raw, const std::string& source) {
         return makeError(ErrorCode::kInvalidArgument, source + ": no data");
     }
     if (raw.format == PixelFormat::kMjpeg) {
-        return true;
+        return {};
     }
     const Layout layout = layoutOf(raw);
     for (std::size_t i = 0; i < layout.count; ++i) {
@@ -181,7 +181,7 @@ core::Result<bool> checkRaw(const RawImage& raw, const std::string& source) {
                                                  sizeText(raw.width_px, raw.height_px) +
                                                  " image needs " + std::to_string(need));
         }
-        return true;
+        return {};
     }
     for (std::size_t i = 0; i < layout.count; ++i) {
         const PlaneLayout& p = layout.planes.at(i);
@@ -197,7 +197,7 @@ core::Result<bool> checkRaw(const RawImage& raw, const std::string& source) {
                                                  " image needs " + std::to_string(p.bytesNeeded()));
         }
     }
-    return true;
+    return {};
 }
 
 // A Mat over a plane's rows (read only).
@@ -236,8 +236,8 @@ bool isPacked(const Layout& layout) {
     return true;
 }
 
-core::Result<bool> convertYuv420(const RawImage& raw, const Layout& layout, cv::Mat& gray,
-                                 cv::Mat& color) {
+core::Status convertYuv420(const RawImage& raw, const Layout& layout, cv::Mat& gray,
+                           cv::Mat& color) {
     const int w = raw.width_px;
     const int h = raw.height_px;
     planeMat(layout.planes[0], w, CV_8UC1).copyTo(gray);
@@ -257,7 +257,7 @@ core::Result<bool> convertYuv420(const RawImage& raw, const Layout& layout, cv::
         } else {
             cv::cvtColor(packPlanes(layout, w, h), color, cv::COLOR_YUV2BGR_NV12);
         }
-        return true;
+        return {};
     }
     // I420. OpenCV reads the chroma rows of a strided I420 Mat two to a Y
     // stride, not at half the Y stride as these buffers have them: unless
@@ -268,11 +268,11 @@ core::Result<bool> convertYuv420(const RawImage& raw, const Layout& layout, cv::
     } else {
         cv::cvtColor(packPlanes(layout, w, h), color, cv::COLOR_YUV2BGR_I420);
     }
-    return true;
+    return {};
 }
 
-core::Result<bool> decodeMjpeg(const RawImage& raw, const std::string& source, cv::Mat& gray,
-                               cv::Mat& color) {
+core::Status decodeMjpeg(const RawImage& raw, const std::string& source, cv::Mat& gray,
+                         cv::Mat& color) {
     const cv::Mat encoded(1, static_cast<int>(raw.size_bytes), CV_8UC1, readOnly(raw.data));
     // imdecode writes into `color` (re-using its buffer when the decoder allows).
     cv::imdecode(encoded, cv::IMREAD_COLOR, &color);
@@ -289,7 +289,7 @@ core::Result<bool> decodeMjpeg(const RawImage& raw, const std::string& source, c
                                              sizeText(raw.width_px, raw.height_px));
     }
     cv::cvtColor(color, gray, cv::COLOR_BGR2GRAY);
-    return true;
+    return {};
 }
 
 }  // namespace
@@ -312,12 +312,12 @@ std::size_t rawImageBytes(PixelFormat format, int width_px, int height_px,
     return offset + layout.planes.at(layout.count - 1).bytesNeeded();
 }
 
-core::Result<bool> checkRawImage(const RawImage& raw, const std::string& source) {
+core::Status checkRawImage(const RawImage& raw, const std::string& source) {
     return checkRaw(raw, source);
 }
 
-core::Result<bool> convertRawImage(const RawImage& raw, const std::string& source, cv::Mat& gray,
-                                   cv::Mat& color) {
+core::Status convertRawImage(const RawImage& raw, const std::string& source, cv::Mat& gray,
+                             cv::Mat& color) {
     auto checked = checkRaw(raw, source);
     if (!checked) {
         return checked.error();
@@ -335,7 +335,7 @@ core::Result<bool> convertRawImage(const RawImage& raw, const std::string& sourc
                 const cv::Mat yuyv = planeMat(first, w, CV_8UC2);
                 cv::extractChannel(yuyv, gray, 0);
                 cv::cvtColor(yuyv, color, cv::COLOR_YUV2BGR_YUYV);
-                return true;
+                return {};
             }
             case PixelFormat::kNv12:
             case PixelFormat::kYuv420:
@@ -343,31 +343,31 @@ core::Result<bool> convertRawImage(const RawImage& raw, const std::string& sourc
             case PixelFormat::kGrey: {
                 planeMat(first, w, CV_8UC1).copyTo(gray);
                 cv::cvtColor(gray, color, cv::COLOR_GRAY2BGR);
-                return true;
+                return {};
             }
             case PixelFormat::kRgb888: {  // B, G, R: OpenCV's order
                 const cv::Mat bgr = planeMat(first, w, CV_8UC3);
                 bgr.copyTo(color);
                 cv::cvtColor(bgr, gray, cv::COLOR_BGR2GRAY);
-                return true;
+                return {};
             }
             case PixelFormat::kBgr888: {  // R, G, B
                 const cv::Mat rgb = planeMat(first, w, CV_8UC3);
                 cv::cvtColor(rgb, color, cv::COLOR_RGB2BGR);
                 cv::cvtColor(rgb, gray, cv::COLOR_RGB2GRAY);
-                return true;
+                return {};
             }
             case PixelFormat::kXrgb8888: {  // B, G, R, X
                 const cv::Mat bgrx = planeMat(first, w, CV_8UC4);
                 cv::cvtColor(bgrx, color, cv::COLOR_BGRA2BGR);
                 cv::cvtColor(bgrx, gray, cv::COLOR_BGRA2GRAY);
-                return true;
+                return {};
             }
             case PixelFormat::kXbgr8888: {  // R, G, B, X
                 const cv::Mat rgbx = planeMat(first, w, CV_8UC4);
                 cv::cvtColor(rgbx, color, cv::COLOR_RGBA2BGR);
                 cv::cvtColor(rgbx, gray, cv::COLOR_RGBA2GRAY);
-                return true;
+                return {};
             }
             case PixelFormat::kMjpeg:
             case PixelFormat::kAuto:

@@ -764,8 +764,8 @@ core::Result<std::uint32_t> chooseFourcc(const std::string& who, const CameraOpt
 // Sets the frame rate: the closest the device lists (S_PARM then picks its
 // own closest anyway; asking for a listed one makes the choice ours and
 // reportable), read back from the driver's answer.
-core::Result<bool> setFrameRate(int fd, const std::string& who, const CameraOptions& opt,
-                                Negotiated& neg) {
+core::Status setFrameRate(int fd, const std::string& who, const CameraOptions& opt,
+                          Negotiated& neg) {
     v4l2_streamparm parm{};
     parm.type = kCaptureType;
     if (xioctl(fd, VIDIOC_G_PARM, &parm) != 0 ||
@@ -774,7 +774,7 @@ core::Result<bool> setFrameRate(int fd, const std::string& who, const CameraOpti
         neg.notes.push_back(who + ": the device cannot be asked for a frame rate; it runs at " +
                             (neg.fps > 0 ? fpsText(neg.fps) + " fps" : "its own rate") +
                             " (asked for " + fpsText(opt.fps) + ")");
-        return true;
+        return {};
     }
     const Intervals iv = enumIntervals(fd, neg.fourcc, static_cast<std::uint32_t>(neg.width_px),
                                        static_cast<std::uint32_t>(neg.height_px));
@@ -814,12 +814,12 @@ core::Result<bool> setFrameRate(int fd, const std::string& who, const CameraOpti
             "; using " + (neg.fps > 0 ? fpsText(neg.fps) + " fps" : "the device's rate") +
             ", the closest" + (offered.empty() ? std::string() : " (offered: " + offered + ")"));
     }
-    return true;
+    return {};
 }
 
 // Maps the buffers, queues them and starts streaming.
-core::Result<bool> startStreaming(CaptureStream& s, const std::string& who,
-                                  const CameraOptions& opt, Negotiated& neg) {
+core::Status startStreaming(CaptureStream& s, const std::string& who, const CameraOptions& opt,
+                            Negotiated& neg) {
     const int fd = s.fd.get();
     v4l2_requestbuffers req{};
     req.count = static_cast<std::uint32_t>(opt.buffers);
@@ -890,7 +890,7 @@ core::Result<bool> startStreaming(CaptureStream& s, const std::string& who,
     if (xioctl(fd, VIDIOC_STREAMON, &type) != 0) {
         return ioctlError(who, "VIDIOC_STREAMON", errno);
     }
-    return true;
+    return {};
 }
 
 // `path` exists and is a character device.
@@ -1061,7 +1061,7 @@ core::Result<Opened> openStream(const std::string& path, const CameraOptions& op
     return out;
 }
 
-core::Result<bool> checkOptions(const CameraOptions& o) {
+core::Status checkOptions(const CameraOptions& o) {
     const std::string who = "camera \"" + o.device + "\"";
     if (o.device.empty()) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -1087,7 +1087,7 @@ core::Result<bool> checkOptions(const CameraOptions& o) {
                                                           std::to_string(o.frame_timeout_s) +
                                                           " s (must be in (0, 3600])");
     }
-    return true;
+    return {};
 }
 
 // ---------------------------------------------------------------- camera
@@ -1112,7 +1112,7 @@ public:
     }
 
     // Looks the device up (by card name or path) and starts streaming.
-    core::Result<bool> start(bool reopening) {
+    core::Status start(bool reopening) {
         std::string path = options_.device;
         if (by_name_) {
             auto found = findByCard(options_.device, reopening);
@@ -1137,7 +1137,7 @@ public:
         const std::lock_guard<std::mutex> lock(text_mutex_);
         describe_ = neg_.who();
         mode_ = neg_.mode();
-        return true;
+        return {};
     }
 
     core::Result<bool> next(source::Frame& frame) override {
@@ -1218,7 +1218,11 @@ public:
             return makeError(ErrorCode::kUnavailable, describe() + ": stopped");
         }
         stream_.reset();
-        return start(true);
+        auto started = start(true);
+        if (!started) {
+            return started.error();
+        }
+        return true;
     }
 
     void stop() override {
@@ -1247,12 +1251,12 @@ private:
         return lose("no frame for " + secondsText(options_.frame_timeout_s) + " s");
     }
 
-    core::Result<bool> requeue(v4l2_buffer& buf) {
+    core::Status requeue(v4l2_buffer& buf) {
         buf.bytesused = 0;
         if (xioctl(stream_->fd.get(), VIDIOC_QBUF, &buf) != 0) {
             return lose("device lost (VIDIOC_QBUF: " + errnoText(errno) + ")");
         }
-        return true;
+        return {};
     }
 
     core::Result<bool> deliver(v4l2_buffer& buf, source::Frame& frame) {

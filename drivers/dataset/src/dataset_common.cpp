@@ -24,6 +24,7 @@ namespace scaled::drivers::dataset::detail {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 
 namespace {
 
@@ -301,7 +302,7 @@ std::string sizeText(int width_px, int height_px) {
     return std::to_string(width_px) + "x" + std::to_string(height_px);
 }
 
-Result<bool> toGrayAndColor(const cv::Mat& img, const std::string& source, source::Frame& frame) {
+Status toGrayAndColor(const cv::Mat& img, const std::string& source, source::Frame& frame) {
     if (img.empty() || img.depth() != CV_8U) {
         return makeError(ErrorCode::kParse, source + ": expected a non-empty 8-bit image");
     }
@@ -328,20 +329,20 @@ Result<bool> toGrayAndColor(const cv::Mat& img, const std::string& source, sourc
         return makeError(ErrorCode::kIo,
                          source + ": cannot convert image: " + std::string(e.what()));
     }
-    return true;
+    return {};
 }
 
-Result<bool> validateFps(double fps) {
+Status validateFps(double fps) {
     constexpr double kMaxFps = 1e9;  // a frame period of at least 1 ns
     if (!(std::isfinite(fps) && fps > 0 && fps <= kMaxFps)) {
         return makeError(ErrorCode::kInvalidArgument,
                          "DatasetOptions.folder_fps must be finite and in (0, 1e9] Hz (got " +
                              shortNumber(fps) + ")");
     }
-    return true;
+    return {};
 }
 
-Result<bool> trimMissingTail(ReplayIndex& index, const DatasetOptions& opt) {
+Status trimMissingTail(ReplayIndex& index, const DatasetOptions& opt) {
     const std::size_t listed = index.frames.size();
     index.info.listed_count = listed;
     if (listed == 0) {
@@ -368,20 +369,20 @@ Result<bool> trimMissingTail(ReplayIndex& index, const DatasetOptions& opt) {
                                    " images exist (partial download?): replaying those");
     }
     index.info.frame_count = index.frames.size();
-    return true;
+    return {};
 }
 
-Result<bool> chooseIntrinsics(source::SequenceInfo& info,
-                              const std::optional<core::CameraIntrinsics>& from_dataset,
-                              std::string_view dataset_source, const DatasetOptions& opt,
-                              const std::function<Result<cv::Size>()>& image_size) {
+Status chooseIntrinsics(source::SequenceInfo& info,
+                        const std::optional<core::CameraIntrinsics>& from_dataset,
+                        std::string_view dataset_source, const DatasetOptions& opt,
+                        const std::function<Result<cv::Size>()>& image_size) {
     std::optional<core::CameraIntrinsics> k = opt.intrinsics ? opt.intrinsics : from_dataset;
     const std::string source =
         opt.intrinsics ? std::string("DatasetOptions.intrinsics") : std::string(dataset_source);
     if (!k) {
         info.has_intrinsics = false;
         info.notes.push_back("no intrinsics in the dataset: the caller must supply them");
-        return true;
+        return {};
     }
     if (k->width_px == 0 || k->height_px == 0) {
         auto size = image_size();
@@ -397,12 +398,12 @@ Result<bool> chooseIntrinsics(source::SequenceInfo& info,
     }
     info.intrinsics = *k;
     info.has_intrinsics = true;
-    return true;
+    return {};
 }
 
-Result<bool> resolveIntrinsics(ReplayIndex& index,
-                               const std::optional<core::CameraIntrinsics>& from_dataset,
-                               std::string_view dataset_source, const DatasetOptions& opt) {
+Status resolveIntrinsics(ReplayIndex& index,
+                         const std::optional<core::CameraIntrinsics>& from_dataset,
+                         std::string_view dataset_source, const DatasetOptions& opt) {
     return chooseIntrinsics(
         index.info, from_dataset, dataset_source, opt, [&]() -> Result<cv::Size> {
             const auto first =

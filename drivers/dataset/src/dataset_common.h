@@ -73,14 +73,13 @@ std::string datasetName(const std::filesystem::path& dir);
 
 // frame.gray (CV_8UC1) and frame.color (CV_8UC3 BGR) from a decoded 8-bit
 // image of 1, 3 (BGR) or 4 (BGRA) channels. Errors name `source`.
-core::Result<bool> toGrayAndColor(const cv::Mat& img, const std::string& source,
-                                  source::Frame& frame);
+core::Status toGrayAndColor(const cv::Mat& img, const std::string& source, source::Frame& frame);
 
 // "WxH".
 std::string sizeText(int width_px, int height_px);
 
 // DatasetOptions::folder_fps: finite and in (0, 1e9] (1 ns frame period).
-core::Result<bool> validateFps(double fps);
+core::Status validateFps(double fps);
 
 // One frame of a replayed sequence, everything but the pixels.
 struct ReplayFrame {
@@ -104,29 +103,29 @@ struct ReplayIndex {
 // Applies DatasetOptions::drop_missing_tail: frames after the last one whose
 // image exists are dropped (a partial download) and a note says so. Fails
 // when the index lists no frame or none of its images exists.
-core::Result<bool> trimMissingTail(ReplayIndex& index, const DatasetOptions& opt);
+core::Status trimMissingTail(ReplayIndex& index, const DatasetOptions& opt);
 
 // Chooses the intrinsics (opt.intrinsics overrides `from_dataset`), takes the
 // image size from `image_size` when it is not given (its errors are returned
 // unchanged), validates them and fills info.intrinsics / info.has_intrinsics
 // (or adds the "no intrinsics" note). `dataset_source` names where
 // `from_dataset` came from, for error messages.
-core::Result<bool> chooseIntrinsics(source::SequenceInfo& info,
-                                    const std::optional<core::CameraIntrinsics>& from_dataset,
-                                    std::string_view dataset_source, const DatasetOptions& opt,
-                                    const std::function<core::Result<cv::Size>()>& image_size);
+core::Status chooseIntrinsics(source::SequenceInfo& info,
+                              const std::optional<core::CameraIntrinsics>& from_dataset,
+                              std::string_view dataset_source, const DatasetOptions& opt,
+                              const std::function<core::Result<cv::Size>()>& image_size);
 
 // chooseIntrinsics() for a replayed index: the image size comes from the
 // first existing image.
-core::Result<bool> resolveIntrinsics(ReplayIndex& index,
-                                     const std::optional<core::CameraIntrinsics>& from_dataset,
-                                     std::string_view dataset_source, const DatasetOptions& opt);
+core::Status resolveIntrinsics(ReplayIndex& index,
+                               const std::optional<core::CameraIntrinsics>& from_dataset,
+                               std::string_view dataset_source, const DatasetOptions& opt);
 
 // resolveIntrinsics() with the intrinsics of `camera_file` (camera.txt
 // format, readOptionalCameraFile) when it exists. Defined in dataset_tum.cpp.
-core::Result<bool> resolveIntrinsicsFromCameraFile(ReplayIndex& index,
-                                                   const std::filesystem::path& camera_file,
-                                                   const DatasetOptions& opt);
+core::Status resolveIntrinsicsFromCameraFile(ReplayIndex& index,
+                                             const std::filesystem::path& camera_file,
+                                             const DatasetOptions& opt);
 
 // Nanoseconds from seconds; fails on non-finite, negative or huge values.
 core::Result<int64_t> toleranceNs(double seconds);

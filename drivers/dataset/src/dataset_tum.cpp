@@ -22,6 +22,7 @@ using core::ErrorCode;
 using core::makeError;
 using core::Result;
 using core::Scalar;
+using core::Status;
 
 namespace {
 
@@ -146,9 +147,8 @@ Result<std::optional<CameraIntrinsics>> readOptionalCameraFile(
 
 namespace detail {
 
-Result<bool> resolveIntrinsicsFromCameraFile(ReplayIndex& index,
-                                             const std::filesystem::path& camera_file,
-                                             const DatasetOptions& opt) {
+Status resolveIntrinsicsFromCameraFile(ReplayIndex& index, const std::filesystem::path& camera_file,
+                                       const DatasetOptions& opt) {
     auto from_dataset = readOptionalCameraFile(camera_file);
     if (!from_dataset) {
         return from_dataset.error();

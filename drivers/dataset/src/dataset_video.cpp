@@ -21,6 +21,7 @@ namespace scaled::drivers::dataset {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 
 namespace {
 
@@ -227,7 +228,7 @@ public:
     }
 
 private:
-    Result<bool> reopen() {
+    Status reopen() {
         try {
             cap_.release();
             if (!openVideoFile(cap_, file_.string())) {
@@ -243,7 +244,7 @@ private:
         last_index_ = 0;
         ended_ = false;
         pending_.reset();
-        return true;
+        return {};
     }
 
     // Grabs the frame at pos_; true: grabbed, its time in grabbed_t_ns_.

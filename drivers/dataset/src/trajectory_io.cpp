@@ -28,6 +28,7 @@ using core::CameraPose;
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 
 namespace {
 
@@ -255,8 +256,8 @@ std::string formatTimestampS(int64_t t_ns) {
     return out;
 }
 
-Result<bool> writeTumTrajectory(const std::filesystem::path& path, std::span<const int64_t> t_ns,
-                                std::span<const CameraPose> poses) {
+Status writeTumTrajectory(const std::filesystem::path& path, std::span<const int64_t> t_ns,
+                          std::span<const CameraPose> poses) {
     const std::string name = path.string();
     if (t_ns.size() != poses.size()) {
         return makeError(ErrorCode::kInvalidArgument, name + ": " + std::to_string(t_ns.size()) +
@@ -317,7 +318,7 @@ Result<bool> writeTumTrajectory(const std::filesystem::path& path, std::span<con
         ::unlink(tmp.c_str());
         return makeError(ErrorCode::kIo, name + ": cannot rename " + tmp + ": " + ec.message());
     }
-    return true;
+    return {};
 }
 
 Result<std::vector<std::pair<int64_t, CameraPose>>> readTumTrajectory(

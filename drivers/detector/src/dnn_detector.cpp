@@ -22,6 +22,7 @@ using core::ErrorCode;
 using core::makeError;
 using core::Result;
 using core::Scalar;
+using core::Status;
 
 namespace {
 
@@ -61,7 +62,7 @@ std::string floatText(float v) {
     return os.str();
 }
 
-Result<bool> checkReadableFile(const std::filesystem::path& path, std::string_view what) {
+Status checkReadableFile(const std::filesystem::path& path, std::string_view what) {
     std::error_code ec;
     if (path.empty()) {
         return makeError(ErrorCode::kInvalidArgument, std::string(what) + " path is empty");
@@ -83,7 +84,7 @@ Result<bool> checkReadableFile(const std::filesystem::path& path, std::string_vi
         return makeError(ErrorCode::kIo,
                          path.string() + ": cannot open " + std::string(what) + " for reading");
     }
-    return true;
+    return {};
 }
 
 // OpenCV's Darknet importer reads the weights without checking their length:
@@ -92,7 +93,7 @@ Result<bool> checkReadableFile(const std::filesystem::path& path, std::string_vi
 // int32 before) and one float32 per parameter of the convolution and batch
 // norm layers, which is exactly what the imported layers hold (the region
 // layers' anchors come from the cfg).
-Result<bool> checkDarknetWeightsSize(cv::dnn::Net& net, const std::filesystem::path& weights) {
+Status checkDarknetWeightsSize(cv::dnn::Net& net, const std::filesystem::path& weights) {
     std::ifstream in(weights, std::ios::binary);
     std::array<std::int32_t, 3> version{};
     if (!in.read(reinterpret_cast<char*>(version.data()), sizeof version)) {
@@ -122,7 +123,7 @@ Result<bool> checkDarknetWeightsSize(cv::dnn::Net& net, const std::filesystem::p
                 " bytes but its cfg needs " + std::to_string(needed_bytes) +
                 (bytes < needed_bytes ? " (truncated?)" : " (weights of another cfg?)"));
     }
-    return true;
+    return {};
 }
 
 }  // namespace
@@ -155,7 +156,7 @@ ModelFamily familyFromPath(const std::filesystem::path& model_path) {
     return ext == ".cfg" ? ModelFamily::kDarknet : ModelFamily::kYolox;
 }
 
-Result<bool> validate(const DetectorConfig& config) {
+Status validate(const DetectorConfig& config) {
     using L = DetectorLimits;
     const int s = config.input_size_px;
     if (!L::input_size_px.contains(s) || s % kInputMultiple != 0) {
@@ -198,7 +199,7 @@ Result<bool> validate(const DetectorConfig& config) {
         return makeError(ErrorCode::kInvalidArgument,
                          fieldError("model_path", "\"\"", "a model file is required"));
     }
-    return true;
+    return {};
 }
 
 Result<std::vector<std::string>> readClassNames(const std::filesystem::path& names_file) {
@@ -508,8 +509,8 @@ Result<std::unique_ptr<DnnDetector>> DnnDetector::create(const DetectorConfig& c
     return std::unique_ptr<DnnDetector>(new DnnDetector(std::move(impl)));
 }
 
-Result<bool> DnnDetector::detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                                 DetectionResult& out) {
+Status DnnDetector::detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                           DetectionResult& out) {
     out.frame_id = frame_id;
     out.t_ns = t_ns;
     out.width_px = image.cols;
@@ -555,7 +556,7 @@ Result<bool> DnnDetector::detect(const cv::Mat& image, std::int64_t frame_id, st
                                              " failed on frame " + std::to_string(frame_id) +
                                              " (OpenCV: " + openCvReason(e) + ")");
     }
-    return true;
+    return {};
 }
 
 std::size_t toEstimatorDetections(const DetectionResult& result, std::span<core::Detection> out) {

@@ -21,7 +21,7 @@ id_t threadId() {
 
 }  // namespace
 
-core::Result<bool> setThreadNice(int nice) {
+core::Status setThreadNice(int nice) {
     if (nice < kMinNice || nice > kMaxNice) {
         return core::makeError(core::ErrorCode::kInvalidArgument,
                                "detector.nice: must be an integer in [" + std::to_string(kMinNice) +
@@ -34,7 +34,7 @@ core::Result<bool> setThreadNice(int nice) {
                                "cannot set the thread's nice value to " + std::to_string(nice) +
                                    ": " + std::error_code(err, std::generic_category()).message());
     }
-    return true;
+    return {};
 }
 
 int threadNice() {
@@ -44,7 +44,7 @@ int threadNice() {
 }
 
 core::Result<int> startOpenCvWorkersAtNice(int nice) {
-    core::Result<bool> set = true;
+    core::Status set;
     try {
         std::thread starter([&] {
             ::pthread_setname_np(::pthread_self(), "scaled-dnn");

@@ -23,6 +23,7 @@ namespace scaled::drivers::fieldlog {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 
 namespace {
 
@@ -229,7 +230,7 @@ core::Error FieldLogWriter::setFault(const std::filesystem::path& path, const ch
     return makeError(ErrorCode::kIo, fault_);
 }
 
-Result<bool> FieldLogWriter::openNext() {
+Status FieldLogWriter::openNext() {
     const std::uint64_t seq = (closed_.empty() ? 0 : closed_.back().sequence) + 1;
     FieldLogFile next;
     next.sequence = seq;
@@ -244,10 +245,10 @@ Result<bool> FieldLogWriter::openNext() {
     }
     fd_.reset(fd);
     current_ = std::move(next);
-    return true;
+    return {};
 }
 
-Result<bool> FieldLogWriter::rotate() {
+Status FieldLogWriter::rotate() {
     if (::fdatasync(fd_.get()) != 0) {
         return setFault(current_.path, "fdatasync failed", errno);
     }
@@ -262,7 +263,7 @@ Result<bool> FieldLogWriter::rotate() {
     return enforceTotal();
 }
 
-Result<bool> FieldLogWriter::writeAll(std::string_view bytes) {
+Status FieldLogWriter::writeAll(std::string_view bytes) {
     const std::uint64_t before = current_.bytes;
     std::size_t done = 0;
     while (done < bytes.size()) {
@@ -282,10 +283,10 @@ Result<bool> FieldLogWriter::writeAll(std::string_view bytes) {
     }
     current_.bytes += bytes.size();
     bytes_written_ += bytes.size();
-    return true;
+    return {};
 }
 
-Result<bool> FieldLogWriter::enforceTotal() {
+Status FieldLogWriter::enforceTotal() {
     std::uint64_t total = totalBytes();
     while (total > options_.max_total_bytes && !closed_.empty()) {
         const FieldLogFile& oldest = closed_.front();
@@ -296,7 +297,7 @@ Result<bool> FieldLogWriter::enforceTotal() {
         closed_.erase(closed_.begin());
         ++files_deleted_;
     }
-    return true;
+    return {};
 }
 
 std::uint64_t FieldLogWriter::totalBytes() const {
@@ -307,12 +308,12 @@ std::uint64_t FieldLogWriter::totalBytes() const {
     return total;
 }
 
-Result<bool> FieldLogWriter::write(std::string_view lines) {
+Status FieldLogWriter::write(std::string_view lines) {
     if (faulted()) {
         return makeError(ErrorCode::kIo, fault_);
     }
     if (lines.empty()) {
-        return true;
+        return {};
     }
     if (lines.back() != '\n') {
         return makeError(ErrorCode::kInvalidArgument,
@@ -353,14 +354,14 @@ Result<bool> FieldLogWriter::write(std::string_view lines) {
     return enforceTotal();
 }
 
-Result<bool> FieldLogWriter::sync() {
+Status FieldLogWriter::sync() {
     if (faulted()) {
         return makeError(ErrorCode::kIo, fault_);
     }
     if (::fdatasync(fd_.get()) != 0) {
         return setFault(current_.path, "fdatasync failed", errno);
     }
-    return true;
+    return {};
 }
 
 // ---------------------------------------------------------------------------

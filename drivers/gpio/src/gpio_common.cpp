@@ -177,7 +177,7 @@ std::string chipText(const ChipInfo& chip) {
     return chip.name + " [" + chip.label + "]";
 }
 
-core::Result<bool> checkOffsets(const GpioOutputOptions& options, const ChipInfo& chip) {
+core::Status checkOffsets(const GpioOutputOptions& options, const ChipInfo& chip) {
     const std::vector<unsigned>& offsets = options.offsets;
     if (offsets.empty()) {
         return makeError(ErrorCode::kInvalidArgument, chipText(chip) + ": no lines to request");
@@ -203,7 +203,7 @@ core::Result<bool> checkOffsets(const GpioOutputOptions& options, const ChipInfo
                 chipText(chip) + ": line " + std::to_string(offsets[i]) + " given twice");
         }
     }
-    return true;
+    return {};
 }
 
 core::Error requestError(const ChipInfo& chip, const GpioOutputOptions& options, int err,

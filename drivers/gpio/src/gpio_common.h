@@ -47,7 +47,7 @@ core::Error openError(const std::string& spec, const std::string& path, int err)
 std::string chipText(const ChipInfo& chip);
 
 // Offsets present, distinct, at most kMaxLines, each below the chip's count.
-core::Result<bool> checkOffsets(const GpioOutputOptions& options, const ChipInfo& chip);
+core::Status checkOffsets(const GpioOutputOptions& options, const ChipInfo& chip);
 
 // A failed line request. `busy_detail` (for EBUSY): "line 3 is used by 'x'".
 core::Error requestError(const ChipInfo& chip, const GpioOutputOptions& options, int err,

@@ -60,7 +60,7 @@ public:
     // Releases the lines, then chip_ closes the chip (the lines belong to it).
     ~GpiodV1Outputs() override { ::gpiod_line_release_bulk(&bulk_); }
 
-    core::Result<bool> set(std::size_t index, bool active) override {
+    core::Status set(std::size_t index, bool active) override {
         if (index >= offsets_.size()) {
             return detail::indexError(info_, index, offsets_.size());
         }
@@ -76,7 +76,7 @@ public:
             values_[index] = previous;
             return detail::setError(info_, offsets_[index], err);
         }
-        return true;
+        return {};
     }
 
     [[nodiscard]] std::string describe() const override { return description_; }

@@ -78,7 +78,7 @@ public:
     GpiodV2Outputs& operator=(GpiodV2Outputs&&) = delete;
     ~GpiodV2Outputs() override = default;  // request_ releases the lines
 
-    core::Result<bool> set(std::size_t index, bool active) override {
+    core::Status set(std::size_t index, bool active) override {
         if (index >= offsets_.size()) {
             return detail::indexError(info_, index, offsets_.size());
         }
@@ -90,7 +90,7 @@ public:
                 active ? GPIOD_LINE_VALUE_ACTIVE : GPIOD_LINE_VALUE_INACTIVE) != 0) {
             return detail::setError(info_, offsets_[index], lastErrno());
         }
-        return true;
+        return {};
     }
 
     [[nodiscard]] std::string describe() const override { return description_; }

@@ -22,6 +22,7 @@ namespace scaled::drivers::imu {
 using core::ErrorCode;
 using core::makeError;
 using core::Result;
+using core::Status;
 namespace fs = std::filesystem;
 
 namespace {
@@ -122,7 +123,7 @@ Result<std::string> readAttr(const fs::path& path) {
     return text;
 }
 
-Result<bool> writeAttr(const fs::path& path, std::string_view value) {
+Status writeAttr(const fs::path& path, std::string_view value) {
     const base::UniqueFd fd(::open(path.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC));
     if (!fd.isValid()) {
         const int err = errno;
@@ -139,7 +140,7 @@ Result<bool> writeAttr(const fs::path& path, std::string_view value) {
         return makeError(codeOf(err), path.string() + ": cannot write " + quote(value) + ": " +
                                           drivers::base::errnoText(err));
     }
-    return true;
+    return {};
 }
 
 // A sysfs attribute holding one number of type T (integer, or a finite real).
@@ -795,7 +796,7 @@ core::Error IioDevice::explainEnableRefused(core::Error e) const {
     return e;
 }
 
-Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
+Status IioDevice::startBuffer(const IioBufferOptions& options) {
     const fs::path enable_file = sysfs_dir_ / "buffer" / "enable";
     if (auto ok = checkBufferFree(enable_file, options.length); !ok) {
         return ok.error();
@@ -832,7 +833,7 @@ Result<bool> IioDevice::startBuffer(const IioBufferOptions& options) {
     }
     fd_ = std::move(fd);
     pending_.clear();
-    return true;
+    return {};
 }
 
 Result<std::vector<IioScan>> IioDevice::readScans(std::size_t max_scans, int timeout_ms) {

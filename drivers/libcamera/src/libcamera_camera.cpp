@@ -342,7 +342,7 @@ public:
     }
 
     // The first open: a session, then the SequenceInfo (notes, intrinsics).
-    core::Result<bool> open() {
+    core::Status open() {
         auto started = openSession();
         if (!started) {
             return started;
@@ -362,7 +362,7 @@ public:
         info_.notes = session_notes_;
         first_width_px_ = width_px_;
         first_height_px_ = height_px_;
-        return true;
+        return {};
     }
 
     core::Result<bool> next(source::Frame& frame) override {
@@ -416,7 +416,7 @@ public:
         }
         auto started = openSession();
         if (!started) {
-            return started;
+            return started.error();
         }
         if (width_px_ != first_width_px_ || height_px_ != first_height_px_) {
             const std::string now = std::to_string(width_px_) + "x" + std::to_string(height_px_);
@@ -456,7 +456,7 @@ private:
         return error(code, what + ": " + errnoText(err));
     }
 
-    core::Result<bool> openSession() {
+    core::Status openSession() {
         auto started = startSession();
         if (!started) {
             closeSession();
@@ -466,7 +466,7 @@ private:
 
     // acquire, configure, allocate and map buffers, create requests, start,
     // queue every request. On error the caller closes what was opened.
-    core::Result<bool> startSession() {
+    core::Status startSession() {
         session_notes_.clear();
         {
             const std::lock_guard lock(mutex_);
@@ -520,7 +520,7 @@ private:
         mode_ = std::string(toString(format_)) + " " + std::to_string(width_px_) + "x" +
                 std::to_string(height_px_) + " @ " +
                 (fps > 0 ? fpsText(fps) : std::string("the camera's rate"));
-        return true;
+        return {};
     }
 
     // The formats to try, in order: the option's, or the preferred ones for auto.
@@ -618,7 +618,7 @@ private:
     }
 
     // Chooses the pixel format and validates the size; configures the camera.
-    core::Result<bool> configureStream() {
+    core::Status configureStream() {
         auto wanted = wantedFormats();
         if (!wanted) {
             return wanted.error();
@@ -642,15 +642,18 @@ private:
                 continue;
             }
             auto configured = configureFormat(candidate, format, asked, rejected);
-            if (!configured || *configured) {
-                return configured;
+            if (!configured) {
+                return configured.error();
+            }
+            if (*configured) {
+                return {};
             }
         }
         return noUsableFormatError(*wanted, asked, offered_text, rejected);
     }
 
     // Buffers from libcamera's allocator, each mapped once, one request each.
-    core::Result<bool> allocateBuffers() {
+    core::Status allocateBuffers() {
         allocator_ = std::make_unique<libcamera::FrameBufferAllocator>(camera_);
         const int count = allocator_->allocate(stream_);
         if (count < 0) {
@@ -682,7 +685,7 @@ private:
         }
         const std::lock_guard lock(mutex_);
         completed_.assign(requests_.size(), nullptr);
-        return true;
+        return {};
     }
 
     // Maps each dmabuf of `buffer` once (planes of one buffer often share
@@ -776,7 +779,7 @@ private:
     // other errors: one bad frame.
     core::Result<bool> deliver(libcamera::Request* request, source::Frame& frame) {
         const bool cancelled = request->status() == libcamera::Request::RequestCancelled;
-        core::Result<bool> converted = true;
+        core::Status converted;
         int64_t t_ns = 0;
         if (!cancelled) {
             // Converted before the buffer goes back to the camera.
@@ -794,7 +797,7 @@ private:
             return false;
         }
         if (!converted) {
-            return converted;
+            return converted.error();
         }
         if (t_ns <= last_t_ns_) {
             t_ns = last_t_ns_ + 1;  // keep the contract's strict order
@@ -812,8 +815,7 @@ private:
         return true;
     }
 
-    core::Result<bool> convert(libcamera::Request& request, cv::Mat& gray, cv::Mat& bgr,
-                               int64_t& t_ns) {
+    core::Status convert(libcamera::Request& request, cv::Mat& gray, cv::Mat& bgr, int64_t& t_ns) {
         const libcamera::FrameBuffer* buffer = request.findBuffer(stream_);
         const uint64_t index = request.cookie();
         if (buffer == nullptr || index >= views_.size()) {
@@ -840,7 +842,7 @@ private:
         if (t_ns <= 0) {
             t_ns = monotonicNowNs();
         }
-        return true;
+        return {};
     }
 
     // libcamera's thread: hand the request to next().
@@ -952,7 +954,7 @@ private:
     std::string mode_;
 };
 
-core::Result<bool> checkOptions(const camera::CameraOptions& options, const std::string& who) {
+core::Status checkOptions(const camera::CameraOptions& options, const std::string& who) {
     const auto bad = [&](const std::string& what) {
         return makeError(ErrorCode::kInvalidArgument, who + ": " + what);
     };
@@ -971,7 +973,7 @@ core::Result<bool> checkOptions(const camera::CameraOptions& options, const std:
         options.frame_timeout_s > 3600) {
         return bad("frame timeout must be in (0, 3600] s, not " + fpsText(options.frame_timeout_s));
     }
-    return true;
+    return {};
 }
 
 }  // namespace

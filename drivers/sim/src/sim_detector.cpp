@@ -47,8 +47,8 @@ public:
         }
     }
 
-    core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                              drivers::detector::DetectionResult& out) override {
+    core::Status detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                        drivers::detector::DetectionResult& out) override {
         const auto t0 = std::chrono::steady_clock::now();
         if (image.empty()) {
             return core::makeError(core::ErrorCode::kInvalidArgument, "sim detector: empty image");
@@ -108,7 +108,7 @@ public:
         out.timing.forward_ms =
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                 .count();
-        return true;
+        return {};
     }
 
     [[nodiscard]] std::span<const std::string> classNames() const override { return names_; }

@@ -52,7 +52,7 @@ drivers::synth::Aabb floorBox(double x0, double y0, double x1, double y1, double
 
 }  // namespace
 
-core::Result<bool> validate(const SimConfig& c) {
+core::Status validate(const SimConfig& c) {
     if (!std::isfinite(c.fps) || !(c.fps > 0.0) || c.fps > kMaxFps) {
         return bad("fps", "(0, 240]", num(c.fps));
     }
@@ -91,7 +91,7 @@ core::Result<bool> validate(const SimConfig& c) {
         c.min_visible_fraction > 1.0) {
         return bad("min_visible_fraction", "(0, 1]", num(c.min_visible_fraction));
     }
-    return true;
+    return {};
 }
 
 std::vector<SimObject> simObjects(const SimConfig& /*config*/) {

@@ -48,7 +48,7 @@ void copyUpdateReport(const slam::UpdateReport& report, TrackStats& stats) {
 
 }  // namespace
 
-core::Result<bool> validate(const TrackerConfig& c) {
+core::Status validate(const TrackerConfig& c) {
     if (auto ok = slam::validate(c.slam); !ok) {
         return ok.error();
     }
@@ -100,7 +100,7 @@ core::Result<bool> validate(const TrackerConfig& c) {
         return bad("gyro_bias_sigma_radps", c.gyro_bias_sigma_radps,
                    "> 0 when gyro_noise_density is 0 (a gyro without noise)");
     }
-    return true;
+    return {};
 }
 
 core::Result<MonoTracker> MonoTracker::create(const core::PinholeRadialCamera& camera,

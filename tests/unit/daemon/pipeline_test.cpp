@@ -155,8 +155,8 @@ class GatedDetector final : public drivers::detector::ObjectDetector {
 public:
     explicit GatedDetector(std::unique_ptr<drivers::detector::ObjectDetector> inner)
         : inner_(std::move(inner)) {}
-    core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                              drivers::detector::DetectionResult& out) override {
+    core::Status detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                        drivers::detector::DetectionResult& out) override {
         gate_->pass();
         return inner_->detect(image, frame_id, t_ns, out);
     }

@@ -195,7 +195,7 @@ public:
         log_->changed.notify_all();
     }
 
-    core::Result<bool> set(std::size_t index, bool active) override {
+    core::Status set(std::size_t index, bool active) override {
         {
             const std::lock_guard lock(log_->mutex);
             if (index >= lines_) {
@@ -211,7 +211,7 @@ public:
             log_->level[index] = active ? 1 : 0;
         }
         log_->changed.notify_all();
-        return true;
+        return {};
     }
     [[nodiscard]] std::string describe() const override { return "fakechip [fake] lines 2,3"; }
 

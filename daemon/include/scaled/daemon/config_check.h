@@ -39,6 +39,6 @@ ConfigCheckReport checkConfiguration(const CommandLine& cli,
 
 // The socket's group, when one is configured: kNotFound when no such group
 // exists (start-up exits 78 on it, as --check-config reports it).
-[[nodiscard]] core::Result<bool> checkSocketGroup(const SocketConfig& socket);
+[[nodiscard]] core::Status checkSocketGroup(const SocketConfig& socket);
 
 }  // namespace scaled::daemon

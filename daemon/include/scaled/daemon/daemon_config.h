@@ -169,20 +169,20 @@ DaemonConfig defaultDaemonConfig();
 // need source.device, log.max_total_bytes >= log.max_file_bytes, ...) are
 // reported at the line of the key or of the key it depends on.
 // On error `config` is unchanged.
-core::Result<bool> applyDaemonToml(std::string_view toml_text, std::string_view source_name,
-                                   const std::filesystem::path& base_dir, DaemonConfig& config);
-core::Result<bool> applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config);
+core::Status applyDaemonToml(std::string_view toml_text, std::string_view source_name,
+                             const std::filesystem::path& base_dir, DaemonConfig& config);
+core::Status applyDaemonFile(const std::filesystem::path& path, DaemonConfig& config);
 // `section.key=value` overrides (the pipeline's and the daemon's sections),
 // cross-field checks after all of them; errors name the `--set` to blame.
-core::Result<bool> applyDaemonOverrides(const std::vector<std::string>& assignments,
-                                        DaemonConfig& config);
+core::Status applyDaemonOverrides(const std::vector<std::string>& assignments,
+                                  DaemonConfig& config);
 // Every key as `section.key`, in file order.
 std::vector<std::string> daemonConfigKeys();
 // The configuration as TOML (every key).
 std::string toToml(const DaemonConfig& config);
 
 // `--source` values: sim | replay:DIR | v4l2:DEVICE | libcamera:ID.
-core::Result<bool> applySourceSpec(std::string_view spec, SourceConfig& source);
+core::Status applySourceSpec(std::string_view spec, SourceConfig& source);
 
 // The command line (CLI11). Everything optional overrides the file.
 struct CommandLine {

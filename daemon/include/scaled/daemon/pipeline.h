@@ -157,7 +157,7 @@ public:
     Pipeline& operator=(Pipeline&&) = delete;
 
     // Starts the threads (once).
-    core::Result<bool> start();
+    core::Status start();
     // Stops and joins the threads (idempotent). Frames still queued are dropped.
     void stop();
 

@@ -55,16 +55,16 @@ PipelineConfig defaultPipelineConfig();
 // Applies a TOML document to `config` (keys absent from the text keep their
 // value). source_name names the text in messages; base_dir resolves relative
 // paths.
-core::Result<bool> applyPipelineToml(std::string_view toml_text, std::string_view source_name,
-                                     const std::filesystem::path& base_dir, PipelineConfig& config);
+core::Status applyPipelineToml(std::string_view toml_text, std::string_view source_name,
+                               const std::filesystem::path& base_dir, PipelineConfig& config);
 
 // Reads a file and applies it (relative paths against the file's directory).
-core::Result<bool> applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config);
+core::Status applyPipelineFile(const std::filesystem::path& path, PipelineConfig& config);
 
 // Applies `section.key=value` overrides, each in turn (paths against the
 // working directory). A string value may be given without quotes.
-core::Result<bool> applyPipelineOverrides(const std::vector<std::string>& assignments,
-                                          PipelineConfig& config);
+core::Status applyPipelineOverrides(const std::vector<std::string>& assignments,
+                                    PipelineConfig& config);
 
 // Every key as `section.key`, in file order (for --help and the tests).
 std::vector<std::string> pipelineConfigKeys();

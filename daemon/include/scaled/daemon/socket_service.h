@@ -72,7 +72,7 @@ public:
     SocketService& operator=(SocketService&&) = delete;
 
     // Starts the thread (once).
-    core::Result<bool> start();
+    core::Status start();
     // Wakes and joins the thread, closes the clients and the listening socket
     // and removes the socket file if this process created it (never when
     // socket-activated). Idempotent; the destructor calls it.

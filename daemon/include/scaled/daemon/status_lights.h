@@ -87,7 +87,7 @@ public:
     // (the first render sets every line); no allocation unless it fails.
     // Used by the thread; tests call it directly with chosen times (without
     // start()). After stop(): kUnavailable.
-    core::Result<bool> render(std::int64_t now_ns);
+    core::Status render(std::int64_t now_ns);
     // Same as setPattern / setAlive, with the phase starting at `now_ns` (tests).
     void setPatternAt(LightPattern p, std::int64_t now_ns);
     void setAliveAt(bool alive, std::int64_t now_ns);
@@ -110,7 +110,7 @@ private:
     StatusLights(std::unique_ptr<drivers::gpio::GpioOutputs> outputs, const GpioConfig& config,
                  std::int64_t now_ns);
     void run();
-    core::Result<bool> renderLocked(std::int64_t now_ns);
+    core::Status renderLocked(std::int64_t now_ns);
     // When the thread must render next, at or after `now_ns`.
     [[nodiscard]] std::int64_t nextWakeLocked(std::int64_t now_ns) const;
     void noteErrorLocked(const core::Error& error);

@@ -44,7 +44,7 @@ public:
     // Beyond the paper (optional, see LikelihoodConfig::partial_weight): the
     // probability that a box of this class shows only part of the object
     // (e.g. a chair behind a table). Negative: the estimator's setting.
-    Result<bool> setPartialProbability(Scalar probability);
+    Status setPartialProbability(Scalar probability);
     [[nodiscard]] Scalar partialProbability() const { return partial_probability_; }
 
     // Beyond the paper (the object model, object_evidence.h): the object's
@@ -53,7 +53,7 @@ public:
     // H + w (|tan t| + |tan b|) / 2 on the vertical through the object's
     // centre, t and b the elevations of its top and bottom. std 0 with mean 0:
     // no width model for this class (the default).
-    Result<bool> setWidth(Scalar mean_m, Scalar std_m);
+    Status setWidth(Scalar mean_m, Scalar std_m);
     [[nodiscard]] Scalar widthMean() const { return width_mean_m_; }
     [[nodiscard]] Scalar widthStd() const { return width_std_m_; }
     [[nodiscard]] bool hasWidth() const { return width_mean_m_ > 0; }

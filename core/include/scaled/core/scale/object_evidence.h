@@ -127,7 +127,7 @@ struct ObjectLimits {
 
 // Checks ObjectLimits and the parameters' relations; the message names the
 // field and its value.
-Result<bool> validate(const ObjectConfig& config);
+Status validate(const ObjectConfig& config);
 
 enum class ObjectState : std::uint8_t {
     kTentative,  // no usable anchor yet
@@ -175,7 +175,7 @@ public:
 
     // New priors (SIGHUP): the table stays, the likelihoods are evaluated
     // again at the next update. Allocates.
-    Result<bool> setPriors(const PriorTable& priors);
+    Status setPriors(const PriorTable& priors);
 
     // Forgets every object (a new map).
     void reset();
@@ -268,7 +268,7 @@ private:
     ObjectEvidence(const ObjectConfig& config, const ExtentConfig& extent,
                    const LikelihoodConfig& likelihood, const PinholeRadialCamera& camera,
                    const ScaleGrid& grid);
-    Result<bool> buildPriors(const PriorTable& priors);
+    Status buildPriors(const PriorTable& priors);
 
     [[nodiscard]] View& view(int track, int k) {
         return views_[static_cast<std::size_t>(track) *

@@ -133,7 +133,7 @@ public:
     // Replaces the height priors and keeps the posterior (the daemon's SIGHUP
     // reload): later updates use the new priors, earlier evidence stays.
     // Allocates (the table is moved in); not for the per-frame path.
-    Result<bool> setPriors(PriorTable priors);
+    Status setPriors(PriorTable priors);
 
     [[nodiscard]] ScaleSummary summary() const { return posterior_.summary(); }
     [[nodiscard]] const ScalePosterior& posterior() const { return posterior_; }

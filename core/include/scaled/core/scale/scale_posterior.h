@@ -68,7 +68,7 @@ struct PosteriorLimits {
 
 // Checks the posterior's own fields (the grid is checked by ScaleGrid::create);
 // the message names the field and value.
-Result<bool> validate(const PosteriorConfig& config);
+Status validate(const PosteriorConfig& config);
 
 // With config.arithmetic = kFixed every call is forwarded to a FixedPosterior
 // (fixed_posterior.h); the interface is the same for both.

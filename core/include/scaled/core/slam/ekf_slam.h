@@ -101,7 +101,7 @@ struct SlamLimits {
 
 // Checks ranges (SlamLimits) and the parameters' relations; the message
 // names the field and value.
-Result<bool> validate(const SlamConfig& config);
+Status validate(const SlamConfig& config);
 
 enum class SlamHealth : std::uint8_t {
     kUninitialised,

@@ -83,7 +83,7 @@ public:
     // Sets the capacity and allocates for it (kInvalidArgument outside
     // [0, kMaxCapacity]). Allocates; call it once, not per frame. Clears the
     // snapshot.
-    Result<bool> reserve(int max_features);
+    Status reserve(int max_features);
 
     // Copies the filter's state at its current frame: time, pose and its 6x6
     // covariance, up_W, health, and per map point (as EkfSlam::mapPoints, in

@@ -93,6 +93,8 @@ public:
     // name or id when it was opened that way; the node number may change) and
     // starts streaming with the same options. kUnavailable while it is still
     // missing; other errors when it came back different (e.g. no such format).
+    // true: streaming again; false: stop() was called (the daemon's wrapper
+    // answers so while shutting down), nothing to retry.
     virtual core::Result<bool> reopen() = 0;
     // Makes a blocked next() return false soon (at most ~100 ms) and every
     // later call return false. Thread-safe; for shutdown.

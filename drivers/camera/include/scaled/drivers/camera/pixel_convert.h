@@ -79,12 +79,12 @@ std::size_t rawImageBytes(PixelFormat format, int width_px, int height_px,
 // bad description (kAuto, non-positive or odd sizes where the format needs
 // even ones, a stride shorter than a row, no data). OpenCV exceptions are
 // caught here; nothing throws.
-core::Result<bool> convertRawImage(const RawImage& raw, const std::string& source, cv::Mat& gray,
-                                   cv::Mat& color);
+core::Status convertRawImage(const RawImage& raw, const std::string& source, cv::Mat& gray,
+                             cv::Mat& color);
 
 // The checks of convertRawImage() alone (same errors), for a backend that
 // describes its buffers once, when it maps them. MJPEG data is only checked
 // for presence (it is not decoded).
-core::Result<bool> checkRawImage(const RawImage& raw, const std::string& source);
+core::Status checkRawImage(const RawImage& raw, const std::string& source);
 
 }  // namespace scaled::drivers::camera

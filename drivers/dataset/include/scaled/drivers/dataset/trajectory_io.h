@@ -21,9 +21,8 @@ namespace scaled::drivers::dataset {
 // Fails (the message names the file) on mismatched sizes, non-finite poses,
 // rotations that are not orthonormal, timestamps that do not increase at
 // microsecond resolution, or I/O errors.
-core::Result<bool> writeTumTrajectory(const std::filesystem::path& path,
-                                      std::span<const int64_t> t_ns,
-                                      std::span<const core::CameraPose> poses);
+core::Status writeTumTrajectory(const std::filesystem::path& path, std::span<const int64_t> t_ns,
+                                std::span<const core::CameraPose> poses);
 
 // Reads a TUM trajectory: 8 fields per line, finite numbers, strictly
 // increasing timestamps, unit quaternions (|norm - 1| <= 1e-3, normalised).

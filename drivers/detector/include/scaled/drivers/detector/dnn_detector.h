@@ -74,7 +74,7 @@ struct DetectorLimits {
     static constexpr core::ParamLimits max_detections = core::closed(1, 10000);
 };
 
-core::Result<bool> validate(const DetectorConfig& config);
+core::Status validate(const DetectorConfig& config);
 
 // The names file: one non-empty name per line (a trailing newline and '\r'
 // are allowed). Errors name the file and the line.
@@ -100,8 +100,8 @@ public:
     DnnDetector& operator=(DnnDetector&&) = delete;
     ~DnnDetector() override;
 
-    core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
-                              DetectionResult& out) override;
+    core::Status detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                        DetectionResult& out) override;
     [[nodiscard]] std::span<const std::string> classNames() const override;
 
     [[nodiscard]] const DetectorInfo& info() const;

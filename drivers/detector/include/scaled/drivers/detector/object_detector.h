@@ -61,8 +61,8 @@ public:
     // `out` is overwritten; its vector keeps its capacity between calls.
     // Errors: an empty or unsupported image (kInvalidArgument), or a failure
     // inside the network (kIo); never throws.
-    virtual core::Result<bool> detect(const cv::Mat& image, std::int64_t frame_id,
-                                      std::int64_t t_ns, DetectionResult& out) = 0;
+    virtual core::Status detect(const cv::Mat& image, std::int64_t frame_id, std::int64_t t_ns,
+                                DetectionResult& out) = 0;
 
     // Class names in model output order.
     [[nodiscard]] virtual std::span<const std::string> classNames() const = 0;

@@ -22,7 +22,7 @@ inline constexpr int kMaxNice = 19;
 
 // Sets the calling thread's nice value (in [kMinNice, kMaxNice]). Raising a
 // priority back needs CAP_SYS_NICE: an unprivileged thread can only lower it.
-[[nodiscard]] core::Result<bool> setThreadNice(int nice);
+[[nodiscard]] core::Status setThreadNice(int nice);
 
 // The calling thread's nice value.
 [[nodiscard]] int threadNice();

@@ -71,10 +71,10 @@ public:
     // longer than that gets a file of its own), then deletes the oldest files
     // while the total passes max_total_bytes. Any I/O error puts the writer
     // into the fault state and is returned; after that every call returns it.
-    core::Result<bool> write(std::string_view lines);
+    core::Status write(std::string_view lines);
 
     // fdatasync(2) of the current file (a fault like write()).
-    core::Result<bool> sync();
+    core::Status sync();
 
     [[nodiscard]] bool faulted() const { return !fault_.empty(); }
     // "<file>: <what failed>: <errno text>"; empty when not faulted.
@@ -91,10 +91,10 @@ public:
 
 private:
     explicit FieldLogWriter(FieldLogWriterOptions options);
-    core::Result<bool> openNext();
-    core::Result<bool> rotate();
-    core::Result<bool> writeAll(std::string_view bytes);
-    core::Result<bool> enforceTotal();
+    core::Status openNext();
+    core::Status rotate();
+    core::Status writeAll(std::string_view bytes);
+    core::Status enforceTotal();
     core::Error setFault(const std::filesystem::path& path, const char* what, int err);
 
     FieldLogWriterOptions options_;

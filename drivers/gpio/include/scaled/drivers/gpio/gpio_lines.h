@@ -45,7 +45,7 @@ public:
     // Sets line `index` (into options.offsets) active (true) or inactive; the
     // other lines keep their values. One ioctl; no allocation (except for the
     // message of an error).
-    virtual core::Result<bool> set(std::size_t index, bool active) = 0;
+    virtual core::Status set(std::size_t index, bool active) = 0;
     // "gpiochip1 [gpio-sim.0-node0] lines 0,1" (plus " active-low"): for the log.
     [[nodiscard]] virtual std::string describe() const = 0;
 };

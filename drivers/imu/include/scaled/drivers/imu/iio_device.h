@@ -155,7 +155,7 @@ public:
     [[nodiscard]] core::Result<core::ImuSample> readOnce() const;
 
     // --- buffer ---
-    [[nodiscard]] core::Result<bool> startBuffer(const IioBufferOptions& options = {});
+    [[nodiscard]] core::Status startBuffer(const IioBufferOptions& options = {});
     [[nodiscard]] bool bufferRunning() const { return fd_.isValid(); }
     // The buffered channels in scan order (their scan_index).
     [[nodiscard]] const std::vector<std::string>& bufferChannels() const { return buffer_names_; }

@@ -51,7 +51,7 @@ struct SimConfig {
 };
 
 // Checks every field; the error message names the field and its value.
-core::Result<bool> validate(const SimConfig& config);
+core::Status validate(const SimConfig& config);
 
 // The objects in the sim room: COCO class name, true height (the class's prior
 // mean in config/priors.toml) and the box (world frame, metres, on the floor).

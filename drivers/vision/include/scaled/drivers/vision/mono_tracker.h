@@ -117,7 +117,7 @@ struct TrackerLimits {
 
 // Checks TrackerLimits, core::slam::SlamLimits and the parameters' relations;
 // the message names the key and value.
-core::Result<bool> validate(const TrackerConfig& config);
+core::Status validate(const TrackerConfig& config);
 
 // Wall time of each stage of MonoTracker::processFrame() on one frame,
 // microseconds (std::chrono::steady_clock; core stays clock-free, so the
