@@ -135,6 +135,9 @@ for name in sorted(os.listdir(src)):
         if doc.get("class") not in ("DETECTION", "SCALE", "OBJECT", "POSE", "STATE"):
             continue
         keep.append({k: v for k, v in doc.items() if k not in wall and not k.endswith("_us")})
+# Each class in the order its thread wrote it: DETECTION lines (detection
+# thread) and POSE lines (tracking thread) interleave as the threads ran.
+keep.sort(key=lambda d: d["class"])
 json.dump(keep, open(dst, "w"), indent=0, sort_keys=True)
 PY
   rm -rf "$out/daemon/log" "$out/daemon/scaled.toml" "$out/daemon/scaled.sock"
