@@ -182,6 +182,10 @@ Field path(const char* section, const char* key, std::filesystem::path* target);
 Field text(const char* section, const char* key, std::string* target);
 Field stringList(const char* section, const char* key, std::vector<std::string>* target);
 
+// Moves the fields of `more` to the end of `out` (one section's table after
+// another, in file order).
+void appendFields(std::vector<Field>& out, std::vector<Field> more);
+
 // The pipeline's sections ([tracker] [detector] [detection] [estimator]) in
 // file order, bound to `c`.
 std::vector<Field> pipelineFields(PipelineConfig& c);

@@ -232,16 +232,12 @@ std::vector<Field> serviceFields(QueueConfig& q, SocketConfig& k, LogConfig& l) 
 // Every key of the daemon's file, one table per section (the pipeline's own
 // from pipeline_config.cpp), in the order config/scaled.toml documents them.
 std::vector<Field> daemonFields(DaemonConfig& c) {
+    using config_detail::appendFields;
     std::vector<Field> out = sourceFields(c.source);
-    const auto append = [&out](std::vector<Field> more) {
-        for (auto& f : more) {
-            out.push_back(std::move(f));
-        }
-    };
-    append(config_detail::pipelineFields(c.pipeline));
-    append(cameraFields(c.camera));
-    append(deviceFields(c.gpio, c.imu));
-    append(serviceFields(c.queues, c.socket, c.log));
+    appendFields(out, config_detail::pipelineFields(c.pipeline));
+    appendFields(out, cameraFields(c.camera));
+    appendFields(out, deviceFields(c.gpio, c.imu));
+    appendFields(out, serviceFields(c.queues, c.socket, c.log));
     return out;
 }
 

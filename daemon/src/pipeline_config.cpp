@@ -292,17 +292,18 @@ std::vector<Field> objectFields(core::ObjectConfig& o) {
 
 }  // namespace
 
+void appendFields(std::vector<Field>& out, std::vector<Field> more) {
+    for (auto& f : more) {
+        out.push_back(std::move(f));
+    }
+}
+
 // Every key of the pipeline, one table per section.
 std::vector<Field> pipelineFields(PipelineConfig& c) {
     std::vector<Field> out = trackerFields(c.tracker);
-    for (auto* more : {&detectorFields, &estimatorFields}) {
-        for (auto& f : more(c)) {
-            out.push_back(std::move(f));
-        }
-    }
-    for (auto& f : objectFields(c.estimator.objects)) {
-        out.push_back(std::move(f));
-    }
+    appendFields(out, detectorFields(c));
+    appendFields(out, estimatorFields(c));
+    appendFields(out, objectFields(c.estimator.objects));
     return out;
 }
 
