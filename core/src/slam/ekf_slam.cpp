@@ -119,6 +119,8 @@ EkfSlam::EkfSlam(const PinholeRadialCamera& camera, const SlamConfig& config)
     inliers_.reserve(static_cast<size_t>(config.max_measured));
     best_inliers_.reserve(static_cast<size_t>(config.max_measured));
     accepted_.reserve(static_cast<size_t>(config.max_measured));
+    observations_.reserve(static_cast<size_t>(config.max_measured) +
+                          static_cast<size_t>(config.max_features));
 }
 
 void EkfSlam::initialise(std::int64_t t_ns, const Vec3& gravity_down_C) {
@@ -133,6 +135,7 @@ void EkfSlam::initialise(std::int64_t t_ns, const Vec3& gravity_down_C) {
     features_.clear();
     predictions_.clear();
     cand_.clear();
+    observations_.clear();
     up_W_ = -gravity_down_C.normalized();
     t_ns_ = t_ns;
     frame_ = 0;
@@ -158,6 +161,7 @@ SlamHealth EkfSlam::predict(std::int64_t t_ns, const GyroRate* gyro) {
     if (!(dt > 0) || dt > config_.max_dt_s) {
         return SlamHealth::kBadTimestamp;
     }
+    observations_.clear();
     MotionNoise noise = config_.motion;
     if (gyro != nullptr && gyro->w_C_radps.allFinite() && std::isfinite(gyro->sigma_radps) &&
         gyro->sigma_radps > 0) {
@@ -529,6 +533,9 @@ void EkfSlam::recordAcceptedMatches(int nc, UpdateReport& report) {
             FeatureInfo& f = features_[static_cast<size_t>(c.slot)];
             ++f.matches;
             f.measured = true;
+            if (observations_.size() < observations_.capacity()) {
+                observations_.push_back({f.id, c.z});
+            }
             const Vec2 nu = c.z - c.pred_px;
             const int bin = f.attempts < 5 ? 0 : f.attempts < 15 ? 1 : f.attempts < 50 ? 2 : 3;
             report.nis_sum[static_cast<size_t>(bin)] += nu.dot(c.S.inverse() * nu);
@@ -706,6 +713,9 @@ std::uint64_t EkfSlam::addInverseDepth(const Vec2& px, Scalar rho, Scalar sigma_
     f.in_view = true;
     f.px = px;
     features_.push_back(f);
+    if (observations_.size() < observations_.capacity()) {
+        observations_.push_back({f.id, px});
+    }
     return f.id;
 }
 
@@ -728,6 +738,33 @@ int EkfSlam::makeRoom(int n) {
         ++removed;
     }
     return removed;
+}
+
+void EkfSlam::rescaleMap(Scalar s, const Vec3& centre_W) {
+    if (health_ == SlamHealth::kUninitialised || !(s > 0) || !std::isfinite(s) ||
+        !centre_W.allFinite()) {
+        return;
+    }
+    // x' = D x + (1 - s) c on positions, D diagonal: s on positions and
+    // velocities, 1 / s on inverse depths, 1 elsewhere; P' = D P D.
+    VecX& d = x_hyp_;  // scratch, capacity long
+    d.head(n_).setOnes();
+    auto scalePosition = [&](int offset) {
+        x_.segment<3>(offset) = centre_W + s * (x_.segment<3>(offset) - centre_W);
+        d.segment<3>(offset).setConstant(s);
+    };
+    scalePosition(kPos);
+    x_.segment<3>(kVel) *= s;
+    d.segment<3>(kVel).setConstant(s);
+    for (const FeatureInfo& f : features_) {
+        scalePosition(f.offset);
+        if (f.kind == FeatureKind::kInverseDepth) {
+            x_(f.offset + 5) /= s;
+            d(f.offset + 5) = 1 / s;
+        }
+    }
+    const auto dn = d.head(n_);
+    P_.topLeftCorner(n_, n_) = dn.asDiagonal() * P_.topLeftCorner(n_, n_) * dn.asDiagonal();
 }
 
 bool EkfSlam::relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p,

@@ -69,6 +69,51 @@ TEST(EkfSlam, ValidateNamesTheField) {
     EXPECT_FALSE(EkfSlam::create(test::makeCamera(), c).ok());
 }
 
+TEST(EkfSlam, RescalingTheMapKeepsEveryPredictedPixel) {
+    // The map's unit is not observable: scaling every position about any
+    // centre (and inverse depths by the inverse) predicts the same pixels.
+    PointSimOptions opt;
+    opt.frames = 60;
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    for (int k = 0; k < opt.frames; ++k) {
+        sim.step(*slam, k);
+    }
+    ASSERT_FALSE(slam->observations().empty());
+    std::vector<FeaturePrediction> before;
+    for (const auto& p : slam->predictMeasurements()) {
+        before.push_back(p);
+    }
+    ASSERT_GT(before.size(), 10U);
+    const Mat6x6 P_before = slam->poseCovariance();
+    const Vec3 v_before = slam->velocityW();
+    const Vec3 centre = slam->pose().p_CinW + Vec3(Scalar(0.1), Scalar(-0.2), Scalar(0.3));
+    const Vec3 p_before = slam->pose().p_CinW;
+    const Scalar s = Scalar(1.7);
+    slam->rescaleMap(s, centre);
+    EXPECT_TRUE(slam->pose().p_CinW.isApprox(centre + s * (p_before - centre),
+                                             Scalar(test::tolerance(1e-9, 1e-4))));
+    EXPECT_TRUE(slam->velocityW().isApprox(s * v_before, Scalar(test::tolerance(1e-9, 1e-4))));
+    const Mat6x6 P_after = slam->poseCovariance();
+    const Mat3 Ppp_expected = s * s * P_before.topLeftCorner<3, 3>();
+    const Mat3 Ptt_expected = P_before.bottomRightCorner<3, 3>();
+    const auto tol = Scalar(test::tolerance(1e-9, 1e-4));
+    EXPECT_TRUE((P_after.topLeftCorner<3, 3>().isApprox(Ppp_expected, tol)));
+    EXPECT_TRUE((P_after.bottomRightCorner<3, 3>().isApprox(Ptt_expected, tol)));
+    const auto after = slam->predictMeasurements();
+    ASSERT_EQ(after.size(), before.size());
+    for (size_t i = 0; i < after.size(); ++i) {
+        EXPECT_EQ(after[i].id, before[i].id);
+        EXPECT_LT((after[i].h_px - before[i].h_px).norm(), Scalar(test::tolerance(1e-6, 1e-2)))
+            << "feature " << i;
+        EXPECT_TRUE(after[i].S.isApprox(before[i].S, Scalar(test::tolerance(1e-6, 1e-2))))
+            << "feature " << i;
+    }
+}
+
 TEST(EkfSlam, TracksTheSimulatedPathWithArbitraryScale) {
     PointSimOptions opt;
     opt.frames = 300;

@@ -151,6 +151,13 @@ struct UpdateReport {
     std::array<int, kAgeBins> nis_count{};
 };
 
+// A feature seen in this frame: an accepted match or a new feature's pixel
+// (for a back end that keeps the tracks, window_ba.h).
+struct FeatureObservation {
+    std::uint64_t id = 0;
+    Vec2 z_px = Vec2::Zero();
+};
+
 // What the scale estimator needs about one map point.
 struct MapPoint {
     std::uint64_t id = 0;
@@ -210,6 +217,17 @@ public:
     std::uint64_t addFeature(const Vec2& px, Scalar rho, Scalar sigma_rho);
     // Makes room for n new features by deleting those out of view the longest.
     int makeRoom(int n);
+
+    // Changes the map's unit: every position p becomes c + s (p - c) (camera,
+    // Euclidean features, inverse-depth anchors), velocities and inverse
+    // depths scale by s and 1/s, and the covariance with them. Every predicted
+    // pixel stays the same (the map's scale is not observable): a correction
+    // of the map's scale from outside the filter (window_ba.h). s > 0.
+    void rescaleMap(Scalar s, const Vec3& centre_W);
+
+    // The features seen in the current frame: the matches the last update()
+    // accepted and the features added since (cleared by predict()).
+    [[nodiscard]] std::span<const FeatureObservation> observations() const { return observations_; }
 
     // Puts the camera back into a map it lost (relocalisation): the camera at
     // T_CtoW with independent position and attitude uncertainty (std sigma_p
@@ -299,7 +317,8 @@ private:
     std::vector<Candidate> cand_;  // matched candidates of this frame
     std::vector<int> inliers_;     // indices into cand_
     std::vector<int> best_inliers_;
-    std::vector<unsigned char> accepted_;  // per candidate
+    std::vector<unsigned char> accepted_;           // per candidate
+    std::vector<FeatureObservation> observations_;  // this frame's, max_measured + max_features
     // Scratch for updates, sized at create().
     MatX PHt_;  // capacity x 2 max_measured
     MatX S_;    // 2 max_measured square

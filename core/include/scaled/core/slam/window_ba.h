@@ -1,0 +1,192 @@
+#pragma once
+
+// Sliding-window bundle adjustment over the filter's own feature tracks, and
+// the scale correction it gives the filter (issue 19, docs/slam.md).
+//
+// The EKF's map scale wanders by 20-45% over 5 s windows on real sequences:
+// each frame's single linearisation passes errors on to the features that
+// replace the ones leaving the view. A bundle adjustment of the same matches
+// over the last keyframes (every keyframe_every frames, window_keyframes of
+// them) re-linearises them all together; the older part of its window
+// (fixed_keyframes, already adjusted) holds the gauge, so the newer keyframes
+// come out in the unit the older ones had. The scale between the filter's
+// keyframes and the adjusted ones is handed back to the filter
+// (EkfSlam::rescaleMap), so the map, the served pose and the scale estimator
+// all carry the corrected unit.
+//
+// Keyframe poses are camera-to-world (R_CtoW, p_CinW) in the filter's world
+// frame; points are world positions; the residual is the camera model's
+// projection minus the measured pixel, Huber-weighted. Levenberg-Marquardt
+// with the points eliminated (Schur complement). Every buffer is sized at
+// create(): adding frames and optimising do not allocate.
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Cholesky>
+
+#include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/core/param_limits.h>
+#include <scaled/core/result.h>
+#include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/types.h>
+
+namespace scaled::core::slam {
+
+struct WindowBaConfig {
+    bool enabled = false;
+    int keyframe_every = 3;     // frames between keyframes
+    int window_keyframes = 67;  // keyframes adjusted together (200 frames)
+    int fixed_keyframes = 33;   // the window's oldest, held fixed (the gauge)
+    int step_keyframes = 12;    // optimise after this many new keyframes
+    int max_points = 600;       // distinct features in a window
+    int max_observations_per_keyframe = 160;
+    int min_views = 3;                       // a point needs this many keyframes
+    Scalar min_parallax_rad = Scalar(0.02);  // and this angle between its first and last ray
+    Scalar huber_px = 2;
+    int iterations = 10;
+    // true: the filter's map is rescaled to the adjusted unit after every
+    // optimisation (the scale handed back clamped to [1 / (1 + max_scale_step),
+    // 1 + max_scale_step]); false: the filter keeps its unit and the served
+    // pose scales the filter's motion since the newest keyframe by the ratio
+    // of the units.
+    bool scale_feedback = false;
+    Scalar max_scale_step = Scalar(0.2);
+};
+
+struct WindowBaLimits {
+    static constexpr ParamLimits keyframe_every = closed(1, 1000);
+    static constexpr ParamLimits window_keyframes = closed(4, 1000);
+    static constexpr ParamLimits fixed_keyframes = closed(1, 1000);  // < window_keyframes - 1
+    static constexpr ParamLimits step_keyframes = closed(1, 1000);   // <= window - fixed
+    static constexpr ParamLimits max_points = closed(1, 100000);
+    static constexpr ParamLimits max_observations_per_keyframe = closed(1, 100000);
+    static constexpr ParamLimits min_views = closed(2, 1000);
+    static constexpr ParamLimits min_parallax_rad = closed(0, 1);
+    static constexpr ParamLimits huber_px = openClosed(0, 100);
+    static constexpr ParamLimits iterations = closed(1, 100);
+    static constexpr ParamLimits max_scale_step = closed(0, 10);
+};
+
+Status validate(const WindowBaConfig& config);
+
+// What one optimisation did.
+struct WindowBaReport {
+    bool optimised = false;
+    int keyframes = 0;  // in the window
+    int free_keyframes = 0;
+    int points = 0;
+    int observations = 0;
+    Scalar rms_before_px = 0;
+    Scalar rms_after_px = 0;
+    // Scale of the adjusted free keyframes against their filter poses
+    // (Sim(3) over them and the newest fixed one): > 1, the filter's map had
+    // shrunk; 1 when nothing was adjusted. Clamped by max_scale_step.
+    Scalar scale = 1;
+};
+
+class WindowBa {
+public:
+    static Result<WindowBa> create(const PinholeRadialCamera& camera, const WindowBaConfig& config);
+
+    // A new map: forget every keyframe.
+    void reset();
+
+    // After the filter's frame (update, new features): its camera pose and the
+    // features it saw. Every keyframe_every-th frame becomes a keyframe; every
+    // step_keyframes keyframes the window is optimised and the report says
+    // by how much the caller should rescale the filter's map (about the
+    // camera's position). Call notifyRescaled() after applying it.
+    WindowBaReport addFrame(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs);
+
+    // The filter's map was rescaled by s about centre_W: the stored filter
+    // poses follow it.
+    void notifyRescaled(Scalar s, const Vec3& centre_W);
+
+    // The adjusted pose of the newest keyframe composed with the filter's
+    // motion since it: the camera's pose in the adjusted trajectory.
+    [[nodiscard]] CameraPose adjustedPose(const CameraPose& filter_T_CtoW) const;
+    [[nodiscard]] int keyframeCount() const { return count_; }
+
+private:
+    struct Keyframe {
+        CameraPose filter;    // the filter's pose when the keyframe was taken
+        CameraPose adjusted;  // the window's estimate
+        int obs_count = 0;
+    };
+    struct Point {
+        std::uint64_t id = 0;
+        Vec3 p_W = Vec3::Zero();
+        int views = 0;     // entries in its views (one per keyframe that saw it)
+        int first_kf = 0;  // window index of its first and last view
+        int last_kf = 0;
+        bool usable = false;
+    };
+    struct View {
+        int kf = 0;  // window index
+        int j = 0;   // observation of that keyframe
+    };
+
+    WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& config);
+
+    Keyframe& keyframe(int i);  // window index: 0 = the oldest
+    [[nodiscard]] const Keyframe& keyframe(int i) const;
+    [[nodiscard]] size_t obsIndex(int i, int j) const;
+    [[nodiscard]] std::span<const View> viewsOf(const Point& pt) const;
+    void pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs);
+    WindowBaReport optimise();
+    // The first optimisation's result moved into the filter's frame and unit.
+    void holdFilterGauge();
+    [[nodiscard]] Scalar scaleOfFreeKeyframes(int first_free);
+    // The window's points by id, with their views, triangulated from the
+    // adjusted poses; usable: enough views, parallax, in front, seen by a free keyframe.
+    void gatherPoints(int first_free);
+    int findOrAddPoint(std::uint64_t id);
+    bool triangulate(Point& pt);
+    // Levenberg-Marquardt: one iteration (normal equations, Schur complement,
+    // solve, step); false when the cost did not go down (state restored).
+    bool iterate(int first_free, Scalar& lambda, Scalar& c);
+    [[nodiscard]] Scalar cost(int first_free) const;
+    void accumulate(int first_free);
+    void accumulateView(int i, int j, int first_free);
+    void schurComplement(int first_free, Scalar lambda);
+    void step(int first_free);
+
+    PinholeRadialCamera camera_;
+    WindowBaConfig config_;
+    int capacity_ = 0;   // keyframes kept (the window)
+    int head_ = 0;       // ring index of the oldest keyframe
+    int count_ = 0;      // keyframes in the window
+    int frames_ = 0;     // frames since reset
+    int since_opt_ = 0;  // keyframes since the last optimisation
+    bool first_optimisation_ = true;
+    Scalar unit_ratio_ = 1;  // adjusted unit per filter unit (scale_feedback off)
+    std::vector<Keyframe> keyframes_;
+    std::vector<FeatureObservation> obs_;  // capacity_ x max_observations_per_keyframe
+    std::vector<int> obs_point_;           // point of each observation, -1: none
+    std::vector<Point> points_;
+    std::vector<View> views_;  // max_points x capacity_
+    int point_count_ = 0;
+    int usable_points_ = 0;
+    int usable_observations_ = 0;
+    // Normal equations: the free poses (6 each) dense, the points 3x3 blocks;
+    // per observation of a free keyframe its 6x3 pose-point block.
+    MatX H_pp_;
+    VecX b_p_;
+    MatX S_;
+    VecX g_;
+    VecX dx_p_;
+    std::vector<Mat3> H_ll_;
+    std::vector<Vec3> b_l_;
+    std::vector<Mat3> H_ll_inv_;
+    std::vector<Eigen::Matrix<Scalar, 6, 3>> W_;
+    std::vector<Keyframe> saved_keyframes_;
+    std::vector<Point> saved_points_;
+    Eigen::LDLT<MatX> ldlt_;
+    std::vector<Vec3> sim_from_;  // scratch for the Sim(3) fits
+    std::vector<Vec3> sim_to_;
+};
+
+}  // namespace scaled::core::slam

@@ -1,0 +1,568 @@
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <string>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+
+#include <scaled/core/slam/window_ba.h>
+
+namespace scaled::core::slam {
+
+namespace {
+
+Mat3 skew(const Vec3& v) {
+    Mat3 m;
+    m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+    return m;
+}
+
+Mat3 expSO3(const Vec3& w) {
+    const Scalar th = w.norm();
+    if (!(th > Scalar(1e-12))) {
+        return Mat3::Identity() + skew(w);
+    }
+    return Eigen::AngleAxis<Scalar>(th, w / th).toRotationMatrix();
+}
+
+// Relative motion of b from a, its translation times unit, applied to base:
+// base * a^-1 * b.
+CameraPose compose(const CameraPose& base, const CameraPose& a, const CameraPose& b, Scalar unit) {
+    CameraPose out;
+    const Mat3 R_rel = a.R_CtoW.transpose() * b.R_CtoW;
+    const Vec3 p_rel = unit * (a.R_CtoW.transpose() * (b.p_CinW - a.p_CinW));
+    out.R_CtoW = base.R_CtoW * R_rel;
+    out.p_CinW = base.p_CinW + base.R_CtoW * p_rel;
+    return out;
+}
+
+Scalar huberCost(Scalar e, Scalar k) {
+    return e < k ? e * e : 2 * k * e - k * k;
+}
+
+// to ~= scale R from + t (Umeyama 1991) with fixed-size algebra: no
+// allocation (core's alignTrajectories is evaluation code and allocates).
+struct Sim3 {
+    Scalar scale = 1;
+    Mat3 R = Mat3::Identity();
+    Vec3 t = Vec3::Zero();
+};
+
+std::optional<Sim3> fitSim3(std::span<const Vec3> from, std::span<const Vec3> to) {
+    const auto n = static_cast<Scalar>(from.size());
+    if (from.size() < 3 || from.size() != to.size()) {
+        return std::nullopt;
+    }
+    Vec3 mf = Vec3::Zero();
+    Vec3 mt = Vec3::Zero();
+    for (size_t i = 0; i < from.size(); ++i) {
+        mf += from[i];
+        mt += to[i];
+    }
+    mf /= n;
+    mt /= n;
+    Mat3 cov = Mat3::Zero();
+    Scalar var_from = 0;
+    for (size_t i = 0; i < from.size(); ++i) {
+        cov.noalias() += (to[i] - mt) * (from[i] - mf).transpose();
+        var_from += (from[i] - mf).squaredNorm();
+    }
+    cov /= n;
+    var_from /= n;
+    if (!(var_from > Scalar(1e-12)) || !cov.allFinite()) {
+        return std::nullopt;
+    }
+    const Eigen::JacobiSVD<Mat3> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Vec3 d = Vec3::Ones();
+    if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0) {
+        d(2) = -1;
+    }
+    Sim3 out;
+    out.R = svd.matrixU() * d.asDiagonal() * svd.matrixV().transpose();
+    out.scale = svd.singularValues().dot(d) / var_from;
+    out.t = mt - out.scale * out.R * mf;
+    if (!(out.scale > 0) || !std::isfinite(out.scale)) {
+        return std::nullopt;
+    }
+    return out;
+}
+
+}  // namespace
+
+Status validate(const WindowBaConfig& c) {
+    using L = WindowBaLimits;
+    const LimitCheck checks[] = {
+        {"keyframe_every", static_cast<double>(c.keyframe_every), L::keyframe_every},
+        {"window_keyframes", static_cast<double>(c.window_keyframes), L::window_keyframes},
+        {"fixed_keyframes", static_cast<double>(c.fixed_keyframes), L::fixed_keyframes},
+        {"step_keyframes", static_cast<double>(c.step_keyframes), L::step_keyframes},
+        {"max_points", static_cast<double>(c.max_points), L::max_points},
+        {"max_observations_per_keyframe", static_cast<double>(c.max_observations_per_keyframe),
+         L::max_observations_per_keyframe},
+        {"min_views", static_cast<double>(c.min_views), L::min_views},
+        {"min_parallax_rad", static_cast<double>(c.min_parallax_rad), L::min_parallax_rad},
+        {"huber_px", static_cast<double>(c.huber_px), L::huber_px},
+        {"iterations", static_cast<double>(c.iterations), L::iterations},
+        {"max_scale_step", static_cast<double>(c.max_scale_step), L::max_scale_step},
+    };
+    if (const LimitCheck* bad = firstOutside(checks)) {
+        return makeError(ErrorCode::kInvalidArgument, std::string("window_ba.") + bad->name +
+                                                          " = " + formatLimitValue(bad->value) +
+                                                          ": must be " + bad->limits.text());
+    }
+    if (c.fixed_keyframes > c.window_keyframes - 2) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "window_ba.fixed_keyframes = " + std::to_string(c.fixed_keyframes) +
+                             ": must leave at least 2 of window_keyframes (" +
+                             std::to_string(c.window_keyframes) + ") free");
+    }
+    if (c.step_keyframes > c.window_keyframes - c.fixed_keyframes) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "window_ba.step_keyframes = " + std::to_string(c.step_keyframes) +
+                             ": must be at most window_keyframes - fixed_keyframes (" +
+                             std::to_string(c.window_keyframes - c.fixed_keyframes) + ")");
+    }
+    return {};
+}
+
+Result<WindowBa> WindowBa::create(const PinholeRadialCamera& camera, const WindowBaConfig& config) {
+    if (auto ok = validate(config); !ok) {
+        return ok.error();
+    }
+    return WindowBa(camera, config);
+}
+
+WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& config)
+    : camera_(camera), config_(config), capacity_(config.window_keyframes) {
+    const auto cap = static_cast<size_t>(capacity_);
+    const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
+    const auto max_points = static_cast<size_t>(config.max_points);
+    const Eigen::Index free_dim = 6 * Eigen::Index{capacity_};
+    keyframes_.resize(cap);
+    saved_keyframes_.resize(cap);
+    obs_.resize(cap * per_kf);
+    obs_point_.assign(cap * per_kf, -1);
+    W_.resize(cap * per_kf);
+    points_.resize(max_points);
+    views_.resize(max_points * cap);
+    saved_points_.resize(max_points);
+    H_ll_.resize(max_points);
+    b_l_.resize(max_points);
+    H_ll_inv_.resize(max_points);
+    H_pp_ = MatX::Zero(free_dim, free_dim);
+    S_ = MatX::Zero(free_dim, free_dim);
+    b_p_ = VecX::Zero(free_dim);
+    g_ = VecX::Zero(free_dim);
+    dx_p_ = VecX::Zero(free_dim);
+    ldlt_ = Eigen::LDLT<MatX>(free_dim);
+    sim_from_.reserve(cap);
+    sim_to_.reserve(cap);
+}
+
+void WindowBa::reset() {
+    head_ = 0;
+    count_ = 0;
+    frames_ = 0;
+    since_opt_ = 0;
+    first_optimisation_ = true;
+    point_count_ = 0;
+    unit_ratio_ = 1;
+}
+
+WindowBa::Keyframe& WindowBa::keyframe(int i) {
+    return keyframes_[static_cast<size_t>((head_ + i) % capacity_)];
+}
+
+const WindowBa::Keyframe& WindowBa::keyframe(int i) const {
+    return keyframes_[static_cast<size_t>((head_ + i) % capacity_)];
+}
+
+size_t WindowBa::obsIndex(int i, int j) const {
+    return static_cast<size_t>((head_ + i) % capacity_) *
+               static_cast<size_t>(config_.max_observations_per_keyframe) +
+           static_cast<size_t>(j);
+}
+
+void WindowBa::pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs) {
+    if (count_ == capacity_) {
+        head_ = (head_ + 1) % capacity_;
+        --count_;
+    }
+    const bool has_previous = count_ > 0;
+    const Keyframe previous = has_previous ? keyframe(count_ - 1) : Keyframe{};
+    ++count_;
+    Keyframe& kf = keyframe(count_ - 1);
+    kf.filter = T_CtoW;
+    kf.adjusted =
+        has_previous ? compose(previous.adjusted, previous.filter, T_CtoW, unit_ratio_) : T_CtoW;
+    const int n = std::min(static_cast<int>(obs.size()), config_.max_observations_per_keyframe);
+    kf.obs_count = n;
+    for (int j = 0; j < n; ++j) {
+        obs_[obsIndex(count_ - 1, j)] = obs[static_cast<size_t>(j)];
+    }
+}
+
+WindowBaReport WindowBa::addFrame(const CameraPose& T_CtoW,
+                                  std::span<const FeatureObservation> obs) {
+    WindowBaReport report;
+    if (!config_.enabled) {
+        return report;
+    }
+    const bool is_keyframe = frames_ % config_.keyframe_every == 0;
+    ++frames_;
+    if (!is_keyframe) {
+        return report;
+    }
+    pushKeyframe(T_CtoW, obs);
+    ++since_opt_;
+    const int wanted = first_optimisation_ ? config_.fixed_keyframes + config_.step_keyframes
+                                           : config_.step_keyframes;
+    if (since_opt_ < wanted || count_ < config_.fixed_keyframes + 2) {
+        report.keyframes = count_;
+        return report;
+    }
+    since_opt_ = 0;
+    return optimise();
+}
+
+void WindowBa::notifyRescaled(Scalar s, const Vec3& centre_W) {
+    for (int i = 0; i < count_; ++i) {
+        Keyframe& kf = keyframe(i);
+        kf.filter.p_CinW = centre_W + s * (kf.filter.p_CinW - centre_W);
+    }
+}
+
+CameraPose WindowBa::adjustedPose(const CameraPose& filter_T_CtoW) const {
+    if (count_ == 0) {
+        return filter_T_CtoW;
+    }
+    const Keyframe& last = keyframe(count_ - 1);
+    return compose(last.adjusted, last.filter, filter_T_CtoW, unit_ratio_);
+}
+
+WindowBaReport WindowBa::optimise() {
+    WindowBaReport report;
+    report.keyframes = count_;
+    // The first optimisation holds only the first keyframe (and leaves the
+    // unit where the filter had it); later ones the window's older part.
+    const int first_free = first_optimisation_ ? 1 : std::min(config_.fixed_keyframes, count_ - 2);
+    report.free_keyframes = count_ - first_free;
+    gatherPoints(first_free);
+    Scalar c = cost(first_free);
+    report.rms_before_px = std::sqrt(c / Scalar(std::max(1, usable_observations_)));
+    Scalar lambda = Scalar(1e-3);
+    for (int it = 0; it < config_.iterations; ++it) {
+        const Scalar before = c;
+        if (iterate(first_free, lambda, c) && before - c < Scalar(1e-6) * before) {
+            break;
+        }
+    }
+    report.points = usable_points_;
+    report.observations = usable_observations_;
+    report.rms_after_px = std::sqrt(c / Scalar(std::max(1, usable_observations_)));
+    report.optimised = true;
+    if (first_optimisation_) {
+        first_optimisation_ = false;
+        holdFilterGauge();
+        return report;
+    }
+    const Scalar s = scaleOfFreeKeyframes(first_free);
+    if (config_.scale_feedback) {
+        // The filter's map takes the adjusted unit (the caller rescales it).
+        const Scalar hi = 1 + config_.max_scale_step;
+        report.scale = std::clamp(s, 1 / hi, hi);
+    } else {
+        // The filter keeps its unit; the adjusted unit per filter unit scales
+        // the filter's motion from the newest keyframe on.
+        unit_ratio_ = s;
+    }
+    return report;
+}
+
+void WindowBa::holdFilterGauge() {
+    // The first window's adjustment in the filter's frame and unit: the Sim(3)
+    // from the adjusted keyframes to the filter's, applied to them.
+    sim_from_.clear();
+    sim_to_.clear();
+    for (int i = 0; i < count_; ++i) {
+        sim_from_.push_back(keyframe(i).adjusted.p_CinW);
+        sim_to_.push_back(keyframe(i).filter.p_CinW);
+    }
+    const auto a = fitSim3(sim_from_, sim_to_);
+    if (!a) {
+        return;
+    }
+    for (int i = 0; i < count_; ++i) {
+        Keyframe& kf = keyframe(i);
+        kf.adjusted.p_CinW = a->scale * a->R * kf.adjusted.p_CinW + a->t;
+        kf.adjusted.R_CtoW = a->R * kf.adjusted.R_CtoW;
+    }
+}
+
+Scalar WindowBa::scaleOfFreeKeyframes(int first_free) {
+    // Umeyama over the free keyframes and the newest fixed one: adjusted ~=
+    // s R filter + t. s > 1: the filter's recent unit is too small.
+    std::vector<Vec3>& from = sim_from_;
+    std::vector<Vec3>& to = sim_to_;
+    from.clear();
+    to.clear();
+    for (int i = first_free - 1; i < count_; ++i) {
+        from.push_back(keyframe(i).filter.p_CinW);
+        to.push_back(keyframe(i).adjusted.p_CinW);
+    }
+    const auto a = fitSim3(from, to);
+    return a ? a->scale : Scalar(1);
+}
+
+int WindowBa::findOrAddPoint(std::uint64_t id) {
+    for (int k = 0; k < point_count_; ++k) {
+        if (points_[static_cast<size_t>(k)].id == id) {
+            return k;
+        }
+    }
+    if (point_count_ == config_.max_points) {
+        return -1;
+    }
+    Point& pt = points_[static_cast<size_t>(point_count_)];
+    pt = Point{};
+    pt.id = id;
+    return point_count_++;
+}
+
+void WindowBa::gatherPoints(int first_free) {
+    point_count_ = 0;
+    for (int i = 0; i < count_; ++i) {
+        const Keyframe& kf = keyframe(i);
+        for (int j = 0; j < kf.obs_count; ++j) {
+            const FeatureObservation& o = obs_[obsIndex(i, j)];
+            const int k = findOrAddPoint(o.id);
+            obs_point_[obsIndex(i, j)] = k;
+            if (k < 0) {
+                continue;
+            }
+            Point& pt = points_[static_cast<size_t>(k)];
+            if (pt.views == 0) {
+                pt.first_kf = i;
+            }
+            pt.last_kf = i;
+            views_[static_cast<size_t>(k) * static_cast<size_t>(capacity_) +
+                   static_cast<size_t>(pt.views)] = {i, j};
+            ++pt.views;
+        }
+    }
+    usable_points_ = 0;
+    for (int k = 0; k < point_count_; ++k) {
+        Point& pt = points_[static_cast<size_t>(k)];
+        pt.usable = pt.views >= config_.min_views && pt.last_kf >= first_free && triangulate(pt);
+        usable_points_ += pt.usable ? 1 : 0;
+    }
+    usable_observations_ = 0;
+    for (int i = 0; i < count_; ++i) {
+        for (int j = 0; j < keyframe(i).obs_count; ++j) {
+            const int k = obs_point_[obsIndex(i, j)];
+            usable_observations_ += k >= 0 && points_[static_cast<size_t>(k)].usable ? 1 : 0;
+        }
+    }
+}
+
+bool WindowBa::triangulate(Point& pt) {
+    // Least squares over the rays of every view: sum (I - r r^T)(X - p) = 0.
+    Eigen::Matrix<Scalar, 4, 4> A = Eigen::Matrix<Scalar, 4, 4>::Zero();
+    Vec3 first_ray = Vec3::Zero();
+    Vec3 last_ray = Vec3::Zero();
+    for (const View& v : viewsOf(pt)) {
+        const Keyframe& kf = keyframe(v.kf);
+        const auto ray_C = camera_.unproject(obs_[obsIndex(v.kf, v.j)].z_px);
+        if (!ray_C) {
+            return false;
+        }
+        const Vec3 ray = (kf.adjusted.R_CtoW * *ray_C).normalized();
+        if (v.kf == pt.first_kf) {
+            first_ray = ray;
+        }
+        last_ray = ray;
+        const Mat3 M = Mat3::Identity() - ray * ray.transpose();
+        Eigen::Matrix<Scalar, 3, 4> Ai;
+        Ai.leftCols<3>() = M;
+        Ai.col(3) = -M * kf.adjusted.p_CinW;
+        A.noalias() += Ai.transpose() * Ai;
+    }
+    const Scalar parallax = std::acos(std::clamp(first_ray.dot(last_ray), Scalar(-1), Scalar(1)));
+    if (!(parallax >= config_.min_parallax_rad)) {
+        return false;
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<Scalar, 4, 4>> es(A);
+    const Eigen::Matrix<Scalar, 4, 1> h = es.eigenvectors().col(0);
+    if (!(std::abs(h(3)) > Scalar(1e-9))) {
+        return false;
+    }
+    pt.p_W = h.head<3>() / h(3);
+    for (const int i : {pt.first_kf, pt.last_kf}) {
+        const Keyframe& kf = keyframe(i);
+        if (!((kf.adjusted.R_CtoW.transpose() * (pt.p_W - kf.adjusted.p_CinW)).z() > 0)) {
+            return false;
+        }
+    }
+    return pt.p_W.allFinite();
+}
+
+Scalar WindowBa::cost(int first_free) const {
+    (void)first_free;
+    Scalar c = 0;
+    for (int i = 0; i < count_; ++i) {
+        const Keyframe& kf = keyframe(i);
+        for (int j = 0; j < kf.obs_count; ++j) {
+            const int k = obs_point_[obsIndex(i, j)];
+            if (k < 0 || !points_[static_cast<size_t>(k)].usable) {
+                continue;
+            }
+            const Vec3 p_C = kf.adjusted.R_CtoW.transpose() *
+                             (points_[static_cast<size_t>(k)].p_W - kf.adjusted.p_CinW);
+            const auto px = camera_.project(p_C);
+            if (!px) {
+                c += 100 * config_.huber_px * config_.huber_px;
+                continue;
+            }
+            c += huberCost((*px - obs_[obsIndex(i, j)].z_px).norm(), config_.huber_px);
+        }
+    }
+    return c;
+}
+
+void WindowBa::accumulateView(int i, int j, int first_free) {
+    const Keyframe& kf = keyframe(i);
+    const int k = obs_point_[obsIndex(i, j)];
+    const auto pk = static_cast<size_t>(k);
+    const Vec3 p_C = kf.adjusted.R_CtoW.transpose() * (points_[pk].p_W - kf.adjusted.p_CinW);
+    Mat23 J_px;
+    const auto px = camera_.project(p_C, &J_px);
+    if (!px) {
+        return;
+    }
+    const Vec2 r = *px - obs_[obsIndex(i, j)].z_px;
+    const Scalar e = r.norm();
+    const Scalar w = e < config_.huber_px ? Scalar(1) : config_.huber_px / e;
+    const Mat23 J_X = J_px * kf.adjusted.R_CtoW.transpose();
+    H_ll_[pk].noalias() += w * J_X.transpose() * J_X;
+    b_l_[pk].noalias() -= w * J_X.transpose() * r;
+    if (i < first_free) {
+        return;
+    }
+    Eigen::Matrix<Scalar, 2, 6> J_c;
+    J_c.leftCols<3>() = -J_X;               // d / d p_CinW
+    J_c.rightCols<3>() = J_px * skew(p_C);  // d / d theta, R_CtoW <- R_CtoW Exp(theta)
+    const Eigen::Index c6 = 6 * Eigen::Index{i - first_free};
+    H_pp_.block<6, 6>(c6, c6).noalias() += w * J_c.transpose() * J_c;
+    b_p_.segment<6>(c6).noalias() -= w * J_c.transpose() * r;
+    W_[obsIndex(i, j)].noalias() = w * J_c.transpose() * J_X;
+}
+
+void WindowBa::accumulate(int first_free) {
+    H_pp_.setZero();
+    b_p_.setZero();
+    for (int k = 0; k < point_count_; ++k) {
+        H_ll_[static_cast<size_t>(k)].setZero();
+        b_l_[static_cast<size_t>(k)].setZero();
+    }
+    for (int i = 0; i < count_; ++i) {
+        for (int j = 0; j < keyframe(i).obs_count; ++j) {
+            const int k = obs_point_[obsIndex(i, j)];
+            W_[obsIndex(i, j)].setZero();
+            if (k >= 0 && points_[static_cast<size_t>(k)].usable) {
+                accumulateView(i, j, first_free);
+            }
+        }
+    }
+}
+
+void WindowBa::schurComplement(int first_free, Scalar lambda) {
+    // S = H_pp - sum_points W H_ll^-1 W^T, g = b_p - sum W H_ll^-1 b_l; the
+    // poses a smaller window leaves unused get an identity block.
+    const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
+    S_ = H_pp_;
+    g_ = b_p_;
+    for (Eigen::Index d = 0; d < S_.rows(); ++d) {
+        S_(d, d) = d < n_free ? S_(d, d) * (1 + lambda) + Scalar(1e-9) : Scalar(1);
+    }
+    for (int k = 0; k < point_count_; ++k) {
+        const auto pk = static_cast<size_t>(k);
+        if (!points_[pk].usable) {
+            continue;
+        }
+        Mat3 H = H_ll_[pk];
+        H.diagonal() *= 1 + lambda;
+        H.diagonal().array() += Scalar(1e-9);
+        H_ll_inv_[pk] = H.inverse();
+        const auto views = viewsOf(points_[pk]);
+        for (const View& a : views) {
+            if (a.kf < first_free) {
+                continue;
+            }
+            const Eigen::Matrix<Scalar, 6, 3> V = W_[obsIndex(a.kf, a.j)] * H_ll_inv_[pk];
+            const Eigen::Index ca = 6 * Eigen::Index{a.kf - first_free};
+            g_.segment<6>(ca).noalias() -= V * b_l_[pk];
+            for (const View& b : views) {
+                if (b.kf >= first_free) {
+                    const Eigen::Index cb = 6 * Eigen::Index{b.kf - first_free};
+                    S_.block<6, 6>(ca, cb).noalias() -= V * W_[obsIndex(b.kf, b.j)].transpose();
+                }
+            }
+        }
+    }
+}
+
+std::span<const WindowBa::View> WindowBa::viewsOf(const Point& pt) const {
+    const auto k = static_cast<size_t>(&pt - points_.data());
+    return {views_.data() + k * static_cast<size_t>(capacity_), static_cast<size_t>(pt.views)};
+}
+
+void WindowBa::step(int first_free) {
+    for (int i = first_free; i < count_; ++i) {
+        Keyframe& kf = keyframe(i);
+        const Eigen::Index c6 = 6 * Eigen::Index{i - first_free};
+        kf.adjusted.p_CinW += dx_p_.segment<3>(c6);
+        kf.adjusted.R_CtoW = kf.adjusted.R_CtoW * expSO3(dx_p_.segment<3>(c6 + 3));
+    }
+    for (int k = 0; k < point_count_; ++k) {
+        const auto pk = static_cast<size_t>(k);
+        Point& pt = points_[pk];
+        if (!pt.usable) {
+            continue;
+        }
+        Vec3 rhs = b_l_[pk];
+        for (const View& a : viewsOf(pt)) {
+            if (a.kf >= first_free) {
+                rhs.noalias() -= W_[obsIndex(a.kf, a.j)].transpose() *
+                                 dx_p_.segment<6>(6 * Eigen::Index{a.kf - first_free});
+            }
+        }
+        pt.p_W += H_ll_inv_[pk] * rhs;
+    }
+}
+
+bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
+    accumulate(first_free);
+    schurComplement(first_free, lambda);
+    ldlt_.compute(S_);
+    dx_p_ = ldlt_.solve(g_);
+    for (int i = 0; i < count_; ++i) {
+        saved_keyframes_[static_cast<size_t>(i)] = keyframe(i);
+    }
+    std::copy_n(points_.begin(), point_count_, saved_points_.begin());
+    step(first_free);
+    const Scalar c_new = cost(first_free);
+    if (std::isfinite(c_new) && c_new < c) {
+        c = c_new;
+        lambda = std::max(Scalar(1e-7), lambda / 3);
+        return true;
+    }
+    for (int i = 0; i < count_; ++i) {
+        keyframe(i) = saved_keyframes_[static_cast<size_t>(i)];
+    }
+    std::copy_n(saved_points_.begin(), point_count_, points_.begin());
+    lambda *= 5;
+    return false;
+}
+
+}  // namespace scaled::core::slam
