@@ -11,7 +11,8 @@
 # (default 300):
 #   - slam-run --out: the trajectory file;
 #   - scale-eval --out --no-plots: frames.csv, updates.csv, observations.csv,
-#     posterior.csv, likelihoods.csv, objects.csv, config.toml, and
+#     posterior.csv, likelihoods.csv, objects.csv, config.toml (less the keys
+#     added since BASE, at their defaults), and
 #     summary.json without its timings (keys ending in ms_per_frame or
 #     ms_per_update);
 #   - scaled --source replay:... --pacing fast (lossless) until the replay ends:
@@ -155,6 +156,35 @@ git show "$(git rev-parse "$base^{commit}"):config/priors.toml" > "$work/priors.
 echo "same-outputs: running both over the first $frames frames of redkitchen"
 run "$base_build" "$work/base"
 run "$head_build" "$work/head"
+
+# Keys added after BASE (additive configuration) are left out of HEAD's
+# config.toml: a new key at its default changes no output, which the other
+# files show.
+python3 - "$work/base/eval/config.toml" "$work/head/eval/config.toml" <<'PY'
+import re, sys
+base_path, head_path = sys.argv[1], sys.argv[2]
+def keys(path):
+    section, out = "", set()
+    for line in open(path):
+        m = re.match(r"\s*\[([^\]]+)\]", line)
+        if m:
+            section = m.group(1)
+        m = re.match(r"\s*([A-Za-z0-9_]+)\s*=", line)
+        if m:
+            out.add((section, m.group(1)))
+    return out
+known = keys(base_path)
+section, kept = "", []
+for line in open(head_path):
+    m = re.match(r"\s*\[([^\]]+)\]", line)
+    if m:
+        section = m.group(1)
+    m = re.match(r"\s*([A-Za-z0-9_]+)\s*=", line)
+    if m and (section, m.group(1)) not in known:
+        continue
+    kept.append(line)
+open(head_path, "w").writelines(kept)
+PY
 
 status=0
 compared=0

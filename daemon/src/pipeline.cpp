@@ -688,9 +688,11 @@ std::uint64_t Pipeline::recordTracked(const FrameStepResult& r, std::int64_t fra
 
 // POSE: fixed-size arithmetic and a copy into the hub, no allocation.
 void Pipeline::publishPose(const drivers::source::Frame& frame, std::uint64_t epoch) {
+    // The tracker's pose: the filter's, or with tracker.window_ba the window
+    // bundle adjustment's (the filter's covariance and velocity either way).
     const core::slam::EkfSlam& filter = tracker_->filter();
     const PoseReport pose =
-        makePoseReport(filter.pose(), filter.velocityW(), filter.poseCovariance(), filter.upW(),
+        makePoseReport(tracker_->pose(), filter.velocityW(), filter.poseCovariance(), filter.upW(),
                        epoch, frame.id, frame.t_ns);
     hub_.publishPose(pose);
     if (events_ == nullptr) {

@@ -147,6 +147,7 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
     auto& s = t.slam;
     using L = core::slam::SlamLimits;          // the EKF's ranges are core's
     using T = drivers::vision::TrackerLimits;  // the front end's, the vision driver's
+    using B = core::slam::WindowBaLimits;      // the window bundle adjustment's, core's
     return {
         real("tracker", "sigma_a", &s.motion.sigma_a, L::sigma_a),
         real("tracker", "sigma_alpha", &s.motion.sigma_alpha, L::sigma_alpha),
@@ -194,6 +195,18 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
              T::gyro_bias_sigma_radps),
         real("tracker", "gyro_max_gap_s", &t.gyro_max_gap_s, T::gyro_max_gap_s),
         real("tracker", "gyro_bias_time_s", &t.gyro_bias_time_s, T::gyro_bias_time_s),
+        boolean("tracker", "window_ba", &t.window_ba.enabled),
+        integer("tracker", "window_ba_keyframe_every", &t.window_ba.keyframe_every,
+                B::keyframe_every),
+        integer("tracker", "window_ba_window_keyframes", &t.window_ba.window_keyframes,
+                B::window_keyframes),
+        integer("tracker", "window_ba_fixed_keyframes", &t.window_ba.fixed_keyframes,
+                B::fixed_keyframes),
+        integer("tracker", "window_ba_step_keyframes", &t.window_ba.step_keyframes,
+                B::step_keyframes),
+        integer("tracker", "window_ba_iterations", &t.window_ba.iterations, B::iterations),
+        boolean("tracker", "window_ba_scale_feedback", &t.window_ba.scale_feedback),
+        real("tracker", "window_ba_max_scale_step", &t.window_ba.max_scale_step, B::max_scale_step),
     };
 }
 

@@ -508,7 +508,7 @@ void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, Ev
     track_.est.push_back(slam.pose().p_CinW);
     track_.gt.push_back(frame.T_CtoW_gt->p_CinW);
     row.has_position = true;
-    row.p_map = slam.pose().p_CinW;
+    row.p_map = tracker_.pose().p_CinW;
     row.p_gt = frame.T_CtoW_gt->p_CinW;
     track_.t_s.push_back(row.t_s);
     row.scale_true = truthScale(track_.est, track_.gt, options_.min_truth_path_m);

@@ -109,7 +109,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         sums.in_map += stats.features;
         Segment& seg = segments.back();
         seg.t_ns.push_back(frame.t_ns);
-        seg.poses.push_back(tracker.filter().pose());
+        seg.poses.push_back(tracker.pose());
         seg.gt.push_back(frame.T_CtoW_gt ? std::optional<Vec3>(frame.T_CtoW_gt->p_CinW)
                                          : std::nullopt);
         if (frame.T_CtoW_gt) {
@@ -117,6 +117,11 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         }
         if (stats.relocalised) {
             ++result.relocalisations;
+        }
+        if (stats.window_ba.optimised) {
+            ++result.window_ba_optimisations;
+            result.window_ba_mean_points += stats.window_ba.points;
+            result.window_ba_mean_rms_px += static_cast<double>(stats.window_ba.rms_after_px);
         }
     } else if (r.map_lost) {
         // Lost or diverged: the next frame starts a new map (new scale).
@@ -269,6 +274,12 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"reinitialisations\":" + std::to_string(r.reinitialisations);
     s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
     s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
+    if (r.window_ba_optimisations > 0) {
+        const double n = r.window_ba_optimisations;
+        s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +
+             ",\"mean_points\":" + num(r.window_ba_mean_points / n) +
+             ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px / n) + "}";
+    }
     s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
     s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);
     s += ",\"ms_per_frame\":" + num(r.ms_per_frame);

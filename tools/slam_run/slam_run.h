@@ -42,6 +42,11 @@ struct SlamRunResult {
     int reinitialisations = 0;
     int relocalisations = 0;            // losses the tracker recovered from in the same map
     int relocalising_frames = 0;        // frames spent looking for the camera in a lost map
+    // tracker.window_ba: its optimisations, their mean points and residual
+    // after (px); the trajectory is then the adjusted one (MonoTracker::pose).
+    int window_ba_optimisations = 0;
+    double window_ba_mean_points = 0;
+    double window_ba_mean_rms_px = 0;
     double mean_features_measured = 0;  // accepted matches per tracked frame
     double mean_features_in_map = 0;
     double ms_per_frame = 0;  // tracker only (image decoding excluded)

@@ -52,6 +52,9 @@ core::Status validate(const TrackerConfig& c) {
     if (auto ok = slam::validate(c.slam); !ok) {
         return ok.error();
     }
+    if (auto ok = slam::validate(c.window_ba); !ok) {
+        return ok.error();
+    }
     auto bad = [](const std::string& key, auto v, const std::string& allowed) {
         return core::makeError(
             core::ErrorCode::kInvalidArgument,
@@ -112,11 +115,20 @@ core::Result<MonoTracker> MonoTracker::create(const core::PinholeRadialCamera& c
     if (!filter) {
         return filter.error();
     }
-    return MonoTracker(std::move(filter.value()), config);
+    std::optional<slam::WindowBa> ba;
+    if (config.window_ba.enabled) {
+        auto made = slam::WindowBa::create(camera, config.window_ba);
+        if (!made) {
+            return made.error();
+        }
+        ba.emplace(std::move(made.value()));
+    }
+    return MonoTracker(std::move(filter.value()), std::move(ba), config);
 }
 
-MonoTracker::MonoTracker(slam::EkfSlam slam, const TrackerConfig& config)
-    : slam_(std::move(slam)), config_(config) {
+MonoTracker::MonoTracker(slam::EkfSlam slam, std::optional<slam::WindowBa> ba,
+                         const TrackerConfig& config)
+    : slam_(std::move(slam)), ba_(std::move(ba)), config_(config) {
     // The filter's chi-square gate is the one the search ellipse uses.
     config_.match.chi2_gate = static_cast<double>(config_.slam.chi2_gate);
     appearance_.reserve(static_cast<size_t>(config.slam.max_features));
@@ -147,6 +159,9 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, const TrackerConfig& config)
 
 void MonoTracker::reset() {
     has_map_ = false;
+    if (ba_) {
+        ba_->reset();
+    }
     relocalising_ = false;
     previous_frame_good_ = false;
     clearAppearances();
@@ -605,6 +620,23 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     stats.features = static_cast<int>(slam_.features().size());
     stats.visible = stats.added;
     stats.health = slam_.health();
+    if (ba_) {
+        ba_->reset();
+        adjustWindow(stats);
+    }
+}
+
+void MonoTracker::adjustWindow(TrackStats& stats) {
+    if (!ba_ || slam_.health() != slam::SlamHealth::kOk) {
+        return;
+    }
+    stats.window_ba = ba_->addFrame(slam_.pose(), slam_.observations());
+    const core::Scalar s = stats.window_ba.scale;
+    if (stats.window_ba.optimised && s != 1) {
+        const core::Vec3 centre_W = slam_.pose().p_CinW;
+        slam_.rescaleMap(s, centre_W);
+        ba_->notifyRescaled(s, centre_W);
+    }
 }
 
 bool MonoTracker::relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats,
@@ -763,6 +795,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     stats.stage_us.update = lap.next();
     copyUpdateReport(report, stats);
     manageMapAfterUpdate(t_ns, gray, report.bad_frame, stats);
+    adjustWindow(stats);
     stats.stage_us.map = lap.next();
     return stats;
 }

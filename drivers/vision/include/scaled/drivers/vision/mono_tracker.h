@@ -20,6 +20,7 @@
 #include <scaled/core/param_limits.h>
 #include <scaled/core/result.h>
 #include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/slam/window_ba.h>
 #include <scaled/drivers/vision/brief.h>
 #include <scaled/drivers/vision/corner_detector.h>
 #include <scaled/drivers/vision/matcher.h>
@@ -29,6 +30,9 @@ namespace scaled::drivers::vision {
 
 struct TrackerConfig {
     core::slam::SlamConfig slam;
+    // Sliding-window bundle adjustment of the filter's tracks and the map
+    // scale correction it gives (core/slam/window_ba.h); off by default.
+    core::slam::WindowBaConfig window_ba;
     CornerConfig corners;
     MatchConfig match;
     int patch_size = 11;         // matching template side, pixels (odd)
@@ -158,6 +162,9 @@ struct TrackStats {
     int coarse_searches = 0;     // features searched coarse-to-fine (pyramid_levels)
     int coarse_matches = 0;      // of which matched at full resolution
     bool relocalised = false;    // this frame put the camera back into the lost map
+    // The window bundle adjustment on this frame (window_ba.enabled): whether
+    // it optimised, and the scale it gave the map.
+    core::slam::WindowBaReport window_ba;
     // The gyro prior on this frame: kOk when the prediction used it; unset
     // when no IMU samples were given (or use_gyro is off, or no prediction ran).
     std::optional<core::slam::GyroCoverage> gyro;
@@ -201,6 +208,11 @@ public:
                             const core::slam::ImuWindow* imu = nullptr);
 
     [[nodiscard]] const core::slam::EkfSlam& filter() const { return slam_; }
+    // The camera's pose: the filter's, or with window_ba the newest adjusted
+    // keyframe composed with the filter's motion since it.
+    [[nodiscard]] core::CameraPose pose() const {
+        return ba_ ? ba_->adjustedPose(slam_.pose()) : slam_.pose();
+    }
     [[nodiscard]] bool hasMap() const { return has_map_; }
     // The gyro bias estimate (gyro_bias_time_s), camera frame, rad/s: kept
     // across maps (it belongs to the device, not the map).
@@ -220,7 +232,11 @@ private:
         std::int64_t brief_frame = 0;
     };
 
-    MonoTracker(core::slam::EkfSlam slam, const TrackerConfig& config);
+    MonoTracker(core::slam::EkfSlam slam, std::optional<core::slam::WindowBa> ba,
+                const TrackerConfig& config);
+    // The window bundle adjustment's step after a tracked frame, and the
+    // scale correction of the map it gives.
+    void adjustWindow(TrackStats& stats);
 
     // The steps of processFrame(). StageLap (mono_tracker.cpp) times them.
     class StageLap;
@@ -284,6 +300,7 @@ private:
                                            const core::Mat2& S, TrackStats& stats);
 
     core::slam::EkfSlam slam_;
+    std::optional<core::slam::WindowBa> ba_;  // when window_ba.enabled
     TrackerConfig config_;
     Matcher matcher_;
     core::Vec3 gravity_down_C_ = core::Vec3(0, 1, 0);
