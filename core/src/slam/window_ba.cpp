@@ -138,7 +138,12 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
     const auto cap = static_cast<size_t>(capacity_);
     const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
     const auto max_points = static_cast<size_t>(config.max_points);
-    const Eigen::Index free_dim = 6 * Eigen::Index{capacity_};
+    // The most free keyframes: the first optimisation's (all but the first
+    // keyframe) or a later one's (the window less the fixed part).
+    const int max_free = std::max(
+        config.window_keyframes - config.fixed_keyframes,
+        std::min(config.fixed_keyframes + config.step_keyframes, config.window_keyframes) - 1);
+    const Eigen::Index free_dim = 6 * Eigen::Index{max_free};
     keyframes_.resize(cap);
     saved_keyframes_.resize(cap);
     obs_.resize(cap * per_kf);
@@ -155,7 +160,6 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
     b_p_ = VecX::Zero(free_dim);
     g_ = VecX::Zero(free_dim);
     dx_p_ = VecX::Zero(free_dim);
-    ldlt_ = Eigen::LDLT<MatX>(free_dim);
     sim_from_.reserve(cap);
     sim_to_.reserve(cap);
 }
@@ -459,8 +463,9 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
 }
 
 void WindowBa::accumulate(int first_free) {
-    H_pp_.setZero();
-    b_p_.setZero();
+    const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
+    H_pp_.topLeftCorner(n_free, n_free).setZero();
+    b_p_.head(n_free).setZero();
     for (int k = 0; k < point_count_; ++k) {
         H_ll_[static_cast<size_t>(k)].setZero();
         b_l_[static_cast<size_t>(k)].setZero();
@@ -477,13 +482,13 @@ void WindowBa::accumulate(int first_free) {
 }
 
 void WindowBa::schurComplement(int first_free, Scalar lambda) {
-    // S = H_pp - sum_points W H_ll^-1 W^T, g = b_p - sum W H_ll^-1 b_l; the
-    // poses a smaller window leaves unused get an identity block.
+    // S = H_pp - sum_points W H_ll^-1 W^T, g = b_p - sum W H_ll^-1 b_l, on
+    // the free poses' part of the buffers.
     const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
-    S_ = H_pp_;
-    g_ = b_p_;
-    for (Eigen::Index d = 0; d < S_.rows(); ++d) {
-        S_(d, d) = d < n_free ? S_(d, d) * (1 + lambda) + Scalar(1e-9) : Scalar(1);
+    S_.topLeftCorner(n_free, n_free) = H_pp_.topLeftCorner(n_free, n_free);
+    g_.head(n_free) = b_p_.head(n_free);
+    for (Eigen::Index d = 0; d < n_free; ++d) {
+        S_(d, d) = S_(d, d) * (1 + lambda) + Scalar(1e-9);
     }
     for (int k = 0; k < point_count_; ++k) {
         const auto pk = static_cast<size_t>(k);
@@ -502,7 +507,12 @@ void WindowBa::schurComplement(int first_free, Scalar lambda) {
             const Eigen::Matrix<Scalar, 6, 3> V = W_[obsIndex(a.kf, a.j)] * H_ll_inv_[pk];
             const Eigen::Index ca = 6 * Eigen::Index{a.kf - first_free};
             g_.segment<6>(ca).noalias() -= V * b_l_[pk];
+            // The lower triangle only (the Cholesky reads no more): views
+            // are in keyframe order, so b up to a.
             for (const View& b : views) {
+                if (b.kf > a.kf) {
+                    break;
+                }
                 if (b.kf >= first_free) {
                     const Eigen::Index cb = 6 * Eigen::Index{b.kf - first_free};
                     S_.block<6, 6>(ca, cb).noalias() -= V * W_[obsIndex(b.kf, b.j)].transpose();
@@ -544,8 +554,18 @@ void WindowBa::step(int first_free) {
 bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     accumulate(first_free);
     schurComplement(first_free, lambda);
-    ldlt_.compute(S_);
-    dx_p_ = ldlt_.solve(g_);
+    // Cholesky in place on the free part (no allocation); not positive
+    // definite: more damping.
+    const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
+    Eigen::Ref<MatX> S = S_.topLeftCorner(n_free, n_free);
+    const Eigen::LLT<Eigen::Ref<MatX>> llt(S);
+    if (llt.info() != Eigen::Success) {
+        lambda *= 5;
+        return false;
+    }
+    auto dx = dx_p_.head(n_free);
+    dx = g_.head(n_free);
+    llt.solveInPlace(dx);
     for (int i = 0; i < count_; ++i) {
         saved_keyframes_[static_cast<size_t>(i)] = keyframe(i);
     }

@@ -36,7 +36,7 @@
 namespace scaled::core::slam {
 
 struct WindowBaConfig {
-    bool enabled = false;
+    bool enabled = true;
     int keyframe_every = 3;     // frames between keyframes
     int window_keyframes = 67;  // keyframes adjusted together (200 frames)
     int fixed_keyframes = 33;   // the window's oldest, held fixed (the gauge)
@@ -184,7 +184,6 @@ private:
     std::vector<Eigen::Matrix<Scalar, 6, 3>> W_;
     std::vector<Keyframe> saved_keyframes_;
     std::vector<Point> saved_points_;
-    Eigen::LDLT<MatX> ldlt_;
     std::vector<Vec3> sim_from_;  // scratch for the Sim(3) fits
     std::vector<Vec3> sim_to_;
 };

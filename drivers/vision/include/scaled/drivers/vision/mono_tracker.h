@@ -31,7 +31,7 @@ namespace scaled::drivers::vision {
 struct TrackerConfig {
     core::slam::SlamConfig slam;
     // Sliding-window bundle adjustment of the filter's tracks and the map
-    // scale correction it gives (core/slam/window_ba.h); off by default.
+    // scale correction it gives (core/slam/window_ba.h); on by default.
     core::slam::WindowBaConfig window_ba;
     CornerConfig corners;
     MatchConfig match;
