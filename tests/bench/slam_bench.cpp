@@ -110,9 +110,10 @@ const Sequence* redkitchen10HzSequence() {
 }
 
 void runTracker(benchmark::State& state, const Sequence& seq, bool before_issue21 = false,
-                bool gyro = false) {
+                bool gyro = false, bool window_ba = true) {
     const int n = static_cast<int>(state.range(0));
     drivers::vision::TrackerConfig config;
+    config.window_ba.enabled = window_ba;
     if (before_issue21) {
         // No pyramid, no relocalisation (no descriptors kept): the tracker's
         // work before issue 21, for the cost comparison.
@@ -149,16 +150,27 @@ void BM_TrackerSynthetic(benchmark::State& state) {
     runTracker(state, syntheticSequence());
 }
 
+// Without the window bundle adjustment (tracker.window_ba = false): the
+// filter alone, for the cost comparison.
+void BM_TrackerSyntheticNoWindowBa(benchmark::State& state) {
+    cv::setNumThreads(1);
+    runTracker(state, syntheticSequence(), false, false, false);
+}
+
 // The tracker on a redkitchen sequence, or the benchmark skipped with the
 // reason when ../shared is absent.
 void runTrackerOn(benchmark::State& state, const Sequence* seq, bool before_issue21 = false,
-                  bool gyro = false) {
+                  bool gyro = false, bool window_ba = true) {
     cv::setNumThreads(1);
     if (seq == nullptr) {
         state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
         return;
     }
-    runTracker(state, *seq, before_issue21, gyro);
+    runTracker(state, *seq, before_issue21, gyro, window_ba);
+}
+
+void BM_TrackerRedkitchenNoWindowBa(benchmark::State& state) {
+    runTrackerOn(state, redkitchenSequence(), false, false, false);
 }
 
 void BM_TrackerRedkitchen(benchmark::State& state) {
@@ -215,6 +227,8 @@ BENCHMARK(BM_CornersRedkitchen)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond
 BENCHMARK(BM_TrackerSynthetic)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchenNoPyramid)->Arg(30)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerSyntheticNoWindowBa)->Arg(30)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TrackerRedkitchenNoWindowBa)->Arg(30)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen10Hz)->Arg(30)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen10HzGyro)->Arg(30)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchenGyro)->Arg(30)->Unit(benchmark::kMillisecond);

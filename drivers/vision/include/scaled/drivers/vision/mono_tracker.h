@@ -143,8 +143,9 @@ struct StageTimes {
     // EkfSlam::manageMap (deletion of bad features, inverse-depth to XYZ
     // conversion), dropping the deleted features' appearances, and new
     // features (free-region mask, corner detection, patch extraction,
-    // EkfSlam::addFeature); on a new-map frame, initialise plus the first
-    // features.
+    // EkfSlam::addFeature), then the window bundle adjustment (a keyframe,
+    // and every window_ba.step_keyframes keyframes an optimisation); on a
+    // new-map frame, initialise plus the first features.
     double map = 0;
 };
 
