@@ -6,15 +6,11 @@
 
 namespace scaled::core::slam {
 
-namespace {
-
 Mat3 skew(const Vec3& a) {
     Mat3 S;
     S << 0, -a.z(), a.y(), a.z(), 0, -a.x(), -a.y(), a.x(), 0;
     return S;
 }
-
-}  // namespace
 
 Vec4 quatMultiply(const Vec4& q, const Vec4& p) {
     return quatLeftMatrix(q) * p;

@@ -6,17 +6,12 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
+#include <scaled/core/slam/quaternion.h>
 #include <scaled/core/slam/window_ba.h>
 
 namespace scaled::core::slam {
 
 namespace {
-
-Mat3 skew(const Vec3& v) {
-    Mat3 m;
-    m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-    return m;
-}
 
 Mat3 expSO3(const Vec3& w) {
     const Scalar th = w.norm();

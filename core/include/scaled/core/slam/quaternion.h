@@ -10,6 +10,9 @@
 
 namespace scaled::core::slam {
 
+// [a]x: skew(a) b = a x b.
+Mat3 skew(const Vec3& a);
+
 // q (x) p.
 Vec4 quatMultiply(const Vec4& q, const Vec4& p);
 // Matrices with q (x) p = leftMatrix(q) p = rightMatrix(p) q.
