@@ -40,8 +40,8 @@ struct SlamRunResult {
     std::size_t frames = 0;
     std::size_t tracked_frames = 0;  // frames tracked (healthy, not starting a replacement map)
     int reinitialisations = 0;
-    int relocalisations = 0;            // losses the tracker recovered from in the same map
-    int relocalising_frames = 0;        // frames spent looking for the camera in a lost map
+    int relocalisations = 0;      // losses the tracker recovered from in the same map
+    int relocalising_frames = 0;  // frames spent looking for the camera in a lost map
     // tracker.window_ba: its optimisations, their mean points and residual
     // after (px); the trajectory is then the adjusted one (MonoTracker::pose).
     int window_ba_optimisations = 0;
