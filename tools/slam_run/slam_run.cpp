@@ -60,9 +60,11 @@ std::optional<Vec3> rotationGain(const std::vector<core::CameraPose>& poses,
 
 // Sums over the frames, averaged into the result at the end.
 struct FrameSums {
-    double track_ms = 0;  // the tracker's time, every frame
-    double measured = 0;  // accepted matches, tracked frames
-    double in_map = 0;    // features in the map, tracked frames
+    double track_ms = 0;          // the tracker's time, every frame
+    double measured = 0;          // accepted matches, tracked frames
+    double in_map = 0;            // features in the map, tracked frames
+    double window_ba_points = 0;  // tracker.window_ba's optimisations
+    double window_ba_rms_px = 0;
 };
 
 // The end of the run (exclusive): the options' end within the dataset; an
@@ -120,8 +122,8 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         }
         if (stats.window_ba.optimised) {
             ++result.window_ba_optimisations;
-            result.window_ba_mean_points += stats.window_ba.points;
-            result.window_ba_mean_rms_px += static_cast<double>(stats.window_ba.rms_after_px);
+            sums.window_ba_points += stats.window_ba.points;
+            sums.window_ba_rms_px += static_cast<double>(stats.window_ba.rms_after_px);
         }
     } else if (r.map_lost) {
         // Lost or diverged: the next frame starts a new map (new scale).
@@ -145,6 +147,9 @@ void averageCounts(const FrameSums& sums, SlamRunResult& result) {
         result.tracked_frames > 0 ? sums.measured / double(result.tracked_frames) : 0;
     result.mean_features_in_map =
         result.tracked_frames > 0 ? sums.in_map / double(result.tracked_frames) : 0;
+    const double optimisations = result.window_ba_optimisations;
+    result.window_ba_mean_points = optimisations > 0 ? sums.window_ba_points / optimisations : 0;
+    result.window_ba_mean_rms_px = optimisations > 0 ? sums.window_ba_rms_px / optimisations : 0;
 }
 
 // The trajectory of the longest segment and, when every frame of it has
@@ -275,10 +280,9 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
     s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
     if (r.window_ba_optimisations > 0) {
-        const double n = r.window_ba_optimisations;
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +
-             ",\"mean_points\":" + num(r.window_ba_mean_points / n) +
-             ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px / n) + "}";
+             ",\"mean_points\":" + num(r.window_ba_mean_points) +
+             ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px) + "}";
     }
     s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
     s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);

@@ -13,14 +13,6 @@ namespace scaled::core::slam {
 
 namespace {
 
-Mat3 expSO3(const Vec3& w) {
-    const Scalar th = w.norm();
-    if (!(th > Scalar(1e-12))) {
-        return Mat3::Identity() + skew(w);
-    }
-    return Eigen::AngleAxis<Scalar>(th, w / th).toRotationMatrix();
-}
-
 // Relative motion of b from a, its translation times unit, applied to base:
 // base * a^-1 * b.
 CameraPose compose(const CameraPose& base, const CameraPose& a, const CameraPose& b, Scalar unit) {
@@ -248,7 +240,7 @@ WindowBaReport WindowBa::optimise() {
     const int first_free = first_optimisation_ ? 1 : std::min(config_.fixed_keyframes, count_ - 2);
     report.free_keyframes = count_ - first_free;
     gatherPoints(first_free);
-    Scalar c = cost(first_free);
+    Scalar c = cost();
     report.rms_before_px = std::sqrt(c / Scalar(std::max(1, usable_observations_)));
     Scalar lambda = Scalar(1e-3);
     for (int it = 0; it < config_.iterations; ++it) {
@@ -406,8 +398,7 @@ bool WindowBa::triangulate(Point& pt) {
     return pt.p_W.allFinite();
 }
 
-Scalar WindowBa::cost(int first_free) const {
-    (void)first_free;
+Scalar WindowBa::cost() const {
     Scalar c = 0;
     for (int i = 0; i < count_; ++i) {
         const Keyframe& kf = keyframe(i);
@@ -527,7 +518,8 @@ void WindowBa::step(int first_free) {
         Keyframe& kf = keyframe(i);
         const Eigen::Index c6 = 6 * Eigen::Index{i - first_free};
         kf.adjusted.p_CinW += dx_p_.segment<3>(c6);
-        kf.adjusted.R_CtoW = kf.adjusted.R_CtoW * expSO3(dx_p_.segment<3>(c6 + 3));
+        kf.adjusted.R_CtoW =
+            kf.adjusted.R_CtoW * rotationFromQuat(quatFromRotationVector(dx_p_.segment<3>(c6 + 3)));
     }
     for (int k = 0; k < point_count_; ++k) {
         const auto pk = static_cast<size_t>(k);
@@ -566,7 +558,7 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     }
     std::copy_n(points_.begin(), point_count_, saved_points_.begin());
     step(first_free);
-    const Scalar c_new = cost(first_free);
+    const Scalar c_new = cost();
     if (std::isfinite(c_new) && c_new < c) {
         c = c_new;
         lambda = std::max(Scalar(1e-7), lambda / 3);

@@ -9,10 +9,10 @@
 // over the last keyframes (every keyframe_every frames, window_keyframes of
 // them) re-linearises them all together; the older part of its window
 // (fixed_keyframes, already adjusted) holds the gauge, so the newer keyframes
-// come out in the unit the older ones had. The scale between the filter's
-// keyframes and the adjusted ones is handed back to the filter
-// (EkfSlam::rescaleMap), so the map, the served pose and the scale estimator
-// all carry the corrected unit.
+// come out in the unit the older ones had. The ratio of the adjusted unit to
+// the filter's scales the filter's motion in the served pose (adjustedPose);
+// with scale_feedback it is handed back to the filter instead
+// (EkfSlam::rescaleMap), so the map and the scale estimator carry it too.
 //
 // Keyframe poses are camera-to-world (R_CtoW, p_CinW) in the filter's world
 // frame; points are world positions; the residual is the camera model's
@@ -148,7 +148,7 @@ private:
     // Levenberg-Marquardt: one iteration (normal equations, Schur complement,
     // solve, step); false when the cost did not go down (state restored).
     bool iterate(int first_free, Scalar& lambda, Scalar& c);
-    [[nodiscard]] Scalar cost(int first_free) const;
+    [[nodiscard]] Scalar cost() const;
     void accumulate(int first_free);
     void accumulateView(int i, int j, int first_free);
     void schurComplement(int first_free, Scalar lambda);
