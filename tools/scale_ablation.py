@@ -4,6 +4,7 @@
 Usage (from the project root, after a release build):
     tools/scale_ablation.py [--bin build/release/bin] [--data ../shared/data/redkitchen]
                             [--jobs 2] [--row NAME=K=V,K=V]... [--per-run] [--set K=V]...
+                            [--wide]
 
 Every row is scale-eval with the given --set overrides (on top of --set, which applies to all
 rows) over the ten runs of ../shared/tools/generality.py (tracker.seed 1..8, --frames 0:300,
@@ -13,6 +14,13 @@ smallest ci95 coverage of the ten runs, the converged updates whose interval exc
 (summed), the observations per 100 frames (median) and the final 95% width against the
 information limit (medians). With --per-run, one table per row with every run as well.
 Without --row, the rows of docs/accuracy.md's ablation. Nothing here knows a bound.
+
+With --wide, 26 runs instead of ten: tracker.seed 1..16, and five 300-frame windows
+(--frames 0:300, 100:400, 150:450, 200:500, 300:600) each with seeds 1 and 2; per row the
+median and worst (and how many runs are at most 10%) of the error 5 s after the map started
+against the whole-run truth and against the sliding-window truth, over the seeds and over the
+windows; how many runs keep the window truth within 8% of the run's own (the map's drift);
+metric ATE; the smallest ci95 coverage.
 """
 import argparse
 import concurrent.futures as cf
@@ -26,6 +34,10 @@ RUNS = [("seed %d" % s, ["--set", "tracker.seed=%d" % s]) for s in range(1, 9)] 
     ("frames 0:300", ["--frames", "0:300"]),
     ("frames 300:600", ["--frames", "300:600"]),
 ]
+
+WIDE_RUNS = [("seed %d" % s, ["--set", "tracker.seed=%d" % s]) for s in range(1, 17)] + [
+    ("frames %s seed %d" % (w, s), ["--frames", w, "--set", "tracker.seed=%d" % s])
+    for w in ("0:300", "100:400", "150:450", "200:500", "300:600") for s in (1, 2)]
 
 DEFAULT_ROWS = [
     ("paper model (issue 5 defaults)", ["estimator.model=paper"]),
@@ -61,7 +73,9 @@ def main():
     ap.add_argument("--set", action="append", default=[], help="K=V for every row")
     ap.add_argument("--flag", action="append", default=[], help="a scale-eval flag for every row")
     ap.add_argument("--per-run", action="store_true")
+    ap.add_argument("--wide", action="store_true", help="26 runs (seeds 1-16, five windows)")
     a = ap.parse_args()
+    runs = WIDE_RUNS if a.wide else RUNS
     exe = os.path.join(a.bin, "scale-eval")
     if not os.access(exe, os.X_OK):
         sys.exit("scale_ablation: %s not found (build the release preset first)" % exe)
@@ -76,8 +90,11 @@ def main():
     with cf.ThreadPoolExecutor(a.jobs) as pool:
         for name, sets in rows:
             extra = [x for kv in sets for x in ("--set", kv)]
-            for run_name, args in RUNS:
+            for run_name, args in runs:
                 jobs[(name, run_name)] = pool.submit(run, exe, a.data, args + common + extra)
+    if a.wide:
+        print_wide(rows, jobs, a.per_run)
+        return
     print("| row | seeds: median / worst of the medians | 0:300 | 300:600 | min ci95 coverage |"
           " wrong converged | obs / 100 frames | final 95% width / limit |")
     print("|---|---|---|---|---|---|---|---|")
@@ -115,6 +132,50 @@ def main():
                     d["wrong_converged_updates"], fmt(d["observations_per_100_frames"]),
                     fmt(d["posterior_final"]["rel_width95"], True),
                     fmt(d["information_limit"]["rel_width95_final"], True)))
+
+
+def stat(values, bound):
+    """'median / worst (n of m at most bound)' of relative errors, in %."""
+    v = [x for x in values if x is not None]
+    if not v:
+        return "-"
+    return "%s / %s (%d/%d)" % (fmt(statistics.median(v), True), fmt(max(v), True),
+                                sum(1 for x in v if x <= bound), len(values))
+
+
+def print_wide(rows, jobs, per_run):
+    print("| row | after 5 s, seeds 1-16 | after 5 s, 5 windows x 2 seeds | vs window truth, seeds |"
+          " vs window truth, windows | window truth within 8% | metric ATE % of path |"
+          " min ci95 coverage |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, _ in rows:
+        res = {rn: jobs[(name, rn)].result() for rn, _ in WIDE_RUNS}
+        errs = [res[rn] for rn, _ in WIDE_RUNS if "_error" in res[rn]]
+        if errs:
+            print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+            continue
+        seeds = [res[rn] for rn, _ in WIDE_RUNS if rn.startswith("seed")]
+        wins = [res[rn] for rn, _ in WIDE_RUNS if rn.startswith("frames")]
+        err = lambda d: d["rel_error_after_5s"]["median"]  # noqa: E731
+        werr = lambda d: d["rel_error_after_5s_window"]["median"]  # noqa: E731
+        dev = [d["scale_true_window_max_dev"] for d in seeds + wins]
+        ate = [d["metric_trajectory"]["ate_percent_of_path"] for d in seeds + wins]
+        ate = [x for x in ate if x is not None]
+        cov = [d["ci95_coverage"] for d in seeds + wins if d["ci95_coverage"] is not None]
+        print("| %s | %s | %s | %s | %s | %d/%d | %s / %s | %s |" % (
+            name, stat([err(d) for d in seeds], 0.10), stat([err(d) for d in wins], 0.10),
+            stat([werr(d) for d in seeds], 0.10), stat([werr(d) for d in wins], 0.10),
+            sum(1 for x in dev if x is not None and x <= 0.08), len(dev),
+            fmt(statistics.median(ate)) if ate else "-", fmt(max(ate)) if ate else "-",
+            fmt(min(cov) if cov else None, True)))
+        if per_run:
+            for rn, _ in WIDE_RUNS:
+                d = res[rn]
+                print("|   %s | %s | | %s | | %s | %s | %s |" % (
+                    rn, fmt(err(d), True), fmt(werr(d), True),
+                    fmt(d["scale_true_window_max_dev"], True),
+                    fmt(d["metric_trajectory"]["ate_percent_of_path"]),
+                    fmt(d["ci95_coverage"], True)))
 
 
 if __name__ == "__main__":

@@ -566,7 +566,7 @@ void Pipeline::trackFrame(TrackingState& state, QueuedFrame& item) {
     const std::uint64_t epoch = recordTracked(r, frame.id, state.tracked);
     ++fps_window_frames_;
     if (r.ok) {
-        publishPose(frame, epoch);
+        publishPose(state, frame, epoch);
     }
     if (r.ok && r.frames_in_map > 1) {
         // Only a tracked frame past the map's first can be due (no lock
@@ -687,13 +687,17 @@ std::uint64_t Pipeline::recordTracked(const FrameStepResult& r, std::int64_t fra
 }
 
 // POSE: fixed-size arithmetic and a copy into the hub, no allocation.
-void Pipeline::publishPose(const drivers::source::Frame& frame, std::uint64_t epoch) {
-    // The tracker's pose: the filter's, or with tracker.window_ba the window
-    // bundle adjustment's (the filter's covariance and velocity either way).
+void Pipeline::publishPose(const TrackingState& state, const drivers::source::Frame& frame,
+                           std::uint64_t epoch) {
+    // The filter's pose, velocity, covariance and gravity in the map the
+    // scale is estimated in (estimator.map): with tracker.window_ba the
+    // served pose's frame and unit, so the metric pose is d times it.
     const core::slam::EkfSlam& filter = tracker_->filter();
-    const PoseReport pose =
-        makePoseReport(tracker_->pose(), filter.velocityW(), filter.poseCovariance(), filter.upW(),
-                       epoch, frame.id, frame.t_ns);
+    const core::slam::Sim3 T = state.step.estimatorFromFilter(config_.pipeline.estimator_map);
+    const PoseReport pose = makePoseReport(
+        T.apply(filter.pose()), T.scale * (T.R * filter.velocityW()),
+        T.applyToPoseCovariance(filter.poseCovariance()), T.R * filter.upW(), epoch, frame.id,
+        frame.t_ns);
     hub_.publishPose(pose);
     if (events_ == nullptr) {
         return;
@@ -714,7 +718,8 @@ void Pipeline::publishPose(const drivers::source::Frame& frame, std::uint64_t ep
 // detector to take the previous job).
 void Pipeline::handToDetector(TrackingState& state, const drivers::source::Frame& frame,
                               std::uint64_t epoch) {
-    state.staging.capture(tracker_->filter(), frame.id, epoch);
+    state.staging.capture(tracker_->filter(), frame.id, epoch,
+                          state.step.estimatorFromFilter(config_.pipeline.estimator_map));
     frame.color.copyTo(state.staging_image);
     std::unique_lock lock(job_mutex_);
     if (lossless_) {

@@ -243,6 +243,8 @@ std::vector<Field> estimatorFields(PipelineConfig& c) {
         choice(
             "estimator", "model", &e.model,
             {{"paper", core::EstimatorModel::kPaper}, {"object", core::EstimatorModel::kObject}}),
+        choice("estimator", "map", &c.estimator_map,
+               {{"served", EstimatorMap::kServed}, {"filter", EstimatorMap::kFilter}}),
         choice("estimator", "variance", &e.likelihood.variance_model,
                {{"paper", core::VarianceModel::kPaper},
                 {"propagated", core::VarianceModel::kPropagated}}),

@@ -107,8 +107,10 @@ fi
 # Experiment 1 of docs/accuracy.md (issue 5): the whole sequence with the
 # paper model, its issue-5 defaults and the COCO priors converges, with a
 # median relative error of at most 3% (on this seed; issue 18's ablation
-# shows its intervals excluding the truth on others).
-"$ev" --dataset "$rk" "${paper[@]}" --json > "$tmp/exp1.json" 2> "$tmp/exp1.err" || fail "experiment 1: $(cat "$tmp/exp1.err")"
+# shows its intervals excluding the truth on others). Measured in the
+# filter's map, as then (in the served map its 95% width ends at 10.6%, just
+# short of "converged", 1.0% off).
+"$ev" --dataset "$rk" "${paper[@]}" --set estimator.map=filter --json > "$tmp/exp1.json" 2> "$tmp/exp1.err" || fail "experiment 1: $(cat "$tmp/exp1.err")"
 "$py" - "$tmp/exp1.json" <<'PY' || fail "experiment 1 check failed"
 import json, sys
 j = json.loads(open(sys.argv[1]).read())

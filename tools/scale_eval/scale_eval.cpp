@@ -12,6 +12,7 @@
 #include <scaled/core/geometry/trajectory_alignment.h>
 #include <scaled/core/scale/likelihood.h>
 #include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/slam/slam_snapshot.h>
 #include <scaled/daemon/frame_step.h>
 #include <scaled/drivers/dataset/depth_image.h>
 #include <scaled/drivers/imu/gyro_feed.h>
@@ -376,7 +377,7 @@ private:
     daemon::FrameStep step_;
 
     std::vector<core::slam::MapPoint> points_;
-    std::vector<core::MapFeature> features_;
+    core::slam::SlamSnapshot snapshot_;
     std::vector<core::Detection> dets_;
     std::vector<core::ObservationRecord> records_;
     std::vector<Scalar> log_l_;
@@ -400,6 +401,9 @@ private:
 };
 
 core::Status EvalRun::run(std::size_t end, EvalResult& r) {
+    if (auto reserved = snapshot_.reserve(config_.tracker.slam.max_features); !reserved) {
+        return reserved.error();
+    }
     const auto& grid = estimator_.posterior().grid();
     curve_step_ =
         std::max<std::size_t>(1, (grid.size() + static_cast<std::size_t>(options_.curve_bins) - 1) /
@@ -503,12 +507,14 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
 
 // Ground truth over this epoch's tracked frames.
 void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, EvalResult& r) {
-    const core::slam::EkfSlam& slam = tracker_.filter();
     r.has_ground_truth = true;
-    track_.est.push_back(slam.pose().p_CinW);
+    // The trajectory in the map the scale is estimated in (estimator.map):
+    // scale_true is metres per its unit, the metric trajectory d times it.
+    const core::slam::Sim3 T = step_.estimatorFromFilter(config_.estimator_map);
+    row.p_map = T.apply(tracker_.filter().pose().p_CinW);
+    track_.est.push_back(row.p_map);
     track_.gt.push_back(frame.T_CtoW_gt->p_CinW);
     row.has_position = true;
-    row.p_map = tracker_.pose().p_CinW;
     row.p_gt = frame.T_CtoW_gt->p_CinW;
     track_.t_s.push_back(row.t_s);
     row.scale_true = truthScale(track_.est, track_.gt, options_.min_truth_path_m);
@@ -538,19 +544,15 @@ void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, Ev
 core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
     const core::slam::EkfSlam& slam = tracker_.filter();
     slam.mapPoints(points_);
-    features_.clear();
-    for (const auto& m : points_) {
-        features_.push_back({m.p_FinW, m.P_FinW});
-    }
-    core::FrameSnapshot snapshot{slam.pose(), slam.upW(), features_, frame.id};
+    // As the daemon hands it to its detection thread (Pipeline::handToDetector).
+    (void)snapshot_.capture(slam, frame.id, 0, step_.estimatorFromFilter(config_.estimator_map));
+    core::FrameSnapshot snapshot = snapshot_.view();
     if (options_.truth_geometry) {
+        // Without truth for this frame there is no update from it.
         snapshot.features = {};
         if (frame.T_CtoW_gt && frame.gravity_down_C) {
             snapshot.pose = *frame.T_CtoW_gt;
             snapshot.up_W = -(frame.T_CtoW_gt->R_CtoW * *frame.gravity_down_C).normalized();
-        } else {
-            // No truth for this frame: no update from it.
-            snapshot.pose = slam.pose();
         }
     }
     return snapshot;
@@ -683,8 +685,11 @@ void EvalRun::appendDepthErrors(const drivers::source::Frame& frame, const Updat
     if (auto depth = drivers::dataset::loadDepthMetres(frame, info)) {
         std::vector<double> rel;
         std::vector<double> abs_m;
-        depthErrors(tracker_.filter(), points_, *depth, static_cast<double>(up.scale.map), rel,
-                    abs_m);
+        // The filter's depths in the unit the scale is for.
+        const double unit =
+            static_cast<double>(step_.estimatorFromFilter(config_.estimator_map).scale);
+        depthErrors(tracker_.filter(), points_, *depth, unit * static_cast<double>(up.scale.map),
+                    rel, abs_m);
         for (std::size_t k = 0; k < rel.size(); ++k) {
             depth_rel_.emplace_back(r.updates.size(), rel[k]);
             depth_abs_.emplace_back(r.updates.size(), abs_m[k]);

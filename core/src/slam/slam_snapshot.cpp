@@ -55,7 +55,7 @@ void SlamSnapshot::clear() {
 }
 
 CaptureReport SlamSnapshot::capture(const EkfSlam& slam, std::int64_t frame_id,
-                                    std::uint64_t epoch) {
+                                    std::uint64_t epoch, const Sim3& to_served) {
     clear();
     frame_id_ = frame_id;
     epoch_ = epoch;
@@ -84,10 +84,24 @@ CaptureReport SlamSnapshot::capture(const EkfSlam& slam, std::int64_t frame_id,
         features_.push_back({point.p_FinW, point.P_FinW});
         info_.push_back({point.id, point.kind, point.px, point.in_view, point.measured});
     }
+    if (!to_served.isIdentity()) {
+        carry(to_served);
+    }
     report.captured = size();
     report.dropped = dropped_;
     report.status = dropped_ > 0 ? CaptureStatus::kTruncated : CaptureStatus::kOk;
     return report;
+}
+
+void SlamSnapshot::carry(const Sim3& T) {
+    pose_ = T.apply(pose_);
+    up_W_ = T.R * up_W_;
+    pose_cov_ = T.applyToPoseCovariance(pose_cov_);
+    const Mat3 J = T.scale * T.R;
+    for (MapFeature& f : features_) {
+        f.p_FinW = T.apply(f.p_FinW);
+        f.P_FinW = J * f.P_FinW * J.transpose();
+    }
 }
 
 FrameSnapshot SlamSnapshot::view() const {

@@ -30,12 +30,6 @@ Scalar huberCost(Scalar e, Scalar k) {
 
 // to ~= scale R from + t (Umeyama 1991) with fixed-size algebra: no
 // allocation (core's alignTrajectories is evaluation code and allocates).
-struct Sim3 {
-    Scalar scale = 1;
-    Mat3 R = Mat3::Identity();
-    Vec3 t = Vec3::Zero();
-};
-
 std::optional<Sim3> fitSim3(std::span<const Vec3> from, std::span<const Vec3> to) {
     const auto n = static_cast<Scalar>(from.size());
     if (from.size() < 3 || from.size() != to.size()) {
@@ -230,6 +224,21 @@ CameraPose WindowBa::adjustedPose(const CameraPose& filter_T_CtoW) const {
     }
     const Keyframe& last = keyframe(count_ - 1);
     return compose(last.adjusted, last.filter, filter_T_CtoW, unit_ratio_);
+}
+
+Sim3 WindowBa::adjustedFromFilter() const {
+    if (count_ == 0) {
+        return {};
+    }
+    // adjustedPose's composition as a map of world points: a point at p_C in
+    // the newest keyframe's filter camera lies at unit_ratio_ p_C in its
+    // adjusted camera.
+    const Keyframe& last = keyframe(count_ - 1);
+    Sim3 out;
+    out.scale = unit_ratio_;
+    out.R = last.adjusted.R_CtoW * last.filter.R_CtoW.transpose();
+    out.t = last.adjusted.p_CinW - out.scale * (out.R * last.filter.p_CinW);
+    return out;
 }
 
 WindowBaReport WindowBa::optimise() {

@@ -20,6 +20,7 @@
 
 #include <scaled/core/scale/scale_estimator.h>
 #include <scaled/core/slam/ekf_slam.h>
+#include <scaled/core/slam/quaternion.h>
 #include <scaled/core/slam/slam_snapshot.h>
 
 #include "allocation_counter.h"
@@ -348,6 +349,49 @@ TEST(SlamSnapshot, CarriesTheFrameIdEpochAndTheFiltersState) {
     EXPECT_EQ(snap->epoch(), 8U);
     EXPECT_EQ(snap->frameId(), 1235);
     EXPECT_EQ(snap->size(), 0);
+}
+
+TEST(SlamSnapshot, CarriedIntoTheServedFrameKeepsEveryProjection) {
+    Rig rig;
+    rig.runTo(45);
+    auto plain = SlamSnapshot::create(rig.slam.config().max_features);
+    auto carried = SlamSnapshot::create(rig.slam.config().max_features);
+    ASSERT_TRUE(plain.ok() && carried.ok());
+    (void)plain->capture(rig.slam, 1, 1);
+    Sim3 T;
+    T.scale = Scalar(1.3);
+    T.R = rotationFromQuat(quatFromRotationVector(Vec3(0.05, -0.2, 0.1)));
+    T.t = Vec3(0.4, -1.0, 2.0);
+    EXPECT_FALSE(T.isIdentity());
+    EXPECT_EQ(carried->capture(rig.slam, 1, 1, T).status, CaptureStatus::kOk);
+    ASSERT_EQ(carried->size(), plain->size());
+    ASSERT_GT(plain->size(), 15);
+    // A similarity of the world moves the camera with it: every point keeps
+    // its direction from the camera (its pixel), its depth grows by scale.
+    const CameraPose& a = plain->pose();
+    const CameraPose& b = carried->pose();
+    for (std::size_t i = 0; i < plain->features().size(); ++i) {
+        const MapFeature& fa = plain->features()[i];
+        const MapFeature& fb = carried->features()[i];
+        const Vec3 p_a = a.R_CtoW.transpose() * (fa.p_FinW - a.p_CinW);
+        const Vec3 p_b = b.R_CtoW.transpose() * (fb.p_FinW - b.p_CinW);
+        EXPECT_LT((p_b - T.scale * p_a).norm(), Scalar(1e-9) * (1 + p_a.norm())) << i;
+        const Scalar trace_a = fa.P_FinW.trace();
+        EXPECT_NEAR(fb.P_FinW.trace(), T.scale * T.scale * trace_a, Scalar(1e-12)) << i;
+    }
+    EXPECT_LT((carried->upW() - T.R * plain->upW()).norm(), Scalar(1e-12));
+    // Position variance grows by scale^2; the camera-frame attitude's is kept.
+    const Mat6x6& Pa = plain->poseCovariance();
+    const Mat6x6& Pb = carried->poseCovariance();
+    const Scalar pos_a = Pa.topLeftCorner<3, 3>().trace();
+    const Scalar pos_b = Pb.topLeftCorner<3, 3>().trace();
+    EXPECT_NEAR(pos_b, T.scale * T.scale * pos_a, Scalar(1e-12));
+    const Mat3 att_a = Pa.bottomRightCorner<3, 3>();
+    const Mat3 att_b = Pb.bottomRightCorner<3, 3>();
+    EXPECT_EQ(att_b, att_a);
+    EXPECT_LT((Pb - Pb.transpose()).norm(), Scalar(1e-15));
+    // The view the estimator gets is the carried one.
+    EXPECT_EQ(carried->view().pose.p_CinW, b.p_CinW);
 }
 
 TEST(SlamSnapshot, DoesNotAliasTheFilter) {

@@ -109,7 +109,9 @@ TEST(WindowBa, HoldsTheUnitTheFilterLoses) {
     std::vector<CameraPose> served;
     int optimisations = 0;
     Scalar rms_after = 0;
+    Scalar max_unit = 0;
     std::int64_t allocations = -1;
+    EXPECT_TRUE(ba->adjustedFromFilter().isIdentity()) << "no keyframe yet";
     for (int k = 0; k < kFrames; ++k) {
         observe(s, cam, k, obs);
         const std::int64_t before = test::allocationCount();
@@ -123,7 +125,17 @@ TEST(WindowBa, HoldsTheUnitTheFilterLoses) {
             EXPECT_GT(r.points, 100);
         }
         served.push_back(ba->adjustedPose(s.filter[static_cast<size_t>(k)]));
+        // The same map as a similarity of the world (what carries the
+        // filter's points, velocity and gravity into the served frame).
+        const Sim3 T = ba->adjustedFromFilter();
+        const CameraPose carried = T.apply(s.filter[static_cast<size_t>(k)]);
+        EXPECT_LT((carried.p_CinW - served.back().p_CinW).norm(), Scalar(1e-4)) << "frame " << k;
+        EXPECT_LT((carried.R_CtoW - served.back().R_CtoW).norm(), Scalar(1e-4)) << "frame " << k;
+        if (optimisations > 0) {
+            max_unit = std::max(max_unit, std::abs(T.scale - 1));
+        }
     }
+    EXPECT_GT(max_unit, Scalar(0.05)) << "the served unit never left the filter's";
     EXPECT_GE(optimisations, 5);
     EXPECT_LT(rms_after, Scalar(0.6));
     EXPECT_EQ(allocations, 0) << "addFrame allocated once running";

@@ -69,6 +69,14 @@ public:
     [[nodiscard]] bool detectionDue(const FrameStepResult& result,
                                     const DetectionSchedule& schedule, std::int64_t t_ns);
 
+    // The tracker's world carried into the map the scale estimator measures
+    // (estimator.map): the served pose's, or identity for the filter's. The
+    // detection snapshot, the POSE report and scale-eval's trajectory all
+    // take it, so a scale and the positions it multiplies share one unit.
+    [[nodiscard]] core::slam::Sim3 estimatorFromFilter(EstimatorMap map) const {
+        return map == EstimatorMap::kServed ? tracker_->servedFromFilter() : core::slam::Sim3{};
+    }
+
     [[nodiscard]] drivers::vision::MonoTracker& tracker() { return *tracker_; }
     [[nodiscard]] const drivers::vision::MonoTracker& tracker() const { return *tracker_; }
 

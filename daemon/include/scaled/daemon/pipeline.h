@@ -210,7 +210,8 @@ private:
     void recordGravity(const drivers::imu::MapGravity& g);
     std::uint64_t recordTracked(const FrameStepResult& r, std::int64_t frame_id,
                                 std::uint64_t tracked);
-    void publishPose(const drivers::source::Frame& frame, std::uint64_t epoch);
+    void publishPose(const TrackingState& state, const drivers::source::Frame& frame,
+                     std::uint64_t epoch);
     void handToDetector(TrackingState& state, const drivers::source::Frame& frame,
                         std::uint64_t epoch);
     // The detection thread: a job from the tracking thread, the detector,

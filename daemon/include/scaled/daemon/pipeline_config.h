@@ -40,10 +40,17 @@ struct DetectionSchedule {
     double period_s = 0;
 };
 
+// The map the scale estimator measures (estimator.map): the served pose's,
+// the window bundle adjustment's frame and unit (the default: the scale
+// served is metres per the served pose's unit), or the filter's own (the
+// ablation; docs/accuracy.md). The same without tracker.window_ba.
+enum class EstimatorMap : std::uint8_t { kServed, kFilter };
+
 struct PipelineConfig {
     drivers::vision::TrackerConfig tracker;
     drivers::detector::DetectorConfig detector;
     core::EstimatorConfig estimator;
+    EstimatorMap estimator_map = EstimatorMap::kServed;
     std::filesystem::path priors_path;  // empty: the caller's default (config/priors.toml)
     DetectionSchedule detection;
 };

@@ -44,6 +44,7 @@
 #include <scaled/core/scale/vertical_extent.h>
 #include <scaled/core/slam/ekf_slam.h>
 #include <scaled/core/slam/slam_types.h>
+#include <scaled/core/slam/window_ba.h>
 
 namespace scaled::core::slam {
 
@@ -90,9 +91,14 @@ public:
     // the same order; inverse-depth features with rho <= 0 are left out) its
     // id, p_FinW, P_FinW and projection. frame_id is the caller's id of the
     // image (the one the detections will carry), epoch the caller's map epoch.
+    // to_served carries all of it (pose, covariance, up_W, points) into the
+    // frame and unit of the served pose (MonoTracker::servedFromFilter(): the
+    // window bundle adjustment's), so the scale estimator measures the map
+    // the served pose is in. Projections are unchanged by a similarity.
     // Does not allocate. On an uninitialised filter the snapshot is emptied
     // (frame_id and epoch are still recorded) and kUninitialised returned.
-    CaptureReport capture(const EkfSlam& slam, std::int64_t frame_id, std::uint64_t epoch);
+    CaptureReport capture(const EkfSlam& slam, std::int64_t frame_id, std::uint64_t epoch,
+                          const Sim3& to_served = {});
 
     // Forgets the content (not the capacity).
     void clear();
@@ -122,6 +128,8 @@ public:
     [[nodiscard]] int dropped() const { return dropped_; }
 
 private:
+    void carry(const Sim3& T);
+
     int capacity_ = 0;
     bool valid_ = false;
     std::int64_t frame_id_ = 0;

@@ -72,6 +72,33 @@ struct WindowBaLimits {
 
 Status validate(const WindowBaConfig& config);
 
+// A similarity of the world: p_to = scale R p_from + t.
+struct Sim3 {
+    Scalar scale = 1;
+    Mat3 R = Mat3::Identity();
+    Vec3 t = Vec3::Zero();
+
+    [[nodiscard]] bool isIdentity() const {
+        return scale == 1 && R == Mat3::Identity() && t == Vec3::Zero();
+    }
+    [[nodiscard]] Vec3 apply(const Vec3& p_from) const { return scale * (R * p_from) + t; }
+    // A camera carried along with the world it is posed in.
+    [[nodiscard]] CameraPose apply(const CameraPose& T_CtoW) const {
+        return {R * T_CtoW.R_CtoW, apply(T_CtoW.p_CinW)};
+    }
+    // The covariance of (position, rotation error in the camera frame) of a
+    // carried camera: position errors turn with the world and grow with its
+    // unit, the camera-frame rotation error is unchanged.
+    [[nodiscard]] Mat6x6 applyToPoseCovariance(const Mat6x6& P) const {
+        const Mat3 J = scale * R;
+        Mat6x6 out = P;
+        out.topLeftCorner<3, 3>() = J * P.topLeftCorner<3, 3>() * J.transpose();
+        out.topRightCorner<3, 3>() = J * P.topRightCorner<3, 3>();
+        out.bottomLeftCorner<3, 3>() = out.topRightCorner<3, 3>().transpose();
+        return out;
+    }
+};
+
 // What one optimisation did.
 struct WindowBaReport {
     bool optimised = false;
@@ -108,6 +135,11 @@ public:
     // The adjusted pose of the newest keyframe composed with the filter's
     // motion since it: the camera's pose in the adjusted trajectory.
     [[nodiscard]] CameraPose adjustedPose(const CameraPose& filter_T_CtoW) const;
+    // The same as a map of the filter's world to the adjusted one (identity
+    // before the first keyframe): adjustedFromFilter().apply(T) equals
+    // adjustedPose(T) up to rounding, and it carries the filter's map points,
+    // velocity and gravity into the frame and unit of the served pose.
+    [[nodiscard]] Sim3 adjustedFromFilter() const;
     [[nodiscard]] int keyframeCount() const { return count_; }
 
 private:

@@ -214,6 +214,11 @@ public:
     [[nodiscard]] core::CameraPose pose() const {
         return ba_ ? ba_->adjustedPose(slam_.pose()) : slam_.pose();
     }
+    // The filter's world carried into pose()'s (identity without window_ba):
+    // for the filter's points, velocity and gravity in the served frame.
+    [[nodiscard]] core::slam::Sim3 servedFromFilter() const {
+        return ba_ ? ba_->adjustedFromFilter() : core::slam::Sim3{};
+    }
     [[nodiscard]] bool hasMap() const { return has_map_; }
     // The gyro bias estimate (gyro_bias_time_s), camera frame, rad/s: kept
     // across maps (it belongs to the device, not the map).
