@@ -694,10 +694,10 @@ void Pipeline::publishPose(const TrackingState& state, const drivers::source::Fr
     // served pose's frame and unit, so the metric pose is d times it.
     const core::slam::EkfSlam& filter = tracker_->filter();
     const core::slam::Sim3 T = state.step.estimatorFromFilter(config_.pipeline.estimator_map);
-    const PoseReport pose = makePoseReport(
-        T.apply(filter.pose()), T.scale * (T.R * filter.velocityW()),
-        T.applyToPoseCovariance(filter.poseCovariance()), T.R * filter.upW(), epoch, frame.id,
-        frame.t_ns);
+    const PoseReport pose =
+        makePoseReport(T.apply(filter.pose()), T.scale * (T.R * filter.velocityW()),
+                       T.applyToPoseCovariance(filter.poseCovariance()), T.R * filter.upW(), epoch,
+                       frame.id, frame.t_ns);
     hub_.publishPose(pose);
     if (events_ == nullptr) {
         return;

@@ -54,8 +54,8 @@ void SlamSnapshot::clear() {
     info_.clear();
 }
 
-CaptureReport SlamSnapshot::capture(const EkfSlam& slam, std::int64_t frame_id,
-                                    std::uint64_t epoch, const Sim3& to_served) {
+CaptureReport SlamSnapshot::capture(const EkfSlam& slam, std::int64_t frame_id, std::uint64_t epoch,
+                                    const Sim3& to_served) {
     clear();
     frame_id_ = frame_id;
     epoch_ = epoch;

@@ -391,15 +391,14 @@ seed = 7
 
 TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
     PipelineConfig c = defaultPipelineConfig();
-    EXPECT_EQ(
-        applyError("[estimator]\nrobust = true\nrobustt = 1\n", c),
-        "test.toml:3: estimator.robustt: unknown key (allowed in [estimator]: priors, "
-        "model, map, variance, robust, outlier_weight, outlier_height_range_m, "
-        "partial_visibility, "
-        "partial_weight, min_sigma_m, weighting, use_non_upright, min_detection_score, "
-        "max_features_per_box, compensate_roll, propagate_variance, box_edge_sigma_px, "
-        "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
-        "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
+    EXPECT_EQ(applyError("[estimator]\nrobust = true\nrobustt = 1\n", c),
+              "test.toml:3: estimator.robustt: unknown key (allowed in [estimator]: priors, "
+              "model, map, variance, robust, outlier_weight, outlier_height_range_m, "
+              "partial_visibility, "
+              "partial_weight, min_sigma_m, weighting, use_non_upright, min_detection_score, "
+              "max_features_per_box, compensate_roll, propagate_variance, box_edge_sigma_px, "
+              "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
+              "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
     EXPECT_EQ(applyError("\n[estimatr]\n", c),
               "test.toml:2: estimatr: unknown section (allowed: source, tracker, detector, "
               "detection, estimator, objects, camera, gpio, imu, pipeline, socket, log)");
