@@ -137,8 +137,10 @@ public:
     [[nodiscard]] CameraPose adjustedPose(const CameraPose& filter_T_CtoW) const;
     // The same as a map of the filter's world to the adjusted one (identity
     // before the first keyframe): adjustedFromFilter().apply(T) equals
-    // adjustedPose(T) up to rounding, and it carries the filter's map points,
-    // velocity and gravity into the frame and unit of the served pose.
+    // adjustedPose(T) up to rounding, and it carries the filter's map points
+    // and velocity into the frame and unit of the served pose. (Not the
+    // vertical: it belongs to the world frame, which the adjustment holds to
+    // the filter's; R is the filter's attitude drift against the adjustment.)
     [[nodiscard]] Sim3 adjustedFromFilter() const;
     [[nodiscard]] int keyframeCount() const { return count_; }
 
