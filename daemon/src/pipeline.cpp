@@ -689,15 +689,18 @@ std::uint64_t Pipeline::recordTracked(const FrameStepResult& r, std::int64_t fra
 // POSE: fixed-size arithmetic and a copy into the hub, no allocation.
 void Pipeline::publishPose(const TrackingState& state, const drivers::source::Frame& frame,
                            std::uint64_t epoch) {
-    // The filter's pose, velocity and covariance in the map the scale is
-    // estimated in (estimator.map): with tracker.window_ba the served pose's
-    // frame and unit, so the metric pose is d times it. The vertical is the
-    // world's (the same in both): G stays fixed within the epoch.
+    // The filter's pose, velocity, covariance and vertical in the map the
+    // scale is estimated in (estimator.map): with tracker.window_ba the
+    // served pose's frame and unit, so the metric pose is d times it. The
+    // adjusted world is turned against the filter's (its first window is
+    // fitted to the filter's positions: 45 degrees on redkitchen), so the
+    // vertical turns with it; each optimisation moves that turn by up to
+    // about a degree, and G with it (docs/protocol.md).
     const core::slam::EkfSlam& filter = tracker_->filter();
     const core::slam::Sim3 T = state.step.estimatorFromFilter(config_.pipeline.estimator_map);
     const PoseReport pose =
         makePoseReport(T.apply(filter.pose()), T.scale * (T.R * filter.velocityW()),
-                       T.applyToPoseCovariance(filter.poseCovariance()), filter.upW(), epoch,
+                       T.applyToPoseCovariance(filter.poseCovariance()), T.R * filter.upW(), epoch,
                        frame.id, frame.t_ns);
     hub_.publishPose(pose);
     if (events_ == nullptr) {

@@ -94,10 +94,8 @@ CaptureReport SlamSnapshot::capture(const EkfSlam& slam, std::int64_t frame_id, 
 }
 
 void SlamSnapshot::carry(const Sim3& T) {
-    // The vertical is the world's, not an estimate the filter drifts in: the
-    // adjusted world is held to the filter's (its first window is fitted to
-    // the filter's poses, its fixed keyframes keep that gauge), so up_W stays.
     pose_ = T.apply(pose_);
+    up_W_ = T.R * up_W_;
     pose_cov_ = T.applyToPoseCovariance(pose_cov_);
     const Mat3 J = T.scale * T.R;
     for (MapFeature& f : features_) {

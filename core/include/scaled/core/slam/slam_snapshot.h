@@ -91,11 +91,10 @@ public:
     // the same order; inverse-depth features with rho <= 0 are left out) its
     // id, p_FinW, P_FinW and projection. frame_id is the caller's id of the
     // image (the one the detections will carry), epoch the caller's map epoch.
-    // to_served carries the filter's estimates (pose, covariance, points) into
-    // the frame and unit of the served pose (MonoTracker::servedFromFilter():
-    // the window bundle adjustment's), so the scale estimator measures the
-    // map the served pose is in; up_W, the world's vertical, is the same in
-    // both. Projections are unchanged by a similarity.
+    // to_served carries all of it (pose, covariance, up_W, points) into the
+    // frame and unit of the served pose (MonoTracker::servedFromFilter(): the
+    // window bundle adjustment's), so the scale estimator measures the map
+    // the served pose is in. Projections are unchanged by a similarity.
     // Does not allocate. On an uninitialised filter the snapshot is emptied
     // (frame_id and epoch are still recorded) and kUninitialised returned.
     CaptureReport capture(const EkfSlam& slam, std::int64_t frame_id, std::uint64_t epoch,

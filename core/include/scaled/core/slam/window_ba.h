@@ -137,10 +137,11 @@ public:
     [[nodiscard]] CameraPose adjustedPose(const CameraPose& filter_T_CtoW) const;
     // The same as a map of the filter's world to the adjusted one (identity
     // before the first keyframe): adjustedFromFilter().apply(T) equals
-    // adjustedPose(T) up to rounding, and it carries the filter's map points
-    // and velocity into the frame and unit of the served pose. (Not the
-    // vertical: it belongs to the world frame, which the adjustment holds to
-    // the filter's; R is the filter's attitude drift against the adjustment.)
+    // adjustedPose(T) up to rounding, and it carries the filter's map points,
+    // velocity and gravity into the frame and unit of the served pose. (The
+    // first window's Sim(3) fit to the filter's positions turns the adjusted
+    // world against the filter's, by 45 degrees on redkitchen, where the
+    // first window is nearly straight: R is that turn, not only drift.)
     [[nodiscard]] Sim3 adjustedFromFilter() const;
     [[nodiscard]] int keyframeCount() const { return count_; }
 

@@ -215,7 +215,7 @@ public:
         return ba_ ? ba_->adjustedPose(slam_.pose()) : slam_.pose();
     }
     // The filter's world carried into pose()'s (identity without window_ba):
-    // for the filter's points and velocity in the served frame.
+    // for the filter's points, velocity and gravity in the served frame.
     [[nodiscard]] core::slam::Sim3 servedFromFilter() const {
         return ba_ ? ba_->adjustedFromFilter() : core::slam::Sim3{};
     }
