@@ -56,18 +56,20 @@ std::vector<float> decimate(std::span<const Scalar> values, std::size_t step) {
 }
 
 // Relative errors between the MAP times the camera-frame depth of each
-// measured feature and the depth image at its pixel.
-void depthErrors(const core::slam::EkfSlam& slam, const std::vector<core::slam::MapPoint>& points,
-                 const cv::Mat& depth_m, double scale, std::vector<double>& rel,
-                 std::vector<double>& abs_m) {
-    const core::CameraPose pose = slam.pose();
-    for (const auto& m : points) {
-        if (!m.in_view || !m.measured) {
+// measured feature of the detection snapshot (in the estimator's map) and the
+// depth image at its pixel.
+void depthErrors(const core::slam::SlamSnapshot& snapshot, const cv::Mat& depth_m, double scale,
+                 std::vector<double>& rel, std::vector<double>& abs_m) {
+    const core::CameraPose& pose = snapshot.pose();
+    const auto features = snapshot.features();
+    const auto info = snapshot.featureInfo();
+    for (std::size_t i = 0; i < features.size(); ++i) {
+        if (!info[i].in_view || !info[i].measured) {
             continue;
         }
-        const Vec3 p_C = pose.R_CtoW.transpose() * (m.p_FinW - pose.p_CinW);
-        const int u = static_cast<int>(std::lround(m.px.x()));
-        const int v = static_cast<int>(std::lround(m.px.y()));
+        const Vec3 p_C = pose.R_CtoW.transpose() * (features[i].p_FinW - pose.p_CinW);
+        const int u = static_cast<int>(std::lround(info[i].px.x()));
+        const int v = static_cast<int>(std::lround(info[i].px.y()));
         if (p_C.z() <= 0 || u < 0 || v < 0 || u >= depth_m.cols || v >= depth_m.rows) {
             continue;
         }
@@ -376,7 +378,6 @@ private:
     drivers::imu::GyroFeed& gyro_feed_;
     daemon::FrameStep step_;
 
-    std::vector<core::slam::MapPoint> points_;
     core::slam::SlamSnapshot snapshot_;
     std::vector<core::Detection> dets_;
     std::vector<core::ObservationRecord> records_;
@@ -543,7 +544,6 @@ void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, Ev
 // camera and gravity.
 core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
     const core::slam::EkfSlam& slam = tracker_.filter();
-    slam.mapPoints(points_);
     // As the daemon hands it to its detection thread (Pipeline::handToDetector).
     (void)snapshot_.capture(slam, frame.id, 0, step_.estimatorFromFilter(config_.estimator_map));
     core::FrameSnapshot snapshot = snapshot_.view();
@@ -685,11 +685,9 @@ void EvalRun::appendDepthErrors(const drivers::source::Frame& frame, const Updat
     if (auto depth = drivers::dataset::loadDepthMetres(frame, info)) {
         std::vector<double> rel;
         std::vector<double> abs_m;
-        // The filter's depths in the unit the scale is for.
-        const double unit =
-            static_cast<double>(step_.estimatorFromFilter(config_.estimator_map).scale);
-        depthErrors(tracker_.filter(), points_, *depth, unit * static_cast<double>(up.scale.map),
-                    rel, abs_m);
+        // The snapshot the estimator measured (this frame's, in its map: the
+        // unit the scale is for).
+        depthErrors(snapshot_, *depth, static_cast<double>(up.scale.map), rel, abs_m);
         for (std::size_t k = 0; k < rel.size(); ++k) {
             depth_rel_.emplace_back(r.updates.size(), rel[k]);
             depth_abs_.emplace_back(r.updates.size(), abs_m[k]);
