@@ -97,10 +97,9 @@ void SlamSnapshot::carry(const Sim3& T) {
     pose_ = T.apply(pose_);
     up_W_ = T.R * up_W_;
     pose_cov_ = T.applyToPoseCovariance(pose_cov_);
-    const Mat3 J = T.scale * T.R;
     for (MapFeature& f : features_) {
         f.p_FinW = T.apply(f.p_FinW);
-        f.P_FinW = J * f.P_FinW * J.transpose();
+        f.P_FinW = T.applyToCovariance(f.P_FinW);
     }
 }
 

@@ -13,17 +13,6 @@ namespace scaled::core::slam {
 
 namespace {
 
-// Relative motion of b from a, its translation times unit, applied to base:
-// base * a^-1 * b.
-CameraPose compose(const CameraPose& base, const CameraPose& a, const CameraPose& b, Scalar unit) {
-    CameraPose out;
-    const Mat3 R_rel = a.R_CtoW.transpose() * b.R_CtoW;
-    const Vec3 p_rel = unit * (a.R_CtoW.transpose() * (b.p_CinW - a.p_CinW));
-    out.R_CtoW = base.R_CtoW * R_rel;
-    out.p_CinW = base.p_CinW + base.R_CtoW * p_rel;
-    return out;
-}
-
 Scalar huberCost(Scalar e, Scalar k) {
     return e < k ? e * e : 2 * k * e - k * k;
 }
@@ -170,17 +159,20 @@ size_t WindowBa::obsIndex(int i, int j) const {
 }
 
 void WindowBa::pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs) {
+    if (capacity_ < 1) {  // validate() keeps window_keyframes >= 4
+        return;
+    }
+    // Where the served pose has it (the newest keyframe's adjusted pose and
+    // the filter's motion since, times the unit ratio), before the ring moves.
+    const CameraPose adjusted = adjustedPose(T_CtoW);
     if (count_ == capacity_) {
         head_ = (head_ + 1) % capacity_;
         --count_;
     }
-    const bool has_previous = count_ > 0;
-    const Keyframe previous = has_previous ? keyframe(count_ - 1) : Keyframe{};
     ++count_;
     Keyframe& kf = keyframe(count_ - 1);
     kf.filter = T_CtoW;
-    kf.adjusted =
-        has_previous ? compose(previous.adjusted, previous.filter, T_CtoW, unit_ratio_) : T_CtoW;
+    kf.adjusted = adjusted;
     const int n = std::min(static_cast<int>(obs.size()), config_.max_observations_per_keyframe);
     kf.obs_count = n;
     for (int j = 0; j < n; ++j) {
@@ -219,20 +211,17 @@ void WindowBa::notifyRescaled(Scalar s, const Vec3& centre_W) {
 }
 
 CameraPose WindowBa::adjustedPose(const CameraPose& filter_T_CtoW) const {
-    if (count_ == 0) {
-        return filter_T_CtoW;
-    }
-    const Keyframe& last = keyframe(count_ - 1);
-    return compose(last.adjusted, last.filter, filter_T_CtoW, unit_ratio_);
+    return adjustedFromFilter().apply(filter_T_CtoW);
 }
 
 Sim3 WindowBa::adjustedFromFilter() const {
     if (count_ == 0) {
         return {};
     }
-    // adjustedPose's composition as a map of world points: a point at p_C in
-    // the newest keyframe's filter camera lies at unit_ratio_ p_C in its
-    // adjusted camera.
+    // The filter's motion since the newest keyframe, its translation times
+    // the unit ratio, from that keyframe's adjusted pose: as a map of world
+    // points, a point at p_C in the keyframe's filter camera lies at
+    // unit_ratio_ p_C in its adjusted camera.
     const Keyframe& last = keyframe(count_ - 1);
     Sim3 out;
     out.scale = unit_ratio_;

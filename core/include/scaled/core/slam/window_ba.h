@@ -86,14 +86,19 @@ struct Sim3 {
     [[nodiscard]] CameraPose apply(const CameraPose& T_CtoW) const {
         return {R * T_CtoW.R_CtoW, apply(T_CtoW.p_CinW)};
     }
-    // The covariance of (position, rotation error in the camera frame) of a
-    // carried camera: position errors turn with the world and grow with its
-    // unit, the camera-frame rotation error is unchanged.
-    [[nodiscard]] Mat6x6 applyToPoseCovariance(const Mat6x6& P) const {
+    // The covariance of a carried point: its errors turn with the world and
+    // grow with its unit (J P J^T, J = scale R).
+    [[nodiscard]] Mat3 applyToCovariance(const Mat3& P) const {
         const Mat3 J = scale * R;
+        return J * P * J.transpose();
+    }
+    // The covariance of (position, rotation error in the camera frame) of a
+    // carried camera: the position's as a point's, the camera-frame rotation
+    // error unchanged.
+    [[nodiscard]] Mat6x6 applyToPoseCovariance(const Mat6x6& P) const {
         Mat6x6 out = P;
-        out.topLeftCorner<3, 3>() = J * P.topLeftCorner<3, 3>() * J.transpose();
-        out.topRightCorner<3, 3>() = J * P.topRightCorner<3, 3>();
+        out.topLeftCorner<3, 3>() = applyToCovariance(P.topLeftCorner<3, 3>());
+        out.topRightCorner<3, 3>() = scale * R * P.topRightCorner<3, 3>();
         out.bottomLeftCorner<3, 3>() = out.topRightCorner<3, 3>().transpose();
         return out;
     }
@@ -136,8 +141,8 @@ public:
     // motion since it: the camera's pose in the adjusted trajectory.
     [[nodiscard]] CameraPose adjustedPose(const CameraPose& filter_T_CtoW) const;
     // The same as a map of the filter's world to the adjusted one (identity
-    // before the first keyframe): adjustedFromFilter().apply(T) equals
-    // adjustedPose(T) up to rounding, and it carries the filter's map points,
+    // before the first keyframe): adjustedPose(T) is
+    // adjustedFromFilter().apply(T), and the map carries the filter's map points,
     // velocity and gravity into the frame and unit of the served pose. (The
     // first window's Sim(3) fit to the filter's positions turns the adjusted
     // world against the filter's, by 45 degrees on redkitchen, where the
