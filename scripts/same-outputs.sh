@@ -90,7 +90,7 @@ build() {
 
 # Behaviour added since the restructuring, on by default and off for HEAD's
 # run: the window bundle adjustment (tracker.window_ba, docs/slam.md).
-head_slam_off=(--set window_ba=0)
+head_slam_off=(--set window_ba=false)
 head_off=(--set tracker.window_ba=false)
 
 # run BUILD_DIR OUT_DIR [head]

@@ -42,13 +42,13 @@ err=$("$run" --dataset "$tmp/seq" --window 2 2>&1 >/dev/null); rc=$?
 set -e
 [[ $rc -eq 64 ]] || fail "--window 2: exit $rc ($err)"
 
-# The window bundle adjustment (--set window_ba=1), with a window of 20
+# The window bundle adjustment (--set window_ba=true), with a window of 20
 # keyframes (every 3rd frame), 10 fixed, an optimisation every 5 once 15 are
 # in: 4 optimisations in 90 frames, reported, and the served trajectory stays
 # as good as the filter's; a window with no free keyframe is refused.
-json=$("$run" --dataset "$tmp/seq" --json --set window_ba=1 --set window_ba_window_keyframes=20 \
+json=$("$run" --dataset "$tmp/seq" --json --set window_ba=true --set window_ba_window_keyframes=20 \
   --set window_ba_fixed_keyframes=10 --set window_ba_step_keyframes=5)
-python3 - "$json" <<'PY' || fail "--set window_ba=1 does not adjust the window: $json"
+python3 - "$json" <<'PY' || fail "--set window_ba=true does not adjust the window: $json"
 import json, sys
 d = json.loads(sys.argv[1])
 ba = d["window_ba"]
@@ -56,7 +56,7 @@ assert ba["optimisations"] == 4 and ba["mean_points"] > 30 and ba["mean_rms_afte
 assert d["tracked_frames"] == 90 and d["ate_rmse_m"] < 0.01 * d["path_length_m"], d
 PY
 set +e
-err=$("$run" --dataset "$tmp/seq" --set window_ba=1 --set window_ba_fixed_keyframes=66 2>&1 >/dev/null); rc=$?
+err=$("$run" --dataset "$tmp/seq" --set window_ba=true --set window_ba_fixed_keyframes=66 2>&1 >/dev/null); rc=$?
 set -e
 [[ $rc -ne 0 && $err == *"window_ba.fixed_keyframes"* ]] || fail "a window with no free keyframe: exit $rc ($err)"
 

@@ -19,7 +19,9 @@
 #include <string_view>
 #include <system_error>
 #include <unistd.h>
+#include <vector>
 
+#include <scaled/daemon/pipeline_config.h>
 #include <scaled/drivers/dataset/dataset.h>
 #include <scaled/drivers/dataset/dataset_tum.h>
 #include <scaled/drivers/dataset/trajectory_io.h>
@@ -36,9 +38,6 @@ using scaled::tools::kExDataErr;
 using scaled::tools::kExNoInput;
 using scaled::tools::OptionSpec;
 using scaled::tools::parseNumber;
-
-using scaled::core::Scalar;
-using scaled::drivers::vision::TrackerConfig;
 
 constexpr const char* kFooter =
     "usage: slam-run --dataset DIR|VIDEO [--format tum|kitti|folder|video] [--frames A:B]\n"
@@ -66,113 +65,21 @@ struct Options {
     bool verbose = false;
     scaled::drivers::dataset::DatasetOptions dataset_options;
     scaled::tools::SlamRunOptions run;
+    // The tracker's settings as `tracker.KEY=VALUE` assignments, in the order
+    // given (--set and its shorthands), applied together after parsing as
+    // the daemon applies its --set: checked against config/scaled.toml's ranges.
+    std::vector<std::string> tracker_sets;
 };
 
-// --set KEY=VALUE: the tracker's tuning knobs, for experiments.
-struct TrackerKnob {
-    std::string_view key;
-    void (*set)(double value, TrackerConfig& c);
-};
-
-constexpr TrackerKnob kTrackerKnobs[] = {
-    {"sigma_a", [](double v, TrackerConfig& c) { c.slam.motion.sigma_a = Scalar(v); }},
-    {"sigma_alpha", [](double v, TrackerConfig& c) { c.slam.motion.sigma_alpha = Scalar(v); }},
-    {"pixel_sigma_px", [](double v, TrackerConfig& c) { c.slam.pixel_sigma_px = Scalar(v); }},
-    {"init_sigma_v", [](double v, TrackerConfig& c) { c.slam.init_sigma_v = Scalar(v); }},
-    {"init_sigma_w", [](double v, TrackerConfig& c) { c.slam.init_sigma_w = Scalar(v); }},
-    {"rho0", [](double v, TrackerConfig& c) { c.slam.rho0 = Scalar(v); }},
-    {"window_ba", [](double v, TrackerConfig& c) { c.window_ba.enabled = v != 0; }},
-    {"window_ba_keyframe_every",
-     [](double v, TrackerConfig& c) { c.window_ba.keyframe_every = static_cast<int>(v); }},
-    {"window_ba_window_keyframes",
-     [](double v, TrackerConfig& c) { c.window_ba.window_keyframes = static_cast<int>(v); }},
-    {"window_ba_fixed_keyframes",
-     [](double v, TrackerConfig& c) { c.window_ba.fixed_keyframes = static_cast<int>(v); }},
-    {"window_ba_step_keyframes",
-     [](double v, TrackerConfig& c) { c.window_ba.step_keyframes = static_cast<int>(v); }},
-    {"window_ba_iterations",
-     [](double v, TrackerConfig& c) { c.window_ba.iterations = static_cast<int>(v); }},
-    {"window_ba_scale_feedback",
-     [](double v, TrackerConfig& c) { c.window_ba.scale_feedback = v != 0; }},
-    {"window_ba_max_scale_step",
-     [](double v, TrackerConfig& c) { c.window_ba.max_scale_step = Scalar(v); }},
-    {"sigma_rho", [](double v, TrackerConfig& c) { c.slam.sigma_rho = Scalar(v); }},
-    {"linearity_threshold",
-     [](double v, TrackerConfig& c) { c.slam.linearity_threshold = Scalar(v); }},
-    {"max_features", [](double v, TrackerConfig& c) { c.slam.max_features = static_cast<int>(v); }},
-    {"max_measured", [](double v, TrackerConfig& c) { c.slam.max_measured = static_cast<int>(v); }},
-    {"min_visible", [](double v, TrackerConfig& c) { c.slam.min_visible = static_cast<int>(v); }},
-    {"image_margin_px", [](double v, TrackerConfig& c) { c.slam.image_margin_px = Scalar(v); }},
-    {"chi2_gate", [](double v, TrackerConfig& c) { c.slam.chi2_gate = Scalar(v); }},
-    {"ransac_threshold_px",
-     [](double v, TrackerConfig& c) { c.slam.ransac_threshold_px = Scalar(v); }},
-    {"ransac_max_hypotheses",
-     [](double v, TrackerConfig& c) { c.slam.ransac_max_hypotheses = static_cast<int>(v); }},
-    {"ransac_min_hypotheses",
-     [](double v, TrackerConfig& c) { c.slam.ransac_min_hypotheses = static_cast<int>(v); }},
-    {"delete_min_attempts",
-     [](double v, TrackerConfig& c) { c.slam.delete_min_attempts = static_cast<int>(v); }},
-    {"delete_min_ratio", [](double v, TrackerConfig& c) { c.slam.delete_min_ratio = Scalar(v); }},
-    {"min_inliers", [](double v, TrackerConfig& c) { c.slam.min_inliers = static_cast<int>(v); }},
-    {"lost_after_frames",
-     [](double v, TrackerConfig& c) { c.slam.lost_after_frames = static_cast<int>(v); }},
-    {"min_ncc", [](double v, TrackerConfig& c) { c.match.min_ncc = v; }},
-    {"max_search_pixels",
-     [](double v, TrackerConfig& c) { c.match.max_search_pixels = static_cast<int>(v); }},
-    {"relocalise_s", [](double v, TrackerConfig& c) { c.relocalise_s = v; }},
-    {"relocalise_min_inliers",
-     [](double v, TrackerConfig& c) { c.relocalise_min_inliers = static_cast<int>(v); }},
-    {"relocalise_reproj_px", [](double v, TrackerConfig& c) { c.relocalise_reproj_px = v; }},
-    {"relocalise_corners",
-     [](double v, TrackerConfig& c) { c.relocalise_corners = static_cast<int>(v); }},
-    {"relocalise_max_brief_distance",
-     [](double v, TrackerConfig& c) { c.relocalise_max_brief_distance = static_cast<int>(v); }},
-    {"relocalise_search_px", [](double v, TrackerConfig& c) { c.relocalise_search_px = v; }},
-    {"relocalise_max_rel_sigma",
-     [](double v, TrackerConfig& c) { c.relocalise_max_rel_sigma = v; }},
-    {"use_gyro", [](double v, TrackerConfig& c) { c.use_gyro = v != 0; }},
-    {"gyro_noise_density", [](double v, TrackerConfig& c) { c.gyro_noise_density = v; }},
-    {"gyro_bias_sigma_radps", [](double v, TrackerConfig& c) { c.gyro_bias_sigma_radps = v; }},
-    {"gyro_max_gap_s", [](double v, TrackerConfig& c) { c.gyro_max_gap_s = v; }},
-    {"gyro_bias_time_s", [](double v, TrackerConfig& c) { c.gyro_bias_time_s = v; }},
-    {"feature_border_px",
-     [](double v, TrackerConfig& c) { c.feature_border_px = static_cast<int>(v); }},
-    {"pyramid_levels", [](double v, TrackerConfig& c) { c.pyramid_levels = static_cast<int>(v); }},
-    {"coarse_min_fraction", [](double v, TrackerConfig& c) { c.coarse_min_fraction = v; }},
-    {"coarse_max_search_pixels",
-     [](double v, TrackerConfig& c) { c.coarse_max_search_pixels = static_cast<int>(v); }},
-    {"coarse_min_ncc", [](double v, TrackerConfig& c) { c.coarse_min_ncc = v; }},
-    {"patch_size", [](double v, TrackerConfig& c) { c.patch_size = static_cast<int>(v); }},
-    {"patch_source_size",
-     [](double v, TrackerConfig& c) { c.patch_source_size = static_cast<int>(v); }},
-    {"warp_patches", [](double v, TrackerConfig& c) { c.warp_patches = v != 0; }},
-    {"free_radius_px", [](double v, TrackerConfig& c) { c.free_radius_px = static_cast<int>(v); }},
-    {"max_new_per_frame",
-     [](double v, TrackerConfig& c) { c.max_new_per_frame = static_cast<int>(v); }},
-    {"corner_quality", [](double v, TrackerConfig& c) { c.corners.quality_level = v; }},
-    {"corner_min_distance_px",
-     [](double v, TrackerConfig& c) { c.corners.min_distance_px = static_cast<int>(v); }},
-};
-
-bool setParameter(std::string_view kv, TrackerConfig& c) {
-    const auto eq = kv.find('=');
-    if (eq == std::string_view::npos) {
+// A shorthand of --set: its value checked as a number here, its range by the
+// daemon's registry.
+bool setTracker(std::string_view key, std::string_view value, Options& o) {
+    double v = 0;
+    if (!parseNumber(value, v)) {
         return false;
     }
-    const std::string_view key = kv.substr(0, eq);
-    const std::string val(kv.substr(eq + 1));
-    char* end = nullptr;
-    const double v = std::strtod(val.c_str(), &end);
-    if (val.empty() || end != val.c_str() + val.size()) {
-        return false;
-    }
-    for (const TrackerKnob& knob : kTrackerKnobs) {
-        if (knob.key == key) {
-            knob.set(v, c);
-            return true;
-        }
-    }
-    return false;
+    o.tracker_sets.push_back("tracker." + std::string(key) + "=" + std::string(value));
+    return true;
 }
 
 bool takeFormat(std::string_view v,
@@ -239,25 +146,23 @@ constexpr OptionSpec<Options> kOptions[] = {
          return parseNumber(v, fps) && std::isfinite(fps) && fps > 0 && fps <= 1e9;
      }},
     {"--max-features", "N", "the map's features at most (= --set max_features=N)",
-     [](std::string_view v, Options& o) {
-         return parseNumber(v, o.run.tracker.slam.max_features);
-     }},
+     [](std::string_view v, Options& o) { return setTracker("max_features", v, o); }},
     {"--max-measured", "N", "features measured per frame at most (= --set max_measured=N)",
-     [](std::string_view v, Options& o) {
-         return parseNumber(v, o.run.tracker.slam.max_measured);
-     }},
+     [](std::string_view v, Options& o) { return setTracker("max_measured", v, o); }},
     {"--no-warp", nullptr, "no patch warping (= --set warp_patches=0)",
      [](std::string_view, Options& o) {
-         o.run.tracker.warp_patches = false;
+         o.tracker_sets.emplace_back("tracker.warp_patches=false");
          return true;
      }},
     {"--seed", "N", "the tracker's random seed (RANSAC; --gyro-sim's bias)",
-     [](std::string_view v, Options& o) { return parseNumber(v, o.run.tracker.slam.seed); }},
+     [](std::string_view v, Options& o) { return setTracker("seed", v, o); }},
     {"--set", "KEY=VALUE",
-     "one of the tracker's tuning knobs, e.g. --set sigma_a=2 (the\n"
-     "names of TrackerConfig and SlamConfig: sigma_a, min_ncc,\n"
-     "relocalise_s, ...); repeatable",
-     [](std::string_view v, Options& o) { return setParameter(v, o.run.tracker); }},
+     "a key of the daemon's [tracker] section (config/scaled.toml),\n"
+     "e.g. --set sigma_a=2, --set window_ba=false; repeatable",
+     [](std::string_view v, Options& o) {
+         o.tracker_sets.push_back("tracker." + std::string(v));
+         return v.find('=') != std::string_view::npos;
+     }},
     {"--window", "N",
      "tracked frames of the sliding-window Sim(3) scale whose\n"
      "range (max/min) --json reports as window_scale (default 150,\n"
@@ -306,6 +211,11 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
     if (o.intrinsics && !o.camera_file.empty()) {
         return scaled::tools::usageError(app, "give --camera or --intrinsics, not both");
     }
+    scaled::daemon::PipelineConfig p = scaled::daemon::defaultPipelineConfig();
+    if (auto set = scaled::daemon::applyPipelineOverrides(o.tracker_sets, p); !set) {
+        return scaled::tools::usageError(app, set.error().message);
+    }
+    o.run.tracker = p.tracker;
     return std::nullopt;
 }
 

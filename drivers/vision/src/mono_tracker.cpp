@@ -64,6 +64,9 @@ core::Status validate(const TrackerConfig& c) {
     const auto d = [](auto v) { return static_cast<double>(v); };
     const core::LimitCheck checks[] = {
         {"patch_size", d(c.patch_size), L::patch_size},
+        {"patch_source_size", d(c.patch_source_size), L::patch_source_size},
+        {"corner_quality", d(c.corners.quality_level), L::corner_quality},
+        {"corner_min_distance_px", d(c.corners.min_distance_px), L::corner_min_distance_px},
         {"feature_border_px", d(c.feature_border_px), L::feature_border_px},
         {"free_radius_px", d(c.free_radius_px), L::free_radius_px},
         {"max_new_per_frame", d(c.max_new_per_frame), L::max_new_per_frame},
@@ -75,6 +78,7 @@ core::Status validate(const TrackerConfig& c) {
         {"brief_refresh_frames", d(c.brief_refresh_frames), L::brief_refresh_frames},
         {"relocalise_corners", d(c.relocalise_corners), L::relocalise_corners},
         {"relocalise_search_px", d(c.relocalise_search_px), L::relocalise_search_px},
+        {"relocalise_max_rel_sigma", d(c.relocalise_max_rel_sigma), L::relocalise_max_rel_sigma},
         {"coarse_max_search_pixels", d(c.coarse_max_search_pixels), L::coarse_max_search_pixels},
         {"coarse_min_fraction", d(c.coarse_min_fraction), L::coarse_min_fraction},
         {"pyramid_levels", d(c.pyramid_levels), L::pyramid_levels},

@@ -96,6 +96,10 @@ struct TrackerConfig {
 // [tracker] section offers them.
 struct TrackerLimits {
     static constexpr core::ParamLimits patch_size = core::closed(5, 31);  // and odd
+    // Odd and at least 2 patch_size + 1.
+    static constexpr core::ParamLimits patch_source_size = core::closed(11, 101);
+    static constexpr core::ParamLimits corner_quality = core::open(0, 1);
+    static constexpr core::ParamLimits corner_min_distance_px = core::closed(1, 200);
     static constexpr core::ParamLimits max_new_per_frame =
         core::closed(1, 1000);  // <= max_features
     static constexpr core::ParamLimits min_ncc = core::open(-1, 1);
@@ -113,6 +117,7 @@ struct TrackerLimits {
     static constexpr core::ParamLimits brief_refresh_frames = core::closed(1, 100000);
     static constexpr core::ParamLimits relocalise_corners = core::closed(1, 10000);
     static constexpr core::ParamLimits relocalise_search_px = core::closed(0, 10000);
+    static constexpr core::ParamLimits relocalise_max_rel_sigma = core::openClosed(0, 10);
     static constexpr core::ParamLimits gyro_noise_density = core::closed(0, 1);  // rad/s/sqrt(Hz)
     static constexpr core::ParamLimits gyro_bias_sigma_radps = core::closed(0, 10);
     static constexpr core::ParamLimits gyro_bias_time_s = core::closed(0, 3600);
