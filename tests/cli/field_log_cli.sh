@@ -6,16 +6,7 @@
 #   tests/cli/field_log_cli.sh PATH/TO/field-log
 set -euo pipefail
 fl=$1
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
-expect() {  # expect RC SUBSTRING -- command...
-    local want=$1 text=$2; shift 3
-    local err rc
-    set +e; err=$("$@" 2>&1 >/dev/null); rc=$?; set -e
-    [[ $rc -eq $want ]] || fail "$*: exit $rc, expected $want ($err)"
-    [[ $err == *"$text"* ]] || fail "$*: message '$err' does not mention '$text'"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
 "$fl" --help | grep -q '^usage: field-log' || fail "--help does not print usage"
 expect 64 "a log directory or file is required" -- "$fl"

@@ -6,16 +6,7 @@
 set -euo pipefail
 det=$1
 shared=${SCALED_SHARED_DIR:-$2}
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
-expect() {  # expect RC SUBSTRING -- command...
-    local want=$1 text=$2; shift 3
-    local err rc
-    set +e; err=$("$@" 2>&1 >/dev/null); rc=$?; set -e
-    [[ $rc -eq $want ]] || fail "$*: exit $rc, expected $want ($err)"
-    [[ $err == *"$text"* ]] || fail "$*: message '$err' does not mention '$text'"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
 "$det" --help | grep -q '^usage: scaled-detect' || fail "--help does not print usage"
 expect 64 "--image FILE is required" -- "$det"
