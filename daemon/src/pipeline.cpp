@@ -473,6 +473,7 @@ void Pipeline::setSlamState(DaemonState state, std::int64_t frame_id, std::int64
         }
         report_.epoch += 1;
         report_.has_scale = false;
+        report_.wide_for_poses = false;
         report_.scale = report_.mean = 0;
         report_.ci68_lo = report_.ci68_hi = report_.ci95_lo = report_.ci95_hi = 0;
         report_.observations = 0;
@@ -794,6 +795,8 @@ bool Pipeline::publishUpdate(const core::ScaleSummary& summary, std::uint64_t ep
     report_.ci68_hi = static_cast<double>(summary.ci68.hi);
     report_.ci95_lo = static_cast<double>(summary.ci95.lo);
     report_.ci95_hi = static_cast<double>(summary.ci95.hi);
+    report_.wide_for_poses = report_.has_scale && wideForPoses(config_.pipeline, report_.scale,
+                                                               report_.ci95_lo, report_.ci95_hi);
     report_.observations = summary.observations;
     report_.frame_id = frame_id;
     report_.t_ns = t_ns;

@@ -286,6 +286,7 @@ std::vector<Field> estimatorFields(PipelineConfig& c) {
         real("estimator", "converged_rel_width", &e.posterior.converged_rel_width,
              P::converged_rel_width),
         real("estimator", "drift_sigma_log", &e.posterior.drift_sigma_log, P::drift_sigma_log),
+        real("estimator", "pose_max_rel_width95", &c.pose_max_rel_width95, 0.01, 1000),
         choice("estimator", "posterior_arithmetic", &e.posterior.arithmetic,
                {{"floating", core::PosteriorArithmetic::kFloating},
                 {"fixed", core::PosteriorArithmetic::kFixed}}),
@@ -715,6 +716,11 @@ Status applyPipelineFile(const std::filesystem::path& path, PipelineConfig& conf
 
 Status applyPipelineOverrides(const std::vector<std::string>& assignments, PipelineConfig& config) {
     return viaDaemon(config, [&](DaemonConfig& d) { return applyDaemonOverrides(assignments, d); });
+}
+
+bool wideForPoses(const PipelineConfig& config, double scale, double ci95_lo, double ci95_hi) {
+    return !(scale > 0) || !std::isfinite(scale) ||
+           !(ci95_hi - ci95_lo <= config.pose_max_rel_width95 * scale);
 }
 
 std::vector<std::string> pipelineConfigKeys() {

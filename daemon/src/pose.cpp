@@ -77,8 +77,8 @@ PoseReport makePoseReport(const core::CameraPose& pose_W, const core::Vec3& velo
 
 MetricPose metricPose(const PoseReport& pose, const ScaleReport& scale) {
     MetricPose m;
-    if (pose.frame_id < 0 || !scale.has_scale || scale.epoch != pose.epoch || !(scale.scale > 0) ||
-        !std::isfinite(scale.scale)) {
+    if (pose.frame_id < 0 || !scale.has_scale || scale.wide_for_poses ||
+        scale.epoch != pose.epoch || !(scale.scale > 0) || !std::isfinite(scale.scale)) {
         return m;
     }
     m.has_scale = true;

@@ -168,10 +168,15 @@ DistanceErrors summariseDistances(const std::vector<double>& abs_m,
 
 }  // namespace
 
-MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m) {
+MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m,
+                                  const daemon::PipelineConfig& config) {
     MetricTrajectory m;
-    const auto served = [](const FrameRow& f) {
-        return f.has_position && f.scale.state != core::ScaleState::kNoData && f.scale.map > 0;
+    // As the daemon's POSE: a scale, and not too loose to put poses in metres.
+    const auto served = [&config](const FrameRow& f) {
+        return f.has_position && f.scale.state != core::ScaleState::kNoData &&
+               !daemon::wideForPoses(config, static_cast<double>(f.scale.map),
+                                     static_cast<double>(f.scale.ci95.lo),
+                                     static_cast<double>(f.scale.ci95.hi));
     };
     const auto metric = [](const FrameRow& f) -> Vec3 { return f.scale.map * f.p_map; };
     double sq = 0;
@@ -715,7 +720,7 @@ void EvalRun::summarise(EvalResult& r) {
     r.converged_update = convergedAt(
         r.updates, static_cast<double>(config_.estimator.posterior.converged_rel_width));
     if (!options_.truth_geometry) {
-        r.metric = metricTrajectory(r.frame_rows, options_.min_distance_m);
+        r.metric = metricTrajectory(r.frame_rows, options_.min_distance_m, config_);
     }
     if (r.converged_update) {
         r.distance = distanceErrorsAfter(r, *r.converged_update, options_);

@@ -146,6 +146,8 @@ struct DistanceErrors {
 // What a user of the served pose gets (issue 20): the trajectory scaled by
 // the estimate served at each frame (no scale fitted to the ground truth),
 // aligned to the ground truth by a rotation and translation per epoch only.
+// A frame counts when the daemon's POSE would be in metres: a scale not too
+// loose for it (daemon::wideForPoses, estimator.pose_max_rel_width95).
 struct MetricTrajectory {
     int frames = 0;  // tracked, with ground truth and a served estimate
     std::optional<double> ate_m;
@@ -153,7 +155,8 @@ struct MetricTrajectory {
     DistanceErrors distance_1s;  // |served displacement| vs the truth's, frames 1 s apart
     DistanceErrors distance_5s;
 };
-MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m);
+MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_distance_m,
+                                  const daemon::PipelineConfig& config);
 
 struct DepthCheck {
     int features = 0;

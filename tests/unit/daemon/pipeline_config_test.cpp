@@ -398,7 +398,7 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
               "partial_weight, min_sigma_m, weighting, use_non_upright, min_detection_score, "
               "max_features_per_box, compensate_roll, propagate_variance, box_edge_sigma_px, "
               "border_margin_px, min_extent_px, grid_d_min, grid_d_max, grid_bins, "
-              "converged_rel_width, drift_sigma_log, posterior_arithmetic)");
+              "converged_rel_width, drift_sigma_log, pose_max_rel_width95, posterior_arithmetic)");
     EXPECT_EQ(applyError("\n[estimatr]\n", c),
               "test.toml:2: estimatr: unknown section (allowed: source, tracker, detector, "
               "detection, estimator, objects, camera, gpio, imu, pipeline, socket, log)");

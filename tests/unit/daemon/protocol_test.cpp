@@ -15,6 +15,7 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include <scaled/daemon/pipeline_config.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/protocol.h>
 
@@ -647,6 +648,32 @@ TEST(Protocol, PoseCovarianceIncludesTheScale) {
     out.clear();
     appendPose(out, p, s);
     EXPECT_TRUE(parseLine(out)["position_cov"][1][1].is_null()) << out;
+}
+
+// A scale known too loosely to put poses in metres (the pipeline sets
+// wide_for_poses from estimator.pose_max_rel_width95): the metric members are
+// null, the pose in map units and the SCALE's numbers stay.
+TEST(Protocol, AScaleTooLooseForPosesLeavesTheMetricMembersNull) {
+    ScaleReport s = sampleReport();
+    ASSERT_TRUE(metricPose(samplePose(), s).has_scale);
+    s.wide_for_poses = true;
+    EXPECT_FALSE(metricPose(samplePose(), s).has_scale);
+    std::string out;
+    appendPose(out, samplePose(), s);
+    const json j = parseLine(out);
+    for (const char* member : {"scale", "scale_sigma", "position", "velocity", "position_cov"}) {
+        EXPECT_TRUE(j[member].is_null()) << member << ": " << out;
+    }
+    EXPECT_FALSE(j["position_map"].is_null()) << out;
+    out.clear();
+    appendScale(out, s, 0);
+    EXPECT_DOUBLE_EQ(parseLine(out)["scale"].get<double>(), s.scale);
+    // The rule: hi - lo at most pose_max_rel_width95 (1 by default) times the scale.
+    const PipelineConfig defaults = defaultPipelineConfig();
+    EXPECT_FALSE(wideForPoses(defaults, 1.0, 0.6, 1.6));
+    EXPECT_TRUE(wideForPoses(defaults, 1.0, 0.5, 1.6));
+    EXPECT_TRUE(wideForPoses(defaults, 0.0, 0.0, 0.0));
+    EXPECT_TRUE(wideForPoses(defaults, std::nan(""), 0.5, 1.5));
 }
 
 // G from the tracker's world W (the first camera: x right, y down, z

@@ -91,7 +91,8 @@ TEST(ScaleEvalMetrics, MapScaleDriftPerEpochAndAgainstTheAverage) {
 
 // A straight-ish walk at 0.5 m/s (30 frames a second) seen by a map at half
 // the scale; the estimate served at each frame is `served` (0: none yet).
-std::vector<FrameRow> walk(int frames, double served, int epoch_break = -1) {
+std::vector<FrameRow> walk(int frames, double served, int epoch_break = -1,
+                           double rel_width95 = 0.2) {
     std::vector<FrameRow> rows;
     for (int k = 0; k < frames; ++k) {
         FrameRow f;
@@ -106,6 +107,8 @@ std::vector<FrameRow> walk(int frames, double served, int epoch_break = -1) {
         if (served > 0) {
             f.scale.state = core::ScaleState::kConverging;
             f.scale.map = static_cast<core::Scalar>(served);
+            f.scale.ci95.lo = static_cast<core::Scalar>(served * (1 - rel_width95 / 2));
+            f.scale.ci95.hi = static_cast<core::Scalar>(served * (1 + rel_width95 / 2));
         }
         rows.push_back(f);
     }
@@ -113,15 +116,16 @@ std::vector<FrameRow> walk(int frames, double served, int epoch_break = -1) {
 }
 
 TEST(ScaleEvalMetrics, MetricTrajectoryUsesTheServedScaleNotAFittedOne) {
+    const daemon::PipelineConfig defaults = daemon::defaultPipelineConfig();
     // Served exactly: no error at all.
-    const MetricTrajectory exact = metricTrajectory(walk(300, 2.0), 0.05);
+    const MetricTrajectory exact = metricTrajectory(walk(300, 2.0), 0.05, defaults);
     EXPECT_EQ(exact.frames, 300);
     ASSERT_TRUE(exact.ate_m && exact.distance_1s.median_rel && exact.distance_5s.median_rel);
     EXPECT_LT(*exact.ate_m, 1e-5);
     EXPECT_LT(*exact.distance_1s.median_rel, 1e-5);
     // 10% too large: every displacement 10% long, and an ATE no Sim(3) fit
     // would show (only rotation and translation are fitted).
-    const MetricTrajectory over = metricTrajectory(walk(300, 2.2), 0.05);
+    const MetricTrajectory over = metricTrajectory(walk(300, 2.2), 0.05, defaults);
     ASSERT_TRUE(over.ate_m && over.ate_percent_of_path);
     EXPECT_NEAR(*over.distance_1s.median_rel, 0.1, 1e-4);
     EXPECT_NEAR(*over.distance_5s.median_rel, 0.1, 1e-4);
@@ -130,15 +134,22 @@ TEST(ScaleEvalMetrics, MetricTrajectoryUsesTheServedScaleNotAFittedOne) {
     EXPECT_GT(*over.ate_m, 0.05);  // 10% of a 5 m walk, half of it at the ends
     EXPECT_GT(*over.ate_percent_of_path, 1.0);
     // Nothing served: nothing to report.
-    const MetricTrajectory none = metricTrajectory(walk(300, 0), 0.05);
+    const MetricTrajectory none = metricTrajectory(walk(300, 0), 0.05, defaults);
     EXPECT_EQ(none.frames, 0);
     EXPECT_FALSE(none.ate_m.has_value());
     EXPECT_EQ(none.distance_1s.pairs, 0);
     // A new map at frame 200: no pair spans it, each epoch aligned alone.
-    const MetricTrajectory split = metricTrajectory(walk(300, 2.0, 200), 0.05);
+    const MetricTrajectory split = metricTrajectory(walk(300, 2.0, 200), 0.05, defaults);
     EXPECT_EQ(split.frames, 300);
     EXPECT_EQ(split.distance_5s.pairs, 200 - 150);  // the second epoch lasts 3.3 s
     EXPECT_EQ(split.distance_1s.pairs, (200 - 30) + (100 - 30));
+    // A scale whose 95% interval is wider than itself puts no pose in metres
+    // (as the daemon's POSE), unless the configuration allows it.
+    const MetricTrajectory loose = metricTrajectory(walk(300, 2.0, -1, 1.5), 0.05, defaults);
+    EXPECT_EQ(loose.frames, 0);
+    daemon::PipelineConfig lenient = defaults;
+    lenient.pose_max_rel_width95 = 2;
+    EXPECT_EQ(metricTrajectory(walk(300, 2.0, -1, 1.5), 0.05, lenient).frames, 300);
 }
 
 TEST(ScaleEvalMetrics, TruthScaleOfASimilarTrajectory) {

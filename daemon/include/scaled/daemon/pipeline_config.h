@@ -51,9 +51,21 @@ struct PipelineConfig {
     drivers::detector::DetectorConfig detector;
     core::EstimatorConfig estimator;
     EstimatorMap estimator_map = EstimatorMap::kServed;
+    // Poses are given in metres only while the scale's 95% interval is at most
+    // this fraction of the scale (wideForPoses() below): a wider one
+    // leaves POSE's metric members null (the pose in map units stays), and
+    // scale-eval's metric trajectory leaves those frames out.
+    double pose_max_rel_width95 = 1.0;
     std::filesystem::path priors_path;  // empty: the caller's default (config/priors.toml)
     DetectionSchedule detection;
 };
+
+// Whether a scale (its MAP and 95% interval) is too loose to put poses in
+// metres: ci95_hi - ci95_lo above config.pose_max_rel_width95 times the scale,
+// or no finite positive scale. The daemon's POSE (ScaleReport::wide_for_poses)
+// and scale-eval's metric trajectory both follow it.
+[[nodiscard]] bool wideForPoses(const PipelineConfig& config, double scale, double ci95_lo,
+                                double ci95_hi);
 
 // The defaults scaled ships with (chosen in docs/accuracy.md from the
 // redkitchen ablations); they differ from the paper-literal core defaults.

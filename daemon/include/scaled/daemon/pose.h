@@ -51,7 +51,7 @@ struct MetricPose {
 };
 
 // The pose in metres at the scale of `scale` (all zero, has_scale false, when
-// there is none for the pose's epoch).
+// there is none for the pose's epoch, or it is wide_for_poses).
 MetricPose metricPose(const PoseReport& pose, const ScaleReport& scale);
 
 // Thins a stream of poses (the socket's POSE lines, socket.pose_rate_hz; the

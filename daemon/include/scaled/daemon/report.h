@@ -61,6 +61,10 @@ struct ScaleReport {
     double ci68_hi = 0;
     double ci95_lo = 0;
     double ci95_hi = 0;
+    // The scale is known too loosely to put poses in metres (its 95% interval
+    // wider than estimator.pose_max_rel_width95 times it; wideForPoses() in
+    // pipeline_config.h): POSE's metric members stay null. Not in SCALE lines.
+    bool wide_for_poses = false;
     DaemonState state = DaemonState::kInitialising;
     std::uint64_t epoch = 0;     // bumped whenever SLAM starts a new map (its scale is new)
     int observations = 0;        // in this epoch
