@@ -89,9 +89,11 @@ build() {
 }
 
 # Behaviour added since the restructuring, on by default and off for HEAD's
-# run: the window bundle adjustment (tracker.window_ba, docs/slam.md).
+# run: the window bundle adjustment (tracker.window_ba, docs/slam.md), and
+# poses in metres only from a narrow enough scale (estimator.pose_max_rel_width95,
+# scale-eval's metric_trajectory; docs/protocol.md).
 head_slam_off=(--set window_ba=false)
-head_off=(--set tracker.window_ba=false)
+head_off=(--set tracker.window_ba=false --set estimator.pose_max_rel_width95=1000)
 
 # run BUILD_DIR OUT_DIR [head]
 run() {
