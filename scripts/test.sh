@@ -45,6 +45,42 @@ werror=OFF
 [[ -n ${CI:-} ]] && werror=ON
 
 jobs=$(nproc)
+
+# A chroot-SUITE stage that comes after other presets has its chroot made and
+# its packages installed in the background while they build and test: that
+# part waits on the mirror and the disk more than on the CPU (docs/deploy.md).
+# Only where no password can be asked for (root, or sudo -n). Whatever it
+# leaves undone, the stage itself does (test-in-chroot.sh makes a missing
+# chroot, test.sh installs what is missing).
+declare -A prepared=()
+prepareChroot() {
+  local suite=$1
+  [[ $(id -u) -eq 0 ]] || sudo -n true 2>/dev/null || return 0
+  mkdir -p build/chroot
+  local log=build/chroot/$suite-prepare.log
+  echo "=== chroot-$suite: made in the background (log: $log)"
+  # Its own process group (setsid), stopped with the script if still running.
+  setsid -w bash -c 'start=$SECONDS; rc=0
+    scripts/test-in-chroot.sh "$1" -- scripts/install-deps.sh || rc=$?
+    echo "=== chroot-$1 prepared in $((SECONDS - start)) s, exit status $rc"' \
+    bash "$suite" >"$log" 2>&1 </dev/null &
+  prepared[$suite]=$!
+}
+stopPreparations() {
+  local pid
+  for pid in "${prepared[@]}"; do
+    kill -- "-$pid" 2>/dev/null || true
+  done
+}
+trap stopPreparations EXIT
+if ((${#presets[@]} > 1)); then
+  for preset in "${presets[@]:1}"; do
+    if [[ $preset == chroot-* ]]; then
+      prepareChroot "${preset#chroot-}"
+    fi
+  done
+fi
+
 # chroot-SUITE: the asan preset in a fresh chroot of SUITE, then the GPIO
 # VM test (smoke and gpio_patterns) there, booting the kernel that the
 # release preset's vm tests fetched when it ran first (else the chroot's own).
@@ -53,6 +89,11 @@ chrootStage() {
   local cache=${SCALED_VM_CACHE:-$PWD/build/release/vm-cache}
   local vm_env=()
   [[ -f $cache/ready ]] && vm_env=(SCALED_VM_CACHE="$cache")
+  if [[ -n ${prepared[$suite]:-} ]]; then
+    wait "${prepared[$suite]}" || true
+    unset "prepared[$suite]"
+    tail -n 1 "build/chroot/$suite-prepare.log" || true
+  fi
   local rc=0
   scripts/test-in-chroot.sh "$suite" asan || rc=$?
   if ((rc == 77)); then
