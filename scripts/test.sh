@@ -48,16 +48,18 @@ jobs=$(nproc)
 
 # A chroot-SUITE stage that comes after other presets has its chroot made and
 # its packages installed in the background while they build and test: that
-# part waits on the mirror and the disk more than on the CPU (docs/deploy.md).
+# part waits on the mirror and the disk more than on the CPU (docs/benchmarks.md).
 # Only where no password can be asked for (root, or sudo -n). Whatever it
 # leaves undone, the stage itself does (test-in-chroot.sh makes a missing
 # chroot, test.sh installs what is missing).
 declare -A prepared=()
+prepareLog() { echo "build/chroot/$1-prepare.log"; }
 prepareChroot() {
   local suite=$1
   [[ $(id -u) -eq 0 ]] || sudo -n true 2>/dev/null || return 0
   mkdir -p build/chroot
-  local log=build/chroot/$suite-prepare.log
+  local log
+  log=$(prepareLog "$suite")
   echo "=== chroot-$suite: made in the background (log: $log)"
   # Its own process group (setsid), stopped with the script if still running.
   setsid -w bash -c 'start=$SECONDS; rc=0
@@ -92,7 +94,7 @@ chrootStage() {
   if [[ -n ${prepared[$suite]:-} ]]; then
     wait "${prepared[$suite]}" || true
     unset "prepared[$suite]"
-    tail -n 1 "build/chroot/$suite-prepare.log" || true
+    tail -n 1 "$(prepareLog "$suite")" || true
   fi
   local rc=0
   scripts/test-in-chroot.sh "$suite" asan || rc=$?
