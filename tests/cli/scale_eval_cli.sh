@@ -25,6 +25,11 @@ printf 'version = 1\n[classes.cup]\nupright = true\nsource = "x"\nmean_m = 0.1\n
 expect 78 "$tmp/p.toml:9: classes.cup.partial_probability: must be in [0, 1) (got 1.5)" \
     -- "$ev" --dataset x --set "estimator.priors=$tmp/p.toml"
 expect 66 "$tmp/none" -- "$ev" --dataset "$tmp/none"
+# --camera: a missing file, one that does not parse, and with --intrinsics.
+expect 66 "scale-eval: --camera: $tmp/nocam.txt" -- "$ev" --dataset x --camera "$tmp/nocam.txt"
+printf '640 480 500\n' > "$tmp/short.txt"
+expect 65 "$tmp/short.txt:1:" -- "$ev" --dataset x --camera "$tmp/short.txt"
+expect 64 "give --camera or --intrinsics, not both" -- "$ev" --dataset x --camera "$tmp/short.txt" --intrinsics 1,1,1,1
 model="$shared/models/yolox_nano.onnx"
 rk="$shared/data/redkitchen"
 tum="$shared/data/tum-fr3-office"
@@ -39,6 +44,12 @@ if [[ -f "$model" ]]; then
     done
     expect 65 "no frame could be read (3 unreadable; the first: $tmp/mismatch/0.pgm: image is 32x24 but the intrinsics are for 640x480)" \
         -- "$ev" --dataset "$tmp/mismatch"
+    # --camera overrides the dataset's camera.txt (with distortion): the same
+    # frames are read.
+    printf '32 24 30 30 16 12 -0.1 0.03\n' > "$tmp/small.txt"
+    "$ev" --dataset "$tmp/mismatch" --camera "$tmp/small.txt" --json > "$tmp/small.json" 2> "$tmp/small.err" \
+        || fail "--camera run failed: $(cat "$tmp/small.err")"
+    grep -q '"frames":3,' "$tmp/small.json" || fail "--camera run: not 3 frames: $(head -c 300 "$tmp/small.json")"
 else
     echo "SKIP unreadable-frames part: $model not found (set SCALED_SHARED_DIR)"
 fi

@@ -23,6 +23,7 @@
 
 #include <scaled/daemon/pipeline_config.h>
 #include <scaled/drivers/dataset/dataset.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
 #include <scaled/drivers/detector/dnn_detector.h>
 #include <scaled/drivers/priors/priors_toml.h>
 
@@ -40,8 +41,8 @@ constexpr const char* kFooter =
     "usage: scale-eval --dataset DIR [--format tum|kitti|folder|video] [--config FILE]\n"
     "                  [--set section.key=value]... [--frames A:B] [--out DIR] [--json]\n"
     "                  [--stride N] [--blank A:B]...\n"
-    "                  [--intrinsics fx,fy,cx,cy] [--window N] [--delta N] [--no-plots]\n"
-    "                  [--truth-geometry] [--gyro-sim D:B]\n"
+    "                  [--camera FILE | --intrinsics fx,fy,cx,cy] [--window N] [--delta N]\n"
+    "                  [--no-plots] [--truth-geometry] [--gyro-sim D:B]\n"
     "Runs EKF MonoSLAM, the object detector (synchronously, every detection.every_frames\n"
     "frames) and the metric scale estimator over a dataset and compares the estimate with\n"
     "the ground truth (Sim(3) alignment of the trajectory).\n"
@@ -50,15 +51,17 @@ constexpr const char* kFooter =
     "of the source tree. Options are applied in the order given; a later one overrides an\n"
     "earlier one.\n"
     "Exit codes (sysexits.h): 0 success; 64 usage (also: a dataset without intrinsics and no\n"
-    "--intrinsics); 65 bad data; 66 the dataset, model, configuration or priors file does not\n"
-    "exist; 69 figures not drawn (python3-matplotlib missing; the CSV files are written);\n"
-    "73 cannot write --out; 78 configuration error (--config, --set, the priors, the model).";
+    "--intrinsics); 65 bad data (also: a --camera file that does not parse); 66 the dataset,\n"
+    "model, configuration, priors or --camera file does not exist; 69 figures not drawn\n"
+    "(python3-matplotlib missing; the CSV files are written); 73 cannot write --out;\n"
+    "78 configuration error (--config, --set, the priors, the model).";
 
 // The command line, checked (the configuration is read later).
 struct Options {
     std::filesystem::path dataset;
     std::filesystem::path config_file;
     std::vector<std::string> overrides;
+    std::filesystem::path camera_file;
     std::string out_dir;
     bool json = false;
     bool plots = true;
@@ -126,6 +129,13 @@ constexpr OptionSpec<Options> kOptions[] = {
          }
          return r.ok();
      }},
+    {"--camera", "FILE",
+     "intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt\n"
+     "format); overrides the dataset's",
+     [](std::string_view v, Options& o) {
+         o.camera_file = std::string(v);
+         return !o.camera_file.empty();
+     }},
     {"--intrinsics", "fx,fy,cx,cy", "the camera's intrinsics (pixels); overrides the dataset's",
      [](std::string_view v, Options& o) {
          scaled::core::CameraIntrinsics k;
@@ -183,6 +193,9 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
     if (o.dataset.empty()) {
         return usageError(app, "--dataset is required");
     }
+    if (o.dataset_options.intrinsics && !o.camera_file.empty()) {
+        return usageError(app, "give --camera or --intrinsics, not both");
+    }
     return std::nullopt;
 }
 
@@ -238,7 +251,16 @@ std::optional<int> openInputs(const Options& o, Inputs& in) {
         return priors.error().code == scaled::core::ErrorCode::kIo ? kExNoInput : kExConfig;
     }
     in.priors = std::move(*priors);
-    auto source = scaled::drivers::dataset::openDataset(o.dataset, o.dataset_options);
+    auto dataset_options = o.dataset_options;
+    if (!o.camera_file.empty()) {
+        auto k = scaled::drivers::dataset::readTumCameraFile(o.camera_file);
+        if (!k) {
+            std::fprintf(stderr, "scale-eval: --camera: %s\n", k.error().message.c_str());
+            return k.error().code == scaled::core::ErrorCode::kNotFound ? kExNoInput : kExDataErr;
+        }
+        dataset_options.intrinsics = *k;
+    }
+    auto source = scaled::drivers::dataset::openDataset(o.dataset, dataset_options);
     if (!source) {
         std::fprintf(stderr, "scale-eval: %s\n", source.error().message.c_str());
         return source.error().code == scaled::core::ErrorCode::kParse ? kExDataErr : kExNoInput;
@@ -247,7 +269,7 @@ std::optional<int> openInputs(const Options& o, Inputs& in) {
     if (!in.source->info().has_intrinsics) {
         std::fprintf(stderr,
                      "scale-eval: %s: no camera intrinsics in the dataset; give "
-                     "--intrinsics fx,fy,cx,cy\n",
+                     "--camera FILE or --intrinsics fx,fy,cx,cy\n",
                      o.dataset.string().c_str());
         return kExUsage;
     }
