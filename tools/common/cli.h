@@ -53,6 +53,19 @@ struct OptionSpec {
     const char* bad_value = nullptr;  // "expected on or off, got '{}'"
 };
 
+// --camera FILE, shared by the tools that read a dataset: the path into
+// Options::camera_file (read by the tool, which owns the dataset library).
+template <typename Options>
+constexpr OptionSpec<Options> cameraFileOption() {
+    return {"--camera", "FILE",
+            "intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt\n"
+            "format); overrides the dataset's",
+            [](std::string_view v, Options& o) {
+                o.camera_file = std::string(v);
+                return !o.camera_file.empty();
+            }};
+}
+
 // A tool's options as a table of OptionSpecs. Every option may be given more
 // than once; takeInto applies them in the order of the command line, as the
 // hand-written parsers did: a later value overrides an earlier one (or adds to

@@ -124,13 +124,7 @@ constexpr OptionSpec<Options> kOptions[] = {
          o.json = true;
          return true;
      }},
-    {"--camera", "FILE",
-     "intrinsics `width height fx fy cx cy [k1 k2]` (camera.txt\n"
-     "format); overrides the dataset's",
-     [](std::string_view v, Options& o) {
-         o.camera_file = std::string(v);
-         return !o.camera_file.empty();
-     }},
+    scaled::tools::cameraFileOption<Options>(),
     {"--intrinsics", "fx,fy,cx,cy", "the camera's intrinsics (pixels); overrides the dataset's",
      [](std::string_view v, Options& o) {
          scaled::core::CameraIntrinsics k;
