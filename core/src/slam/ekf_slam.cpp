@@ -710,6 +710,7 @@ std::uint64_t EkfSlam::addInverseDepth(const Vec2& px, Scalar rho, Scalar sigma_
     f.kind = FeatureKind::kInverseDepth;
     f.offset = o;
     f.last_seen_frame = frame_;
+    f.first_frame = frame_;
     f.in_view = true;
     f.px = px;
     features_.push_back(f);
@@ -793,6 +794,17 @@ bool EkfSlam::relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sig
     bad_frames_ = 0;
     health_ = SlamHealth::kOk;
     return true;
+}
+
+int EkfSlam::removeFeaturesAddedAfter(std::int64_t frame) {
+    int removed = 0;
+    for (int s = static_cast<int>(features_.size()) - 1; s >= 0; --s) {
+        if (features_[static_cast<size_t>(s)].first_frame > frame) {
+            removeSlot(s);
+            ++removed;
+        }
+    }
+    return removed;
 }
 
 CameraPose EkfSlam::pose() const {

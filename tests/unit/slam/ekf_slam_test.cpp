@@ -379,6 +379,44 @@ TEST(EkfSlam, DeletesFeaturesThatAreNeverFoundAndCapsTheMap) {
     EXPECT_LE((P - P.transpose()).cwiseAbs().maxCoeff(), 1e-12);
 }
 
+TEST(EkfSlam, FeaturesAddedAfterAFrameAreRemovedAndTheRestKept) {
+    // After a loss the tracker removes the features it added while the
+    // filter was guessing its pose (frames after the last well-tracked one).
+    const auto cam = test::makeCamera(0, 0, 500);
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->initialise(0, Vec3(0, 1, 0));
+    std::vector<std::uint64_t> kept;
+    kept.reserve(4);
+    for (int i = 0; i < 4; ++i) {
+        kept.push_back(slam->addFeature(Vec2(100 + 100 * i, 200)));
+    }
+    const std::int64_t last_good = slam->frameIndex();
+    for (std::int64_t k = 1; k <= 2; ++k) {
+        ASSERT_EQ(slam->predict(k * 33'333'333), SlamHealth::kOk);
+        slam->predictMeasurements();
+        slam->update({});
+        slam->addFeature(Vec2(150 + 100 * static_cast<Scalar>(k), 300));
+        slam->addFeature(Vec2(150 + 100 * static_cast<Scalar>(k), 350));
+    }
+    ASSERT_EQ(slam->features().size(), 8U);
+    EXPECT_EQ(slam->features()[5].first_frame, 1);
+    EXPECT_EQ(slam->removeFeaturesAddedAfter(slam->frameIndex()), 0);
+    const VecX x_before = slam->state();
+    const MatX P_before = slam->covariance();
+    EXPECT_EQ(slam->removeFeaturesAddedAfter(last_good), 4);
+    ASSERT_EQ(slam->features().size(), kept.size());
+    for (std::size_t i = 0; i < kept.size(); ++i) {
+        EXPECT_EQ(slam->features()[i].id, kept[i]);
+        EXPECT_EQ(slam->features()[i].first_frame, last_good);
+    }
+    // The camera and the kept features keep their state and covariance.
+    const int n = kCameraDim + 6 * 4;
+    ASSERT_EQ(slam->stateDim(), n);
+    EXPECT_EQ(slam->state(), x_before.head(n));
+    EXPECT_EQ(slam->covariance(), P_before.topLeftCorner(n, n));
+}
+
 TEST(EkfSlam, RelocalisationPutsTheCameraBackIntoTheMapItLost) {
     // A metric map (features at their true depth) tracked for 30 frames, a
     // covered lens until the filter is lost, then the camera put back at its

@@ -176,6 +176,7 @@ struct FeatureInfo {
     int attempts = 0;
     int matches = 0;
     std::int64_t last_seen_frame = 0;  // last frame it was predicted in view
+    std::int64_t first_frame = 0;      // the frame it was added on
     bool in_view = false;
     bool measured = false;
     Vec2 px = Vec2::Zero();
@@ -238,6 +239,10 @@ public:
     // Nothing happens (false) before initialise() or for a non-finite input.
     bool relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p,
                     Scalar sigma_theta);
+    // Removes the features added after `frame` (frameIndex()): after a loss,
+    // those the filter added while it was no longer tracking, from a pose
+    // that was a guess. Returns how many.
+    int removeFeaturesAddedAfter(std::int64_t frame);
 
     [[nodiscard]] SlamHealth health() const { return health_; }
     [[nodiscard]] std::int64_t frameIndex() const { return frame_; }
