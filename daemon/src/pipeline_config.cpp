@@ -196,6 +196,7 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
         real("tracker", "relocalise_reproj_px", &t.relocalise_reproj_px, T::relocalise_reproj_px),
         integer("tracker", "relocalise_corners", &t.relocalise_corners, T::relocalise_corners),
         real("tracker", "relocalise_search_px", &t.relocalise_search_px, T::relocalise_search_px),
+        real("tracker", "relocalise_verify_px", &t.relocalise_verify_px, T::relocalise_verify_px),
         integer("tracker", "relocalise_max_brief_distance", &t.relocalise_max_brief_distance,
                 T::relocalise_max_brief_distance),
         real("tracker", "relocalise_max_rel_sigma", &t.relocalise_max_rel_sigma,

@@ -50,27 +50,65 @@ TEST(SlamRedkitchen, TracksEveryFrameWithSmallErrorAndDrift) {
     EXPECT_LT(std::abs(r->scale_drift_thirds - 1), 0.10);
 }
 
+// One map over the run, the camera found in it again once: no new map, one
+// trajectory in one frame and scale, ATE at most max_ate of the path.
+void expectOneMapRelocalisedOnce(const char* run, const SlamRunResult& r, double max_ate) {
+    std::printf(
+        "redkitchen, %s: %d relocalisation(s) (%d verified, %d features removed) after %d "
+        "frames, %d re-init, ATE %.2f%%\n",
+        run, r.relocalisations, r.relocalisations_verified, r.relocalise_dropped_features,
+        r.relocalising_frames, r.reinitialisations, 100 * r.ate_rmse_m / r.path_length_m);
+    EXPECT_EQ(r.reinitialisations, 0);
+    EXPECT_EQ(r.relocalisations, 1);
+    ASSERT_TRUE(r.has_gt);
+    EXPECT_LE(r.ate_rmse_m, max_ate * r.path_length_m);
+}
+
 // Issue 21: 20 black frames (a covered lens, 0.67 s) in the middle of the
-// sequence. The map is kept and the camera found in it again: no new map, one
-// trajectory in one frame and scale over both parts.
+// sequence. The map is kept and the camera found in it again.
 TEST(SlamRedkitchen, ACoveredLensIsRecoveredInTheSameMap) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;
     opt.selection.blank.push_back({300, 320});
     const auto r = runRedkitchen(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
-    std::printf(
-        "redkitchen, frames 300-319 black: %d relocalisation(s) after %d frames, %d re-init, "
-        "ATE %.2f%%\n",
-        r->relocalisations, r->relocalising_frames, r->reinitialisations,
-        100 * r->ate_rmse_m / r->path_length_m);
-    EXPECT_EQ(r->reinitialisations, 0);
-    EXPECT_EQ(r->relocalisations, 1);
+    expectOneMapRelocalisedOnce("frames 300-319 black", *r, 0.02);
     // Lost after lost_after_frames black frames; back on the first frames
     // with light (the others of the 20 are black).
     EXPECT_LE(r->relocalising_frames, 15);
-    ASSERT_TRUE(r->has_gt);
-    EXPECT_LE(r->ate_rmse_m, 0.02 * r->path_length_m);
+}
+
+// Issue 21: the same outage with seed 7. The first PnP pose has 5-6 inliers
+// of 12-17 candidates (the guided search around the last well-tracked pose,
+// 20 frames old); searched again around that hypothesis the features give a
+// pose with enough inliers (tracker.relocalise_verify_px). Without that step
+// this seed started a new map 3 s later.
+TEST(SlamRedkitchen, AWeakRelocalisationIsVerifiedAndKeepsTheMap) {
+    SCALED_REQUIRE_DATASET(dir, "redkitchen");
+    SlamRunOptions opt;
+    opt.tracker.slam.seed = 7;
+    opt.selection.blank.push_back({300, 320});
+    const auto r = runRedkitchen(dir, opt);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    expectOneMapRelocalisedOnce("seed 7, frames 300-319 black", *r, 0.02);
+    EXPECT_EQ(r->relocalisations_verified, 1);
+    EXPECT_LE(r->relocalising_frames, 15);
+}
+
+// Seed 6 nearly loses the camera at frame 44 and tracks with one or two
+// inliers until it is lost at frame 56, adding features all along from poses
+// it was guessing. It is relocalised on the next frame; those features are
+// removed (a new map is not started, and the scale evidence is kept). The
+// map is not as good as the other seeds' (docs/slam.md): ATE 3.6%.
+TEST(SlamRedkitchen, FeaturesAddedWhileLostAreRemovedAtRelocalisation) {
+    SCALED_REQUIRE_DATASET(dir, "redkitchen");
+    SlamRunOptions opt;
+    opt.tracker.slam.seed = 6;
+    const auto r = runRedkitchen(dir, opt);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    expectOneMapRelocalisedOnce("seed 6", *r, 0.05);
+    EXPECT_GE(r->relocalise_dropped_features, 10);
+    EXPECT_GE(r->tracked_frames, 598U);
 }
 
 // Issue 21: every third frame (10 Hz): the motion between frames is three

@@ -119,6 +119,8 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         }
         if (stats.relocalised) {
             ++result.relocalisations;
+            result.relocalisations_verified += stats.relocalise_verified ? 1 : 0;
+            result.relocalise_dropped_features += stats.relocalise_dropped;
         }
         if (stats.window_ba.optimised) {
             ++result.window_ba_optimisations;
@@ -278,6 +280,8 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"tracked_frames\":" + std::to_string(r.tracked_frames);
     s += ",\"reinitialisations\":" + std::to_string(r.reinitialisations);
     s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
+    s += ",\"relocalisations_verified\":" + std::to_string(r.relocalisations_verified);
+    s += ",\"relocalise_dropped_features\":" + std::to_string(r.relocalise_dropped_features);
     s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
     if (r.window_ba_optimisations > 0) {
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +

@@ -40,7 +40,12 @@ struct SlamRunResult {
     std::size_t frames = 0;
     std::size_t tracked_frames = 0;  // frames tracked (healthy, not starting a replacement map)
     int reinitialisations = 0;
-    int relocalisations = 0;      // losses the tracker recovered from in the same map
+    int relocalisations = 0;  // losses the tracker recovered from in the same map
+    // of which from a PnP hypothesis verified by a second search around it
+    // (tracker.relocalise_verify_px), and the features the tracker added
+    // while lost that they removed
+    int relocalisations_verified = 0;
+    int relocalise_dropped_features = 0;
     int relocalising_frames = 0;  // frames spent looking for the camera in a lost map
     // tracker.window_ba: its optimisations, their mean points and residual
     // after (px); the trajectory is then the adjusted one (MonoTracker::pose).

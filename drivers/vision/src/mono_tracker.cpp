@@ -78,6 +78,7 @@ core::Status validate(const TrackerConfig& c) {
         {"brief_refresh_frames", d(c.brief_refresh_frames), L::brief_refresh_frames},
         {"relocalise_corners", d(c.relocalise_corners), L::relocalise_corners},
         {"relocalise_search_px", d(c.relocalise_search_px), L::relocalise_search_px},
+        {"relocalise_verify_px", d(c.relocalise_verify_px), L::relocalise_verify_px},
         {"relocalise_max_rel_sigma", d(c.relocalise_max_rel_sigma), L::relocalise_max_rel_sigma},
         {"coarse_max_search_pixels", d(c.coarse_max_search_pixels), L::coarse_max_search_pixels},
         {"coarse_min_fraction", d(c.coarse_min_fraction), L::coarse_min_fraction},
@@ -402,13 +403,14 @@ void MonoTracker::addRelocPoint(const Vec3& p_FinW, const Vec2& px) {
                                  static_cast<float>((*ray)(1) / (*ray)(2)));
 }
 
-void MonoTracker::guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats) {
-    // Each known feature searched around where the last well-tracked pose
-    // puts it (an outage is usually short and the camera near where it was),
-    // coarse-to-fine inside relocalise_search_px, with its template warped
-    // for that pose.
+void MonoTracker::guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats,
+                                        const core::CameraPose& from, Scalar radius_px) {
+    // Each known feature searched around where the pose `from` puts it (the
+    // last well-tracked pose: an outage is usually short and the camera near
+    // where it was; or a PnP hypothesis), coarse-to-fine inside radius_px,
+    // with its template warped for that pose.
     const auto features = slam_.features();
-    const Scalar r = static_cast<Scalar>(config_.relocalise_search_px);
+    const Scalar r = radius_px;
     const core::Mat2 S =
         core::Mat2::Identity() * (r * r / static_cast<Scalar>(config_.match.chi2_gate));
     const int level = searchLevel(S);
@@ -419,7 +421,7 @@ void MonoTracker::guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats) 
         if (a == nullptr || !knownMapPoint(slot, mp)) {
             continue;
         }
-        const Vec3 p_C = last_good_pose_.R_CtoW.transpose() * (mp.p_FinW - last_good_pose_.p_CinW);
+        const Vec3 p_C = from.R_CtoW.transpose() * (mp.p_FinW - from.p_CinW);
         const auto h = p_C.z() > 0 ? cam.project(p_C) : std::nullopt;
         if (!h || h->x() < 0 || h->y() < 0 || h->x() > Scalar(cam.width() - 1) ||
             h->y() > Scalar(cam.height() - 1)) {
@@ -427,7 +429,7 @@ void MonoTracker::guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats) 
         }
         core::Mat2 A = core::Mat2::Identity();
         if (config_.warp_patches &&
-            !predictedWarp(features[static_cast<size_t>(slot)], *a, *h, last_good_pose_, A)) {
+            !predictedWarp(features[static_cast<size_t>(slot)], *a, *h, from, A)) {
             A = core::Mat2::Identity();
         }
         std::optional<Match> m;
@@ -517,9 +519,9 @@ void MonoTracker::refreshDescriptors(const cv::Mat& gray,
     }
 }
 
-std::optional<core::CameraPose> MonoTracker::solveRelocPose(TrackStats& stats) {
+std::optional<core::CameraPose> MonoTracker::solveRelocPose(TrackStats& stats, int min_inliers) {
     stats.relocalise_candidates = static_cast<int>(reloc_points_W_.size());
-    if (stats.relocalise_candidates < config_.relocalise_min_inliers) {
+    if (stats.relocalise_candidates < min_inliers) {
         return std::nullopt;
     }
     // RANSAC PnP in normalised coordinates (OpenCV's seeded RANSAC:
@@ -539,7 +541,7 @@ std::optional<core::CameraPose> MonoTracker::solveRelocPose(TrackStats& stats) {
         solved = false;  // degenerate points: no pose this frame
     }
     stats.relocalise_inliers = static_cast<int>(reloc_inliers_.size());
-    if (!solved || stats.relocalise_inliers < config_.relocalise_min_inliers) {
+    if (!solved || stats.relocalise_inliers < min_inliers) {
         return std::nullopt;
     }
     cv::Mat R_WtoC_cv;
@@ -562,15 +564,43 @@ std::optional<core::CameraPose> MonoTracker::solveRelocPose(TrackStats& stats) {
 }
 
 bool MonoTracker::tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
-    reloc_points_W_.clear();
-    reloc_points_n_.clear();
-    globalRelocCandidates(gray);
-    auto pose = solveRelocPose(stats);
-    if (!pose) {
+    // A pose with relocalise_min_inliers inliers is taken; one with fewer
+    // (but more than the minimal sample) is a hypothesis: the features are
+    // searched again, within relocalise_verify_px of where it puts them, and
+    // the pose solved from those must have relocalise_min_inliers.
+    const int min_inliers = config_.relocalise_min_inliers;
+    const int min_hypothesis =
+        config_.relocalise_verify_px > 0 ? kMinHypothesisInliers : min_inliers;
+    std::optional<core::CameraPose> hypothesis;
+    int hypothesis_inliers = 0;
+    const auto attempt = [&](auto&& candidates) -> std::optional<core::CameraPose> {
         reloc_points_W_.clear();
         reloc_points_n_.clear();
-        guidedRelocCandidates(gray, stats);
-        pose = solveRelocPose(stats);
+        candidates();
+        auto p = solveRelocPose(stats, std::min(min_hypothesis, min_inliers));
+        if (p && stats.relocalise_inliers < min_inliers) {
+            if (stats.relocalise_inliers > hypothesis_inliers) {
+                hypothesis = p;
+                hypothesis_inliers = stats.relocalise_inliers;
+            }
+            return std::nullopt;
+        }
+        return p;
+    };
+    auto pose = attempt([&] { globalRelocCandidates(gray); });
+    if (!pose) {
+        pose = attempt([&] {
+            guidedRelocCandidates(gray, stats, last_good_pose_,
+                                  static_cast<Scalar>(config_.relocalise_search_px));
+        });
+    }
+    if (!pose && hypothesis) {
+        const core::CameraPose from = *hypothesis;
+        pose = attempt([&] {
+            guidedRelocCandidates(gray, stats, from,
+                                  static_cast<Scalar>(config_.relocalise_verify_px));
+        });
+        stats.relocalise_verified = pose.has_value();
     }
     if (!pose) {
         return false;
@@ -589,7 +619,14 @@ bool MonoTracker::tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackSta
     const Scalar depth = std::max(*mid, Scalar(1e-3));
     const auto px_angle =
         static_cast<Scalar>(config_.relocalise_reproj_px) / slam_.camera().intrinsics().fx;
-    return slam_.relocalise(t_ns, *pose, 3 * px_angle * depth, 3 * px_angle);
+    if (!slam_.relocalise(t_ns, *pose, 3 * px_angle * depth, 3 * px_angle)) {
+        return false;
+    }
+    // The features added after the last well-tracked frame were cut from
+    // poses the filter was guessing: their rays are not where the map is.
+    stats.relocalise_dropped = slam_.removeFeaturesAddedAfter(last_good_frame_);
+    dropDeletedAppearances();
+    return true;
 }
 
 void MonoTracker::updateGyroBias(const slam::GyroRate& rate, const core::Mat3& R_prev_CtoW,
@@ -616,6 +653,7 @@ void MonoTracker::updateGyroBias(const slam::GyroRate& rate, const core::Mat3& R
 void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
     slam_.initialise(t_ns, gravity_down_C_);
     last_good_pose_ = slam_.pose();
+    last_good_frame_ = slam_.frameIndex();
     clearAppearances();
     previous_frame_good_ = true;  // the map's origin: a reference for the gyro bias
     has_map_ = true;
@@ -789,6 +827,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     const auto report = slam_.update(matches_);
     if (!report.bad_frame) {
         last_good_pose_ = slam_.pose();  // where relocalisation's guided search looks
+        last_good_frame_ = slam_.frameIndex();
         if (config_.relocalise_s > 0) {
             refreshDescriptors(gray, preds);
         }

@@ -73,6 +73,11 @@ struct TrackerConfig {
     // The guided search: each feature looked for within this radius (pixels)
     // of where the last well-tracked pose puts it, before the whole image.
     double relocalise_search_px = 200;
+    // A PnP pose with fewer than relocalise_min_inliers inliers (but more
+    // than the minimal sample) is verified: every known feature is searched
+    // within this radius (pixels) of where that pose puts it, and the pose
+    // solved from those matches must have relocalise_min_inliers. 0: not.
+    double relocalise_verify_px = 12;
     // Map features whose position std exceeds this fraction of their distance
     // from the camera are not used (their point is a guess along the ray).
     double relocalise_max_rel_sigma = 0.1;
@@ -117,6 +122,7 @@ struct TrackerLimits {
     static constexpr core::ParamLimits brief_refresh_frames = core::closed(1, 100000);
     static constexpr core::ParamLimits relocalise_corners = core::closed(1, 10000);
     static constexpr core::ParamLimits relocalise_search_px = core::closed(0, 10000);
+    static constexpr core::ParamLimits relocalise_verify_px = core::closed(0, 1000);
     static constexpr core::ParamLimits relocalise_max_rel_sigma = core::openClosed(0, 10);
     static constexpr core::ParamLimits gyro_noise_density = core::closed(0, 1);  // rad/s/sqrt(Hz)
     static constexpr core::ParamLimits gyro_bias_sigma_radps = core::closed(0, 10);
@@ -174,8 +180,10 @@ struct TrackStats {
     // The gyro prior on this frame: kOk when the prediction used it; unset
     // when no IMU samples were given (or use_gyro is off, or no prediction ran).
     std::optional<core::slam::GyroCoverage> gyro;
-    int relocalise_candidates = 0;  // map features matched to corners (relocalising frames)
-    int relocalise_inliers = 0;     // of which the PnP pose kept
+    int relocalise_candidates = 0;     // map features matched to corners (relocalising frames)
+    int relocalise_inliers = 0;        // of which the PnP pose kept
+    bool relocalise_verified = false;  // the pose came from verifying a weaker hypothesis
+    int relocalise_dropped = 0;        // features added while lost, removed at relocalisation
     // The update's normalised innovations by feature age (UpdateReport).
     std::array<core::Scalar, core::slam::UpdateReport::kAgeBins> nis_sum{};
     std::array<int, core::slam::UpdateReport::kAgeBins> nis_count{};
@@ -291,13 +299,16 @@ private:
     // relocalise against (relocalise_max_rel_sigma).
     bool knownMapPoint(int slot, core::slam::MapPoint& mp) const;
     void addRelocPoint(const core::Vec3& p_FinW, const core::Vec2& px);
-    void guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats);
+    void guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats, const core::CameraPose& from,
+                               core::Scalar radius_px);
     void globalRelocCandidates(const cv::Mat& gray);
     // Renews the descriptors of the features this frame's update accepted.
     void refreshDescriptors(const cv::Mat& gray,
                             std::span<const core::slam::FeaturePrediction> preds);
     // RANSAC PnP over the candidates; the pose when enough inliers agree.
-    std::optional<core::CameraPose> solveRelocPose(TrackStats& stats);
+    // A PnP hypothesis to verify needs more inliers than AP3P's minimal sample.
+    static constexpr int kMinHypothesisInliers = 5;
+    std::optional<core::CameraPose> solveRelocPose(TrackStats& stats, int min_inliers);
     // The pyramid level (1..pyramid_levels) whose gate ellipse fits the pixel
     // budget, 0 when the full-resolution search does, -1 when none does.
     [[nodiscard]] int searchLevel(const core::Mat2& S) const;
@@ -343,7 +354,8 @@ private:
     std::vector<int> reloc_inliers_;
     std::vector<BriefDescriptor> corner_briefs_;  // of corners_, while relocalising
     std::vector<unsigned char> corner_has_brief_;
-    core::CameraPose last_good_pose_;  // the last frame that was not a bad frame
+    core::CameraPose last_good_pose_;   // the last frame that was not a bad frame
+    std::int64_t last_good_frame_ = 0;  // its frameIndex()
     core::Vec3 gyro_bias_C_ = core::Vec3::Zero();
     // The previous frame's updated pose was good (same map, not a bad frame):
     // the reference the gyro bias is measured against.
