@@ -392,6 +392,15 @@ bool MonoTracker::knownMapPoint(int slot, slam::MapPoint& mp) const {
            static_cast<Scalar>(config_.relocalise_max_rel_sigma) * dist;
 }
 
+int MonoTracker::knownFeatureCount() const {
+    slam::MapPoint mp;
+    int known = 0;
+    for (int slot = 0; slot < static_cast<int>(slam_.features().size()); ++slot) {
+        known += knownMapPoint(slot, mp) ? 1 : 0;
+    }
+    return known;
+}
+
 void MonoTracker::addRelocPoint(const Vec3& p_FinW, const Vec2& px) {
     const auto ray = slam_.camera().unproject(px);
     if (!ray || !((*ray)(2) > 0)) {
@@ -772,8 +781,11 @@ void MonoTracker::manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, b
     stats.health = slam_.manageMap();
     previous_frame_good_ = !bad_frame && stats.health == slam::SlamHealth::kOk;
     if (stats.health == slam::SlamHealth::kLost && config_.relocalise_s > 0 &&
-        !slam_.features().empty()) {
+        knownFeatureCount() >= config_.relocalise_min_inliers) {
         // Keep the map and look for the camera in it from the next frame on.
+        // (With fewer known features than a pose needs inliers, none can be
+        // found however long it looks: KITTI's far features, seen by a camera
+        // driving away from them. Then the caller starts a new map at once.)
         relocalising_ = true;
         lost_t_ns_ = t_ns;
         stats.health = slam::SlamHealth::kRelocalising;

@@ -63,7 +63,9 @@ struct TrackerConfig {
     // seconds; health is kRelocalising meanwhile. A pose with at least
     // relocalise_min_inliers inliers within relocalise_reproj_px puts the
     // camera back into the map (same map, same scale); after the time is up
-    // the health is kLost and the caller starts a new map. 0: no relocalisation.
+    // the health is kLost and the caller starts a new map. A map with fewer
+    // known features (relocalise_max_rel_sigma) than relocalise_min_inliers
+    // cannot give such a pose: it is given up at once. 0: no relocalisation.
     double relocalise_s = 3.0;
     int relocalise_min_inliers = 10;
     double relocalise_reproj_px = 3.0;
@@ -298,6 +300,9 @@ private:
     // The map point of a feature whose position is known well enough to
     // relocalise against (relocalise_max_rel_sigma).
     bool knownMapPoint(int slot, core::slam::MapPoint& mp) const;
+    // How many of the map's features are known well enough (a relocalised
+    // pose needs relocalise_min_inliers of them).
+    [[nodiscard]] int knownFeatureCount() const;
     void addRelocPoint(const core::Vec3& p_FinW, const core::Vec2& px);
     void guidedRelocCandidates(const cv::Mat& gray, TrackStats& stats, const core::CameraPose& from,
                                core::Scalar radius_px);
