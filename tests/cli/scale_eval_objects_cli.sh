@@ -11,9 +11,7 @@
 set -euo pipefail
 ev=$1
 shared=${SCALED_SHARED_DIR:-$2}
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
+source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
 model="$shared/models/yolox_nano.onnx"
 rk="$shared/data/redkitchen"
