@@ -578,15 +578,16 @@ bool MonoTracker::tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackSta
     // searched again, within relocalise_verify_px of where it puts them, and
     // the pose solved from those must have relocalise_min_inliers.
     const int min_inliers = config_.relocalise_min_inliers;
-    const int min_hypothesis =
-        config_.relocalise_verify_px > 0 ? kMinHypothesisInliers : min_inliers;
+    const int min_hypothesis = config_.relocalise_verify_px > 0
+                                   ? std::min(kMinHypothesisInliers, min_inliers)
+                                   : min_inliers;
     std::optional<core::CameraPose> hypothesis;
     int hypothesis_inliers = 0;
     const auto attempt = [&](auto&& candidates) -> std::optional<core::CameraPose> {
         reloc_points_W_.clear();
         reloc_points_n_.clear();
         candidates();
-        auto p = solveRelocPose(stats, std::min(min_hypothesis, min_inliers));
+        auto p = solveRelocPose(stats, min_hypothesis);
         if (p && stats.relocalise_inliers < min_inliers) {
             if (stats.relocalise_inliers > hypothesis_inliers) {
                 hypothesis = p;
