@@ -18,8 +18,8 @@ namespace {
 
 // slam-run's library over a shared dataset (redkitchen, or KITTI 00 below)
 // with these options.
-core::Result<SlamRunResult> runRedkitchen(const std::filesystem::path& dir,
-                                          const SlamRunOptions& opt) {
+core::Result<SlamRunResult> runDataset(const std::filesystem::path& dir,
+                                       const SlamRunOptions& opt) {
     auto source = drivers::dataset::openDataset(dir);
     if (!source) {
         return source.error();
@@ -34,7 +34,7 @@ core::Result<SlamRunResult> runRedkitchen(const std::filesystem::path& dir,
 TEST(SlamRedkitchen, TracksEveryFrameWithSmallErrorAndDrift) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;  // the defaults slam-run uses
-    const auto r = runRedkitchen(dir, opt);
+    const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf(
         "redkitchen: %zu/%zu tracked, %d re-init, ATE %.4f m of %.3f m (%.2f%%), "
@@ -71,7 +71,7 @@ TEST(SlamRedkitchen, ACoveredLensIsRecoveredInTheSameMap) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;
     opt.selection.blank.push_back({300, 320});
-    const auto r = runRedkitchen(dir, opt);
+    const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     expectOneMapRelocalisedOnce("frames 300-319 black", *r, 0.02);
     // Lost after lost_after_frames black frames; back on the first frames
@@ -89,7 +89,7 @@ TEST(SlamRedkitchen, AWeakRelocalisationIsVerifiedAndKeepsTheMap) {
     SlamRunOptions opt;
     opt.tracker.slam.seed = 7;
     opt.selection.blank.push_back({300, 320});
-    const auto r = runRedkitchen(dir, opt);
+    const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     expectOneMapRelocalisedOnce("seed 7, frames 300-319 black", *r, 0.02);
     EXPECT_EQ(r->relocalisations_verified, 1);
@@ -105,7 +105,7 @@ TEST(SlamRedkitchen, FeaturesAddedWhileLostAreRemovedAtRelocalisation) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;
     opt.tracker.slam.seed = 6;
-    const auto r = runRedkitchen(dir, opt);
+    const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     expectOneMapRelocalisedOnce("seed 6", *r, 0.05);
     EXPECT_GE(r->relocalise_dropped_features, 10);
@@ -121,7 +121,7 @@ TEST(SlamKitti, AMapWithTooFewKnownFeaturesIsGivenUpAtOnce) {
     SCALED_REQUIRE_DATASET(dir, "kitti00");
     SlamRunOptions opt;
     opt.tracker.slam.seed = 2;
-    const auto r = runRedkitchen(dir, opt);
+    const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf("kitti00 seed 2: %zu/%zu tracked, %d re-init, %d relocalising frames\n",
                 r->tracked_frames, r->frames, r->reinitialisations, r->relocalising_frames);
@@ -136,7 +136,7 @@ TEST(SlamRedkitchen, TenHertzIsTrackedInOneMap) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;
     opt.selection.stride = 3;
-    const auto r = runRedkitchen(dir, opt);
+    const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf("redkitchen at 10 Hz: %zu/%zu tracked, %d re-init, ATE %.2f%%\n", r->tracked_frames,
                 r->frames, r->reinitialisations, 100 * r->ate_rmse_m / r->path_length_m);
