@@ -154,9 +154,11 @@ constexpr OptionSpec<Options> kOptions[] = {
      }},
     {"--truth-geometry", nullptr,
      "give the estimator the ground-truth camera poses and gravity\n"
-     "(metric: the true scale is 1): the evidence with a right map",
+     "(metric: the true scale is 1): the evidence with a right map;\n"
+     "on KITTI the vertical is the first camera's +y (its cameras are level)",
      [](std::string_view, Options& o) {
          o.eval.truth_geometry = true;
+         o.dataset_options.gravity_from_groundtruth = true;
          return true;
      }},
     {"--gyro-sim", "D:B",

@@ -366,6 +366,7 @@ private:
     [[nodiscard]] core::Status detectAndUpdate(const drivers::source::Frame& frame,
                                                const FrameRow& row, EvalResult& r);
     [[nodiscard]] core::FrameSnapshot snapshotOf(const drivers::source::Frame& frame);
+    [[nodiscard]] std::optional<double> medianTrueDepthM(const drivers::source::Frame& frame);
     void appendObjects(const UpdateRow& up, EvalResult& r) const;
     void appendObservations(const UpdateRow& up, const core::UpdateStats& u, EvalResult& r);
     void appendDepthErrors(const drivers::source::Frame& frame, const UpdateRow& up, EvalResult& r);
@@ -384,6 +385,7 @@ private:
     daemon::FrameStep step_;
 
     core::slam::SlamSnapshot snapshot_;
+    std::vector<core::MapFeature> truth_features_;  // --truth-geometry's map
     std::vector<core::Detection> dets_;
     std::vector<core::ObservationRecord> records_;
     std::vector<Scalar> log_l_;
@@ -544,6 +546,34 @@ void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, Ev
     }
 }
 
+// The median of the valid readings of the frame's depth image, metres; none
+// without one.
+std::optional<double> EvalRun::medianTrueDepthM(const drivers::source::Frame& frame) {
+    const auto& info = source_.info();
+    if (!frame.depth_path || info.depth_scale_m <= 0) {
+        return std::nullopt;
+    }
+    auto depth = drivers::dataset::loadDepthMetres(frame, info);
+    if (!depth) {
+        return std::nullopt;
+    }
+    std::vector<float> z;
+    for (int v = 0; v < depth->rows; ++v) {
+        const float* row = depth->ptr<float>(v);
+        for (int u = 0; u < depth->cols; ++u) {
+            if (row[u] > 0) {
+                z.push_back(row[u]);
+            }
+        }
+    }
+    if (z.empty()) {
+        return std::nullopt;
+    }
+    auto mid = z.begin() + static_cast<std::ptrdiff_t>(z.size() / 2);
+    std::nth_element(z.begin(), mid, z.end());
+    return static_cast<double>(*mid);
+}
+
 // The map as the detection thread sees it; with --truth-geometry, metric,
 // true geometry: no map features (the object model needs none), the true
 // camera and gravity.
@@ -553,12 +583,35 @@ core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
     (void)snapshot_.capture(slam, frame.id, 0, step_.estimatorFromFilter(config_.estimator_map));
     core::FrameSnapshot snapshot = snapshot_.view();
     if (options_.truth_geometry) {
-        // Without truth for this frame there is no update from it.
-        snapshot.features = {};
+        // Without truth for this frame there is no update from it. The
+        // object model takes only a depth hint from the map (its association
+        // searches the depths around it): with a depth image, one point on
+        // the optical axis at its median depth; without (KITTI), the
+        // tracker's points where it sees them from the camera, in metres by
+        // the scale of its trajectory so far. (None at all would be a hint of
+        // 1 m, which puts KITTI's cars outside every search.)
+        truth_features_.clear();
         if (frame.T_CtoW_gt && frame.gravity_down_C) {
-            snapshot.pose = *frame.T_CtoW_gt;
-            snapshot.up_W = -(frame.T_CtoW_gt->R_CtoW * *frame.gravity_down_C).normalized();
+            const core::CameraPose& gt = *frame.T_CtoW_gt;
+            if (const std::optional<double> z = medianTrueDepthM(frame)) {
+                core::MapFeature f;
+                f.p_FinW = gt.p_CinW + gt.R_CtoW * Vec3(0, 0, static_cast<Scalar>(*z));
+                truth_features_.push_back(f);
+            } else if (const std::optional<double> s =
+                           truthScale(track_.est, track_.gt, options_.min_truth_path_m)) {
+                const core::CameraPose& est = snapshot.pose;
+                const core::Mat3 R = gt.R_CtoW * est.R_CtoW.transpose();
+                for (const core::MapFeature& f : snapshot.features) {
+                    core::MapFeature g;
+                    g.p_FinW = gt.p_CinW + static_cast<Scalar>(*s) * (R * (f.p_FinW - est.p_CinW));
+                    g.P_FinW = static_cast<Scalar>(*s * *s) * (R * f.P_FinW * R.transpose());
+                    truth_features_.push_back(g);
+                }
+            }
+            snapshot.pose = gt;
+            snapshot.up_W = -(gt.R_CtoW * *frame.gravity_down_C).normalized();
         }
+        snapshot.features = truth_features_;
     }
     return snapshot;
 }
