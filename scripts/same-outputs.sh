@@ -91,9 +91,11 @@ build() {
 # Behaviour added since the restructuring, on by default and off for HEAD's
 # run: the window bundle adjustment (tracker.window_ba, docs/slam.md), and
 # poses in metres only from a narrow enough scale (estimator.pose_max_rel_width95,
-# scale-eval's metric_trajectory; docs/protocol.md).
-head_slam_off=(--set window_ba=false)
-head_off=(--set tracker.window_ba=false --set estimator.pose_max_rel_width95=1000)
+# scale-eval's metric_trajectory; docs/protocol.md), and the velocity's noise as
+# a random walk (tracker.sigma_a_reference_hz; at 30 Hz the same to rounding).
+head_slam_off=(--set window_ba=false --set sigma_a_reference_hz=0)
+head_off=(--set tracker.window_ba=false --set estimator.pose_max_rel_width95=1000
+          --set tracker.sigma_a_reference_hz=0)
 
 # run BUILD_DIR OUT_DIR [head]
 run() {

@@ -150,6 +150,7 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
     using B = core::slam::WindowBaLimits;      // the window bundle adjustment's, core's
     return {
         real("tracker", "sigma_a", &s.motion.sigma_a, L::sigma_a),
+        real("tracker", "sigma_a_reference_hz", &s.motion.reference_hz, L::sigma_a_reference_hz),
         real("tracker", "sigma_alpha", &s.motion.sigma_alpha, L::sigma_alpha),
         real("tracker", "pixel_sigma_px", &s.pixel_sigma_px, L::pixel_sigma_px),
         real("tracker", "init_sigma_v", &s.init_sigma_v, L::init_sigma_v),

@@ -112,15 +112,17 @@ TEST(SlamRedkitchen, FeaturesAddedWhileLostAreRemovedAtRelocalisation) {
     EXPECT_GE(r->tracked_frames, 598U);
 }
 
-// KITTI 00 (160 frames at 10 Hz, a car driving), seed 2: the filter is lost
-// at frame 84 with 4 features of 80 known well enough to relocalise against
-// (far features, their depth still open). No pose can have the 10 inliers
-// relocalisation asks for, so the map is given up at once and a new one
-// started: 158 of 160 frames tracked (129 when it looked for 3 s).
+// KITTI 00 (160 frames at 10 Hz, a car driving), seed 2, with MonoSLAM's
+// velocity noise (sigma_a_reference_hz = 0; the default tracks this run in one
+// map): the filter is lost at frame 84 with 4 features of 80 known well enough
+// to relocalise against (far features, their depth still open). No pose can
+// have the 10 inliers relocalisation asks for, so the map is given up at once
+// and a new one started: 158 of 160 frames tracked (129 when it looked for 3 s).
 TEST(SlamKitti, AMapWithTooFewKnownFeaturesIsGivenUpAtOnce) {
     SCALED_REQUIRE_DATASET(dir, "kitti00");
     SlamRunOptions opt;
     opt.tracker.slam.seed = 2;
+    opt.tracker.slam.motion.reference_hz = 0;
     const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf("kitti00 seed 2: %zu/%zu tracked, %d re-init, %d relocalising frames\n",
@@ -128,6 +130,27 @@ TEST(SlamKitti, AMapWithTooFewKnownFeaturesIsGivenUpAtOnce) {
     EXPECT_EQ(r->reinitialisations, 1);
     EXPECT_EQ(r->relocalising_frames, 0);
     EXPECT_GE(r->tracked_frames, 144U);  // issue 21: at least 90% of 160
+}
+
+// Issue 21: KITTI 00 within 5% of its path. A car at 10 Hz with the velocity's
+// noise as a random walk referenced at 30 Hz (sigma_a_reference_hz, the
+// default): seeds 1, 2 and 6, the three beyond 5% with MonoSLAM's noise (7.17,
+// 7.11 with a re-init, 5.89%), measured 1.85, 1.48, 0.76% (seeds 1-16: 0.76-2.44%,
+// docs/slam.md).
+TEST(SlamKitti, TheRandomWalkVelocityNoiseKeepsKittiWithinFivePercent) {
+    SCALED_REQUIRE_DATASET(dir, "kitti00");
+    for (const std::uint64_t seed : {std::uint64_t{1}, std::uint64_t{2}, std::uint64_t{6}}) {
+        SlamRunOptions opt;
+        opt.tracker.slam.seed = seed;
+        const auto r = runDataset(dir, opt);
+        ASSERT_TRUE(r.ok()) << r.error().message;
+        ASSERT_TRUE(r->has_gt) << seed;
+        std::printf("kitti00 seed %llu: ATE %.2f%% of the path, %d re-inits, %zu/%zu tracked\n",
+                    static_cast<unsigned long long>(seed), 100 * r->ate_rmse_m / r->path_length_m,
+                    r->reinitialisations, r->tracked_frames, r->frames);
+        EXPECT_EQ(r->reinitialisations, 0) << seed;
+        EXPECT_LE(r->ate_rmse_m, 0.05 * r->path_length_m) << seed;
+    }
 }
 
 // Issue 21: every third frame (10 Hz): the motion between frames is three

@@ -26,6 +26,8 @@ std::optional<Error> outOfLimits(const SlamConfig& c) {
     const LimitCheck checks[] = {
         {"sigma_a", static_cast<double>(c.motion.sigma_a), L::sigma_a},
         {"sigma_alpha", static_cast<double>(c.motion.sigma_alpha), L::sigma_alpha},
+        {"sigma_a_reference_hz", static_cast<double>(c.motion.reference_hz),
+         L::sigma_a_reference_hz},
         {"pixel_sigma_px", static_cast<double>(c.pixel_sigma_px), L::pixel_sigma_px},
         {"init_sigma_v", static_cast<double>(c.init_sigma_v), L::init_sigma_v},
         {"init_sigma_w", static_cast<double>(c.init_sigma_w), L::init_sigma_w},

@@ -30,7 +30,9 @@ Vec13 predictCamera(const Vec13& x, Scalar dt_s, const MotionNoise& noise, Mat13
         G.block<4, 3>(kQuat, 3) = J_q_w;
         G.block<3, 3>(kVel, 0) = Mat3::Identity();
         G.block<3, 3>(kAngVel, 3) = Mat3::Identity();
-        const Scalar var_v = noise.sigma_a * noise.sigma_a * dt_s * dt_s;
+        const Scalar var_v = noise.reference_hz > 0
+                                 ? noise.sigma_a * noise.sigma_a * dt_s / noise.reference_hz
+                                 : noise.sigma_a * noise.sigma_a * dt_s * dt_s;
         const Scalar var_w = noise.sigma_alpha * noise.sigma_alpha * dt_s * dt_s;
         Eigen::Matrix<Scalar, 6, 1> diag;
         diag << var_v, var_v, var_v, var_w, var_w, var_w;

@@ -107,6 +107,49 @@ TEST(SlamMotionModel, JacobianAndNoise) {
                 test::tolerance(1e-12, 5e-7));
 }
 
+// The velocity's noise as a random walk (reference_hz): MonoSLAM's impulse at
+// the reference rate, a variance growing with dt, not dt^2, elsewhere; the
+// angular impulse keeps MonoSLAM's form.
+TEST(SlamMotionModel, RandomWalkVelocityNoiseMatchesMonoSlamAtItsReferenceRate) {
+    Vec13 x;
+    x << 0.1, -0.2, 0.3, 0, 0, 0, 0, 0.02, -0.05, 0.01, 0.3, -0.6, 0.2;
+    x.segment<4>(kQuat) = someQuat();
+    const MotionNoise impulse{Scalar(2), Scalar(3)};
+    const MotionNoise walk{Scalar(2), Scalar(3), Scalar(30)};
+    auto noiseOf = [&](const MotionNoise& n, Scalar dt) {
+        Mat13 Q;
+        (void)predictCamera(x, dt, n, nullptr, &Q);
+        return Q;
+    };
+    const double tol = test::tolerance(1e-12, 1e-6);
+    const Scalar dt30 = Scalar(1) / 30;
+    // At 30 Hz the two models are the same.
+    EXPECT_LE((noiseOf(walk, dt30) - noiseOf(impulse, dt30)).cwiseAbs().maxCoeff(), tol);
+    for (const Scalar dt : {Scalar(0.1), Scalar(0.2), Scalar(1) / 60}) {
+        const Mat13 Qw = noiseOf(walk, dt);
+        const Mat13 Qi = noiseOf(impulse, dt);
+        // Velocity: 4 dt / 30 against 4 dt^2, i.e. (1 / 30) / dt times the impulse's.
+        const double ratio = static_cast<double>(dt30 / dt);
+        for (int i = 0; i < 3; ++i) {
+            EXPECT_NEAR(static_cast<double>(Qw(kVel + i, kVel + i)),
+                        4.0 * static_cast<double>(dt) / 30, tol);
+            EXPECT_NEAR(static_cast<double>(Qw(kVel + i, kVel + i)),
+                        ratio * static_cast<double>(Qi(kVel + i, kVel + i)), tol);
+        }
+        // The angular block is MonoSLAM's whatever the rate.
+        EXPECT_LE(
+            (Qw.bottomRightCorner<3, 3>() - Qi.bottomRightCorner<3, 3>()).cwiseAbs().maxCoeff(),
+            tol);
+    }
+    // Every 10 Hz frame, the velocity's variance after a second: the same as
+    // thirty 30 Hz frames' (the walk), three times it with the impulse.
+    const double walk_per_s_10 = 10 * static_cast<double>(noiseOf(walk, Scalar(0.1))(kVel, kVel));
+    const double walk_per_s_30 = 30 * static_cast<double>(noiseOf(walk, dt30)(kVel, kVel));
+    const double imp_per_s_10 = 10 * static_cast<double>(noiseOf(impulse, Scalar(0.1))(kVel, kVel));
+    EXPECT_NEAR(walk_per_s_10, walk_per_s_30, test::tolerance(1e-12, 1e-6));
+    EXPECT_NEAR(imp_per_s_10, 3 * walk_per_s_30, test::tolerance(1e-12, 1e-6));
+}
+
 struct ProjectionCase {
     Scalar k1;
     Scalar k2;

@@ -38,7 +38,7 @@ namespace scaled::core::slam {
 struct SlamConfig {
     // Tuned on handheld indoor sequences (7-Scenes redkitchen, docs/accuracy.md)
     // with the unit set by rho0 = 1: sigma_a in SLAM units/s^2.
-    MotionNoise motion{Scalar(8), Scalar(1)};
+    MotionNoise motion{Scalar(8), Scalar(1), Scalar(30)};
     Scalar pixel_sigma_px = 1;          // measurement noise of a matched feature
     Scalar init_sigma_v = Scalar(0.1);  // initial velocity std, SLAM units/s
     Scalar init_sigma_w = Scalar(0.1);  // initial angular velocity std, rad/s
@@ -76,6 +76,7 @@ struct SlamConfig {
 struct SlamLimits {
     static constexpr ParamLimits sigma_a = openClosed(0, 1e4);
     static constexpr ParamLimits sigma_alpha = openClosed(0, 1e4);
+    static constexpr ParamLimits sigma_a_reference_hz = closed(0, 1000);
     static constexpr ParamLimits pixel_sigma_px = openClosed(0, 100);
     static constexpr ParamLimits init_sigma_v = closed(0, 1e3);
     static constexpr ParamLimits init_sigma_w = closed(0, 1e3);
