@@ -155,7 +155,7 @@ constexpr OptionSpec<Options> kOptions[] = {
     {"--truth-geometry", nullptr,
      "give the estimator the ground-truth camera poses and gravity\n"
      "(metric: the true scale is 1): the evidence with a right map;\n"
-     "on KITTI the vertical is the first camera's +y (its cameras are level)",
+     "on KITTI the vertical (the tracker's too) is the first camera's +y",
      [](std::string_view, Options& o) {
          o.eval.truth_geometry = true;
          o.dataset_options.gravity_from_groundtruth = true;

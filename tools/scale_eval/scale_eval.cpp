@@ -575,8 +575,9 @@ std::optional<double> EvalRun::medianTrueDepthM(const drivers::source::Frame& fr
 }
 
 // The map as the detection thread sees it; with --truth-geometry, metric,
-// true geometry: no map features (the object model needs none), the true
-// camera and gravity.
+// true geometry: the true camera and gravity, and for the object model a
+// depth hint (below) in place of the map (the paper model gets no features:
+// it would measure the hint as one).
 core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
     const core::slam::EkfSlam& slam = tracker_.filter();
     // As the daemon hands it to its detection thread (Pipeline::handToDetector).
@@ -591,14 +592,18 @@ core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
         // the scale of its trajectory so far. (None at all would be a hint of
         // 1 m, which puts KITTI's cars outside every search.)
         truth_features_.clear();
+        const bool hint = config_.estimator.model == core::EstimatorModel::kObject;
         if (frame.T_CtoW_gt && frame.gravity_down_C) {
             const core::CameraPose& gt = *frame.T_CtoW_gt;
-            if (const std::optional<double> z = medianTrueDepthM(frame)) {
+            const std::optional<double> z = hint ? medianTrueDepthM(frame) : std::nullopt;
+            const std::optional<double> s =
+                hint && !z ? truthScale(track_.est, track_.gt, options_.min_truth_path_m)
+                           : std::nullopt;
+            if (z) {
                 core::MapFeature f;
                 f.p_FinW = gt.p_CinW + gt.R_CtoW * Vec3(0, 0, static_cast<Scalar>(*z));
                 truth_features_.push_back(f);
-            } else if (const std::optional<double> s =
-                           truthScale(track_.est, track_.gt, options_.min_truth_path_m)) {
+            } else if (s) {
                 const core::CameraPose& est = snapshot.pose;
                 const core::Mat3 R = gt.R_CtoW * est.R_CtoW.transpose();
                 for (const core::MapFeature& f : snapshot.features) {
