@@ -395,6 +395,9 @@ private:
 
     // Per epoch: the trajectory, its frame rows, and the baselines.
     Track track_;
+    // This frame's truth scale of the tracker's trajectory so far (recordTruth;
+    // none without truth), which --truth-geometry's rows replace by 1.
+    std::optional<double> map_scale_true_;
     std::optional<double> epoch_baseline_constant_;
     std::optional<double> epoch_baseline_single_;
     double epoch_t0_s_ = 0;
@@ -490,6 +493,7 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
     } else {
         ++r.tracking_lost_frames;
     }
+    map_scale_true_.reset();
     if (step.ok && frame.T_CtoW_gt) {
         recordTruth(frame, row, r);
     }
@@ -525,10 +529,9 @@ void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, Ev
     row.has_position = true;
     row.p_gt = frame.T_CtoW_gt->p_CinW;
     track_.t_s.push_back(row.t_s);
-    row.scale_true = truthScale(track_.est, track_.gt, options_.min_truth_path_m);
-    if (options_.truth_geometry) {
-        row.scale_true = 1.0;  // the estimator sees metric poses
-    }
+    map_scale_true_ = truthScale(track_.est, track_.gt, options_.min_truth_path_m);
+    // With --truth-geometry the estimator sees metric poses.
+    row.scale_true = options_.truth_geometry ? std::optional<double>(1.0) : map_scale_true_;
     const std::size_t w =
         std::min<std::size_t>(track_.est.size(), static_cast<std::size_t>(options_.window_frames));
     const std::size_t from = track_.est.size() - w;
@@ -596,21 +599,21 @@ core::FrameSnapshot EvalRun::snapshotOf(const drivers::source::Frame& frame) {
         if (frame.T_CtoW_gt && frame.gravity_down_C) {
             const core::CameraPose& gt = *frame.T_CtoW_gt;
             const std::optional<double> z = hint ? medianTrueDepthM(frame) : std::nullopt;
-            const std::optional<double> s =
-                hint && !z ? truthScale(track_.est, track_.gt, options_.min_truth_path_m)
-                           : std::nullopt;
             if (z) {
                 core::MapFeature f;
                 f.p_FinW = gt.p_CinW + gt.R_CtoW * Vec3(0, 0, static_cast<Scalar>(*z));
                 truth_features_.push_back(f);
-            } else if (s) {
+            } else if (hint && map_scale_true_) {
+                // The map carried onto the true camera: its pose to the true
+                // one, its unit to metres.
                 const core::CameraPose& est = snapshot.pose;
-                const core::Mat3 R = gt.R_CtoW * est.R_CtoW.transpose();
+                core::slam::Sim3 to_true;
+                to_true.scale = static_cast<Scalar>(*map_scale_true_);
+                to_true.R = gt.R_CtoW * est.R_CtoW.transpose();
+                to_true.t = gt.p_CinW - to_true.scale * (to_true.R * est.p_CinW);
                 for (const core::MapFeature& f : snapshot.features) {
-                    core::MapFeature g;
-                    g.p_FinW = gt.p_CinW + static_cast<Scalar>(*s) * (R * (f.p_FinW - est.p_CinW));
-                    g.P_FinW = static_cast<Scalar>(*s * *s) * (R * f.P_FinW * R.transpose());
-                    truth_features_.push_back(g);
+                    truth_features_.push_back(
+                        {to_true.apply(f.p_FinW), to_true.applyToCovariance(f.P_FinW)});
                 }
             }
             snapshot.pose = gt;
