@@ -94,7 +94,8 @@ mm=${BASH_REMATCH[1]}
 # The kbuild package is whatever the headers depend on: named by major.minor
 # on bookworm (linux-kbuild-6.1), by ABI on trixie
 # (linux-kbuild-6.12.118+deb13). It comes from the same source package, so
-# it has the kernel's version.
+# it has the kernel's version (or, once the archive has moved on, another
+# revision of the same upstream release: version_of below).
 kbuild_pkg=$(apt-cache depends "linux-headers-$krel" 2>/dev/null |
   sed -n 's/^ *Depends: \(linux-kbuild-[0-9][^ ]*\)$/\1/p' | head -n 1)
 [[ -n $kbuild_pkg ]] || skip "apt-cache knows no linux-kbuild dependency of linux-headers-$krel (run apt-get update)"
@@ -105,19 +106,46 @@ packages=("$image_pkg" "linux-headers-$krel" "linux-headers-$abi-common" "$kbuil
 # warning.
 debs=$cache/debs
 mkdir -p "$debs"
-deb_of() { # the .deb file of package $1 at $version, or nothing
+deb_of() { # the .deb file of package $1 at version $2 (default: the kernel's), or nothing
   local f
-  for f in "$debs/$1_${version}_"*.deb; do
+  for f in "$debs/$1_${2:-$version}_"*.deb; do
     [[ -f $f ]] && echo "$f" && return 0
   done
   return 0
 }
-download() { # download package=version into $debs, or skip
-  if [[ -z $(deb_of "$1") ]]; then
-    echo "fetch-kernel: downloading $1 $version" >&2
-    if ! (cd "$debs" && apt-get -q -o APT::Sandbox::User=root download "$1=$version") >>"$log" 2>&1; then
+# The version of package $1 that is (or will be) in $debs: the kernel's
+# version; for the build tools and the module sources (kbuild, linux-source)
+# when the archive no longer has that exact revision, the newest one of the
+# same upstream release. A security pocket keeps only the newest upload of
+# each binary package: bookworm-security once had linux-kbuild-6.1 at
+# 6.1.192-3 beside the kernel at 6.1.192-2. The same upstream release means
+# the same kernel tree (SUBLEVEL, checked below) and the same build tools; the
+# modules take their version magic from the headers, which match the image.
+versions_of() { # the versions of package $1 the archive has, newest first
+  apt-cache madison "$1" 2>/dev/null | awk -F'|' '{ gsub(/ /, "", $2); print $2 }'
+}
+version_of() {
+  local v
+  if [[ -n $(deb_of "$1") ]] || versions_of "$1" | grep -xF "$version" >/dev/null; then
+    echo "$version"
+    return 0
+  fi
+  case $1 in
+    linux-kbuild-* | linux-source-*)
+      v=$(versions_of "$1" | awk -v u="${version%-*}-" 'index($0, u) == 1 { print; exit }')
+      echo "${v:-$version}"
+      ;;
+    *) echo "$version" ;;
+  esac
+}
+download() { # download package $1 (at version_of $1) into $debs, or skip
+  local v
+  v=$(version_of "$1")
+  if [[ -z $(deb_of "$1" "$v") ]]; then
+    echo "fetch-kernel: downloading $1 $v" >&2
+    if ! (cd "$debs" && apt-get -q -o APT::Sandbox::User=root download "$1=$v") >>"$log" 2>&1; then
       tail -n 5 "$log" >&2 || true
-      skip "apt-get download $1=$version failed (no network or mirror?)"
+      skip "apt-get download $1=$v failed (no network or mirror?)"
     fi
   fi
 }
@@ -132,7 +160,7 @@ src_version=$(dpkg-query -W -f '${Version}' "$src_pkg" 2>/dev/null || true)
 if [[ ! -f $src_tar || $src_version != "$version" ]]; then
   download "$src_pkg"
   rm -rf "$cache/srcpkg"
-  run dpkg -x "$(deb_of "$src_pkg")" "$cache/srcpkg"
+  run dpkg -x "$(deb_of "$src_pkg" "$(version_of "$src_pkg")")" "$cache/srcpkg"
   src_tar=$cache/srcpkg/usr/src/$src_pkg.tar.xz
   [[ -f $src_tar ]] || die "$src_pkg $version has no $src_tar"
 fi
@@ -142,7 +170,7 @@ fi
 root=$cache/root
 rm -rf "$root"
 mkdir -p "$root"
-for p in "${packages[@]}"; do run dpkg -x "$(deb_of "$p")" "$root"; done
+for p in "${packages[@]}"; do run dpkg -x "$(deb_of "$p" "$(version_of "$p")")" "$root"; done
 # Trixie's packages ship the modules in /usr/lib/modules (merged /usr), where
 # bookworm's ship /lib/modules: make the root a merged-/usr one too, so that
 # ROOT/lib/modules is the place for both here and for modprobe -d/depmod -b
