@@ -92,10 +92,11 @@ build() {
 # run: the window bundle adjustment (tracker.window_ba, docs/slam.md), and
 # poses in metres only from a narrow enough scale (estimator.pose_max_rel_width95,
 # scale-eval's metric_trajectory; docs/protocol.md), and the velocity's noise as
-# a random walk (tracker.sigma_a_reference_hz; at 30 Hz the same to rounding).
-head_slam_off=(--set window_ba=false --set sigma_a_reference_hz=0)
+# a random walk (tracker.sigma_a_reference_hz; at 30 Hz the same to rounding),
+# and a run of near-losses counted as a loss (tracker.near_loss_ratio).
+head_slam_off=(--set window_ba=false --set sigma_a_reference_hz=0 --set near_loss_ratio=0)
 head_off=(--set tracker.window_ba=false --set estimator.pose_max_rel_width95=1000
-          --set tracker.sigma_a_reference_hz=0)
+          --set tracker.sigma_a_reference_hz=0 --set tracker.near_loss_ratio=0)
 
 # run BUILD_DIR OUT_DIR [head]
 run() {

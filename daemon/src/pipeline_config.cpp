@@ -190,6 +190,8 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
                 T::coarse_max_search_pixels),
         real("tracker", "coarse_min_fraction", &t.coarse_min_fraction, T::coarse_min_fraction),
         real("tracker", "coarse_min_ncc", &t.coarse_min_ncc, T::coarse_min_ncc),
+        real("tracker", "near_loss_ratio", &t.near_loss_ratio, T::near_loss_ratio),
+        integer("tracker", "near_loss_frames", &t.near_loss_frames, T::near_loss_frames),
         integer("tracker", "feature_border_px", &t.feature_border_px, T::feature_border_px),
         real("tracker", "relocalise_s", &t.relocalise_s, T::relocalise_s),
         integer("tracker", "relocalise_min_inliers", &t.relocalise_min_inliers,

@@ -96,20 +96,58 @@ TEST(SlamRedkitchen, AWeakRelocalisationIsVerifiedAndKeepsTheMap) {
     EXPECT_LE(r->relocalising_frames, 15);
 }
 
-// Seed 6 nearly loses the camera at frame 44 and tracks with one or two
-// inliers until it is lost at frame 56, adding features all along from poses
-// it was guessing. It is relocalised on the next frame; those features are
-// removed (a new map is not started, and the scale evidence is kept). The
-// map is not as good as the other seeds' (docs/slam.md): ATE 3.6%.
+// Seed 6 without the near-loss rule (tracker.near_loss_ratio = 0; the
+// default relocalises this run at frame 48, next test) nearly loses the camera
+// at frame 44 and tracks with one or two inliers until it is lost at frame 56,
+// adding features all along from poses it was guessing. It is relocalised on
+// the next frame; those features are removed (a new map is not started, and
+// the scale evidence is kept). The map is not as good as the other seeds'
+// (docs/slam.md): ATE 3.6%.
 TEST(SlamRedkitchen, FeaturesAddedWhileLostAreRemovedAtRelocalisation) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;
     opt.tracker.slam.seed = 6;
+    opt.tracker.near_loss_ratio = 0;
     const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     expectOneMapRelocalisedOnce("seed 6", *r, 0.05);
     EXPECT_GE(r->relocalise_dropped_features, 10);
     EXPECT_GE(r->tracked_frames, 598U);
+}
+
+// Issue 19: seeds 5, 6 and 11 nearly lose the camera at frames 44-56 (a shake
+// of the handheld camera): for a dozen frames the update accepts 1-8 of 35-40
+// features searched in small gates, and the filter, sure of a wrong
+// prediction, drags its map along (ATE 2.46, 3.62 and 10.55% without the rule;
+// seed 11's map collapses to a third of its unit). Four such frames in a row
+// (tracker.near_loss_ratio, near_loss_frames) are a loss: the camera is found
+// again in the same map at once. Measured 1.75, 1.79, 1.80% (docs/slam.md
+// "Near-losses").
+TEST(SlamRedkitchen, ANearLossIsRelocalisedBeforeTheMapFollowsIt) {
+    SCALED_REQUIRE_DATASET(dir, "redkitchen");
+    for (const std::uint64_t seed : {std::uint64_t{5}, std::uint64_t{6}, std::uint64_t{11}}) {
+        SlamRunOptions opt;
+        opt.tracker.slam.seed = seed;
+        const auto r = runDataset(dir, opt);
+        ASSERT_TRUE(r.ok()) << r.error().message;
+        ASSERT_TRUE(r->has_gt);
+        std::printf("redkitchen seed %llu: %d near-loss frames, %d relocalisation(s), ATE %.2f%%\n",
+                    static_cast<unsigned long long>(seed), r->near_loss_frames, r->relocalisations,
+                    100 * r->ate_rmse_m / r->path_length_m);
+        EXPECT_GE(r->near_loss_frames, 4) << seed;
+        EXPECT_GE(r->relocalisations, 1) << seed;
+        EXPECT_EQ(r->reinitialisations, 0) << seed;
+        EXPECT_GE(r->tracked_frames, 598U) << seed;
+        EXPECT_LE(r->ate_rmse_m, 0.02 * r->path_length_m) << seed;
+    }
+    // The collapse the rule prevents.
+    SlamRunOptions off;
+    off.tracker.slam.seed = 11;
+    off.tracker.near_loss_ratio = 0;
+    const auto r = runDataset(dir, off);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(r->near_loss_frames, 0);
+    EXPECT_GT(r->ate_rmse_m, 0.05 * r->path_length_m);
 }
 
 // KITTI 00 (160 frames at 10 Hz, a car driving), seed 2, with MonoSLAM's
@@ -150,6 +188,12 @@ TEST(SlamKitti, TheRandomWalkVelocityNoiseKeepsKittiWithinFivePercent) {
                     r->reinitialisations, r->tracked_frames, r->frames);
         EXPECT_EQ(r->reinitialisations, 0) << seed;
         EXPECT_LE(r->ate_rmse_m, 0.05 * r->path_length_m) << seed;
+        // A car's tenth of a second makes the gates outgrow the pixel budget:
+        // frames searched coarse-to-fine, where a small share of accepted
+        // matches is normal and never a near-loss (counted there too, two in a row
+        // relocalised 9 of seeds 1-16, started 4 new maps and left 3 seeds
+        // with 128-129 of 160 frames tracked).
+        EXPECT_EQ(r->near_loss_frames, 0) << seed;
     }
 }
 

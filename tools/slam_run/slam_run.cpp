@@ -98,6 +98,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
     sums.track_ms += r.track_ms;
     result.ms_per_frame_max = std::max(result.ms_per_frame_max, r.track_ms);
     ++result.frames;
+    result.near_loss_frames += stats.near_loss ? 1 : 0;
     if (r.ok) {
         // A frame that starts a replacement map was not tracked.
         if (!stats.new_map || result.frames == 1) {
@@ -283,6 +284,7 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"relocalisations_verified\":" + std::to_string(r.relocalisations_verified);
     s += ",\"relocalise_dropped_features\":" + std::to_string(r.relocalise_dropped_features);
     s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
+    s += ",\"near_loss_frames\":" + std::to_string(r.near_loss_frames);
     if (r.window_ba_optimisations > 0) {
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +
              ",\"mean_points\":" + num(r.window_ba_mean_points) +

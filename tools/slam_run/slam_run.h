@@ -47,6 +47,7 @@ struct SlamRunResult {
     int relocalisations_verified = 0;
     int relocalise_dropped_features = 0;
     int relocalising_frames = 0;  // frames spent looking for the camera in a lost map
+    int near_loss_frames = 0;     // near-loss frames (tracker.near_loss_ratio)
     // tracker.window_ba: its optimisations, their mean points and residual
     // after (px); the trajectory is then the adjusted one (MonoTracker::pose).
     int window_ba_optimisations = 0;

@@ -665,6 +665,12 @@ SlamHealth assessNumericalHealth(const Eigen::Ref<const VecX>& x, const Eigen::R
     return SlamHealth::kOk;
 }
 
+void EkfSlam::declareLost() {
+    if (health_ != SlamHealth::kUninitialised) {
+        health_ = SlamHealth::kLost;
+    }
+}
+
 SlamHealth EkfSlam::checkHealth() {
     const SlamHealth numerical = assessNumericalHealth(x_.head(n_), P_.topLeftCorner(n_, n_));
     if (numerical != SlamHealth::kOk) {

@@ -82,6 +82,8 @@ core::Status validate(const TrackerConfig& c) {
         {"relocalise_max_rel_sigma", d(c.relocalise_max_rel_sigma), L::relocalise_max_rel_sigma},
         {"coarse_max_search_pixels", d(c.coarse_max_search_pixels), L::coarse_max_search_pixels},
         {"coarse_min_fraction", d(c.coarse_min_fraction), L::coarse_min_fraction},
+        {"near_loss_ratio", d(c.near_loss_ratio), L::near_loss_ratio},
+        {"near_loss_frames", d(c.near_loss_frames), L::near_loss_frames},
         {"pyramid_levels", d(c.pyramid_levels), L::pyramid_levels},
         {"coarse_min_ncc", d(c.coarse_min_ncc), L::coarse_min_ncc},
         {"gyro_noise_density", d(c.gyro_noise_density), L::gyro_noise_density},
@@ -169,6 +171,7 @@ void MonoTracker::reset() {
     }
     relocalising_ = false;
     previous_frame_good_ = false;
+    near_loss_run_ = 0;
     clearAppearances();
 }
 
@@ -666,6 +669,7 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     last_good_frame_ = slam_.frameIndex();
     clearAppearances();
     previous_frame_good_ = true;  // the map's origin: a reference for the gyro bias
+    near_loss_run_ = 0;
     has_map_ = true;
     stats.new_map = true;
     stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
@@ -706,6 +710,7 @@ bool MonoTracker::relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackS
         return false;
     }
     relocalising_ = false;
+    near_loss_run_ = 0;
     stats.relocalised = true;
     return true;
 }
@@ -746,6 +751,7 @@ void MonoTracker::searchFeatures(const cv::Mat& gray,
     // few large ones on a normal frame are searched as before (not at all):
     // a coarse match there is more often wrong than useful.
     const bool coarse_frame = isCoarseFrame(preds);
+    coarse_frame_ = coarse_frame;
     for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
         const auto& pr = preds[static_cast<size_t>(i)];
         FeatureAppearance* a = appearanceOf(pr.id);
@@ -777,9 +783,24 @@ void MonoTracker::searchFeatures(const cv::Mat& gray,
     }
 }
 
+bool MonoTracker::countNearLoss(const slam::UpdateReport& report) {
+    const int accepted = report.low_innovation_inliers + report.rescued;
+    const bool near_loss = config_.near_loss_ratio > 0 && !coarse_frame_ &&
+                           report.predicted >= TrackerConfig::kNearLossMinSearched &&
+                           static_cast<double>(accepted) <
+                               config_.near_loss_ratio * static_cast<double>(report.predicted);
+    near_loss_run_ = near_loss ? near_loss_run_ + 1 : 0;
+    return near_loss;
+}
+
 void MonoTracker::manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, bool bad_frame,
                                        TrackStats& stats) {
     stats.health = slam_.manageMap();
+    if (stats.health == slam::SlamHealth::kOk && near_loss_run_ >= config_.near_loss_frames) {
+        slam_.declareLost();  // a run of near-losses: lost, as after lost_after_frames
+        stats.health = slam::SlamHealth::kLost;
+        near_loss_run_ = 0;
+    }
     previous_frame_good_ = !bad_frame && stats.health == slam::SlamHealth::kOk;
     if (stats.health == slam::SlamHealth::kLost && config_.relocalise_s > 0 &&
         knownFeatureCount() >= config_.relocalise_min_inliers) {
@@ -850,6 +871,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     }
     stats.stage_us.update = lap.next();
     copyUpdateReport(report, stats);
+    stats.near_loss = countNearLoss(report);
     manageMapAfterUpdate(t_ns, gray, report.bad_frame, stats);
     adjustWindow(stats);
     stats.stage_us.map = lap.next();

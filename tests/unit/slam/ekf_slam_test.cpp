@@ -302,6 +302,28 @@ TEST(EkfSlam, RefusesBadTimestampsAndReportsLostTrack) {
     EXPECT_EQ(slam->stateDim(), kCameraDim);
 }
 
+// The front end's verdict (a run of near-losses, MonoTracker): lost at once,
+// until a relocalisation or a new map; nothing before a map exists.
+TEST(EkfSlam, DeclaredLostUntilRelocalised) {
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSimOptions opt;
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
+    ASSERT_TRUE(slam.ok());
+    slam->declareLost();
+    EXPECT_EQ(slam->health(), SlamHealth::kUninitialised);
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    sim.step(*slam, 0);
+    sim.step(*slam, 1);
+    ASSERT_EQ(slam->health(), SlamHealth::kOk);
+    const std::size_t features = slam->features().size();
+    slam->declareLost();
+    EXPECT_EQ(slam->health(), SlamHealth::kLost);
+    EXPECT_EQ(slam->features().size(), features) << "the map is kept for relocalisation";
+    ASSERT_TRUE(slam->relocalise(sim.timeNs(2), slam->pose(), 0.01, 0.01));
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+}
+
 TEST(EkfSlam, NumericalHealthDetectsNanAndLossOfPositiveDefiniteness) {
     const int n = kCameraDim + 6;
     VecX x = VecX::Zero(n);

@@ -211,6 +211,10 @@ public:
     // Deletes unreliable features, converts inverse-depth features that became
     // linear, and checks the filter's health.
     SlamHealth manageMap();
+    // The front end's verdict that the camera is lost although the last
+    // frames had matches (a run of near-losses, MonoTracker): health() is
+    // kLost until initialise() or relocalise().
+    void declareLost();
 
     // Undelayed initialisation of a feature at a pixel of the current frame.
     // Returns its id, or 0 if the map is full, the pixel cannot be unprojected

@@ -57,6 +57,17 @@ struct TrackerConfig {
     // searched features' ellipses outgrow the budget (the camera's motion is
     // uncertain, not one feature's depth).
     double coarse_min_fraction = 0.5;
+    // A near-loss (docs/slam.md "Near-losses"): a frame searched at full
+    // resolution only (the filter was sure of its prediction) on which fewer
+    // than near_loss_ratio of its searched features (at least
+    // kNearLossMinSearched) were accepted. near_loss_frames of them in a row
+    // are a loss (relocalisation, then a new map): the filter is confidently
+    // wrong, and each further update pulls the map with it. A frame searched
+    // coarse-to-fine is never one (a long frame gap or fast motion accepts a
+    // small share as a matter of course: KITTI at 10 Hz). 0: off.
+    double near_loss_ratio = 0.25;
+    int near_loss_frames = 4;
+    static constexpr int kNearLossMinSearched = 10;
     // Relocalisation (issue 21): when the filter is lost, the map is kept and
     // every frame is matched against it (each map feature's template against
     // the image's corners, then a RANSAC PnP pose) for at most relocalise_s
@@ -114,6 +125,8 @@ struct TrackerLimits {
     static constexpr core::ParamLimits pyramid_levels = core::closed(0, 3);
     static constexpr core::ParamLimits coarse_max_search_pixels = core::closed(1, 1e6);
     static constexpr core::ParamLimits coarse_min_fraction = core::closed(0, 1);
+    static constexpr core::ParamLimits near_loss_ratio = core::closed(0, 1);
+    static constexpr core::ParamLimits near_loss_frames = core::closed(1, 1000);
     static constexpr core::ParamLimits coarse_min_ncc = core::open(-1, 1);
     static constexpr core::ParamLimits feature_border_px = core::closed(0, 200);
     static constexpr core::ParamLimits free_radius_px = core::closed(1, 200);
@@ -176,6 +189,7 @@ struct TrackStats {
     int coarse_searches = 0;     // features searched coarse-to-fine (pyramid_levels)
     int coarse_matches = 0;      // of which matched at full resolution
     bool relocalised = false;    // this frame put the camera back into the lost map
+    bool near_loss = false;      // a near-loss frame (near_loss_ratio)
     // The window bundle adjustment on this frame (window_ba.enabled): whether
     // it optimised, and the scale it gave the map.
     core::slam::WindowBaReport window_ba;
@@ -278,6 +292,9 @@ private:
     // Active search of every predicted feature with its patch: into matches_.
     void searchFeatures(const cv::Mat& gray, std::span<const core::slam::FeaturePrediction> preds,
                         TrackStats& stats, StageLap& lap);
+    // Whether the update's share of accepted matches makes this a near-loss
+    // frame (near_loss_ratio); counts near_loss_run_.
+    bool countNearLoss(const core::slam::UpdateReport& report);
     // After the update: map management, relocalisation on loss, new features.
     void manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, bool bad_frame,
                               TrackStats& stats);
@@ -365,6 +382,10 @@ private:
     // The previous frame's updated pose was good (same map, not a bad frame):
     // the reference the gyro bias is measured against.
     bool previous_frame_good_ = false;
+    // Near-loss frames in a row (near_loss_ratio), and whether this frame's
+    // search was coarse-to-fine (isCoarseFrame).
+    int near_loss_run_ = 0;
+    bool coarse_frame_ = false;
     DepthPrior depth_prior_;
     core::Scalar depth_prior_rel_sigma_ = 0;
 };
