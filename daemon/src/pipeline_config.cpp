@@ -142,12 +142,9 @@ std::pair<std::string, std::string> splitKey(const std::string& full) {
 
 namespace {
 
-// [tracker]: the EKF (core::slam::SlamConfig) and the front end
-std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
-    auto& s = t.slam;
-    using L = core::slam::SlamLimits;          // the EKF's ranges are core's
-    using T = drivers::vision::TrackerLimits;  // the front end's, the vision driver's
-    using B = core::slam::WindowBaLimits;      // the window bundle adjustment's, core's
+// [tracker], the EKF's keys (core::slam::SlamConfig; its ranges are core's)
+std::vector<Field> ekfFields(core::slam::SlamConfig& s) {
+    using L = core::slam::SlamLimits;
     return {
         real("tracker", "sigma_a", &s.motion.sigma_a, L::sigma_a),
         real("tracker", "sigma_a_reference_hz", &s.motion.reference_hz, L::sigma_a_reference_hz),
@@ -175,6 +172,14 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
         integer("tracker", "delete_min_attempts", &s.delete_min_attempts, L::delete_min_attempts),
         real("tracker", "delete_min_ratio", &s.delete_min_ratio, L::delete_min_ratio),
         real("tracker", "max_dt_s", &s.max_dt_s, L::max_dt_s),
+    };
+}
+
+// [tracker], the front end's keys and the window bundle adjustment's
+std::vector<Field> frontEndFields(drivers::vision::TrackerConfig& t) {
+    using T = drivers::vision::TrackerLimits;  // the vision driver's ranges
+    using B = core::slam::WindowBaLimits;      // the window bundle adjustment's, core's
+    return {
         integer("tracker", "patch_size", &t.patch_size, T::patch_size),
         integer("tracker", "patch_source_size", &t.patch_source_size, T::patch_source_size),
         boolean("tracker", "warp_patches", &t.warp_patches),
@@ -225,6 +230,14 @@ std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
         boolean("tracker", "window_ba_scale_feedback", &t.window_ba.scale_feedback),
         real("tracker", "window_ba_max_scale_step", &t.window_ba.max_scale_step, B::max_scale_step),
     };
+}
+
+// [tracker]: the EKF's keys, then the front end's
+std::vector<Field> trackerFields(drivers::vision::TrackerConfig& t) {
+    std::vector<Field> out = ekfFields(t.slam);
+    std::vector<Field> front = frontEndFields(t);
+    out.insert(out.end(), front.begin(), front.end());
+    return out;
 }
 
 // [detector] and [detection]
