@@ -171,7 +171,6 @@ void MonoTracker::reset() {
     }
     relocalising_ = false;
     previous_frame_good_ = false;
-    near_loss_run_ = 0;
     clearAppearances();
 }
 
@@ -742,7 +741,7 @@ bool MonoTracker::isCoarseFrame(std::span<const slam::FeaturePrediction> preds) 
                                  config_.coarse_min_fraction * static_cast<double>(preds.size());
 }
 
-void MonoTracker::searchFeatures(const cv::Mat& gray,
+bool MonoTracker::searchFeatures(const cv::Mat& gray,
                                  std::span<const slam::FeaturePrediction> preds, TrackStats& stats,
                                  StageLap& lap) {
     matches_.clear();
@@ -751,7 +750,6 @@ void MonoTracker::searchFeatures(const cv::Mat& gray,
     // few large ones on a normal frame are searched as before (not at all):
     // a coarse match there is more often wrong than useful.
     const bool coarse_frame = isCoarseFrame(preds);
-    coarse_frame_ = coarse_frame;
     for (int i = 0; i < static_cast<int>(preds.size()); ++i) {
         const auto& pr = preds[static_cast<size_t>(i)];
         FeatureAppearance* a = appearanceOf(pr.id);
@@ -781,11 +779,12 @@ void MonoTracker::searchFeatures(const cv::Mat& gray,
             matches_.push_back({i, m->px});
         }
     }
+    return coarse_frame;
 }
 
-bool MonoTracker::countNearLoss(const slam::UpdateReport& report) {
+bool MonoTracker::countNearLoss(const slam::UpdateReport& report, bool coarse_frame) {
     const int accepted = report.low_innovation_inliers + report.rescued;
-    const bool near_loss = config_.near_loss_ratio > 0 && !coarse_frame_ &&
+    const bool near_loss = config_.near_loss_ratio > 0 && !coarse_frame &&
                            report.predicted >= TrackerConfig::kNearLossMinSearched &&
                            static_cast<double>(accepted) <
                                config_.near_loss_ratio * static_cast<double>(report.predicted);
@@ -799,7 +798,6 @@ void MonoTracker::manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, b
     if (stats.health == slam::SlamHealth::kOk && near_loss_run_ >= config_.near_loss_frames) {
         slam_.declareLost();  // a run of near-losses: lost, as after lost_after_frames
         stats.health = slam::SlamHealth::kLost;
-        near_loss_run_ = 0;
     }
     previous_frame_good_ = !bad_frame && stats.health == slam::SlamHealth::kOk;
     if (stats.health == slam::SlamHealth::kLost && config_.relocalise_s > 0 &&
@@ -856,7 +854,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         }
     }
     const auto preds = slam_.predictMeasurements();
-    searchFeatures(gray, preds, stats, lap);
+    const bool coarse_frame = searchFeatures(gray, preds, stats, lap);
     stats.stage_us.search += lap.next();
     const auto report = slam_.update(matches_);
     if (!report.bad_frame) {
@@ -871,7 +869,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     }
     stats.stage_us.update = lap.next();
     copyUpdateReport(report, stats);
-    stats.near_loss = countNearLoss(report);
+    stats.near_loss = countNearLoss(report, coarse_frame);
     manageMapAfterUpdate(t_ns, gray, report.bad_frame, stats);
     adjustWindow(stats);
     stats.stage_us.map = lap.next();

@@ -290,11 +290,13 @@ private:
     // (coarse_min_fraction).
     [[nodiscard]] bool isCoarseFrame(std::span<const core::slam::FeaturePrediction> preds) const;
     // Active search of every predicted feature with its patch: into matches_.
-    void searchFeatures(const cv::Mat& gray, std::span<const core::slam::FeaturePrediction> preds,
+    // Returns whether the frame was searched coarse-to-fine (isCoarseFrame).
+    bool searchFeatures(const cv::Mat& gray, std::span<const core::slam::FeaturePrediction> preds,
                         TrackStats& stats, StageLap& lap);
     // Whether the update's share of accepted matches makes this a near-loss
-    // frame (near_loss_ratio); counts near_loss_run_.
-    bool countNearLoss(const core::slam::UpdateReport& report);
+    // frame (near_loss_ratio; never one searched coarse-to-fine); counts
+    // near_loss_run_.
+    bool countNearLoss(const core::slam::UpdateReport& report, bool coarse_frame);
     // After the update: map management, relocalisation on loss, new features.
     void manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, bool bad_frame,
                               TrackStats& stats);
@@ -382,10 +384,9 @@ private:
     // The previous frame's updated pose was good (same map, not a bad frame):
     // the reference the gyro bias is measured against.
     bool previous_frame_good_ = false;
-    // Near-loss frames in a row (near_loss_ratio), and whether this frame's
-    // search was coarse-to-fine (isCoarseFrame).
+    // Near-loss frames in a row (near_loss_ratio) in this map since it was
+    // started or relocalised.
     int near_loss_run_ = 0;
-    bool coarse_frame_ = false;
     DepthPrior depth_prior_;
     core::Scalar depth_prior_rel_sigma_ = 0;
 };
