@@ -138,9 +138,12 @@ version_of() {
     *) echo "$version" ;;
   esac
 }
+# The version each package was downloaded at (download), for unpacking it.
+declare -A got_version
 download() { # download package $1 (at version_of $1) into $debs, or skip
   local v
   v=$(version_of "$1")
+  got_version[$1]=$v
   if [[ -z $(deb_of "$1" "$v") ]]; then
     echo "fetch-kernel: downloading $1 $v" >&2
     if ! (cd "$debs" && apt-get -q -o APT::Sandbox::User=root download "$1=$v") >>"$log" 2>&1; then
@@ -160,7 +163,7 @@ src_version=$(dpkg-query -W -f '${Version}' "$src_pkg" 2>/dev/null || true)
 if [[ ! -f $src_tar || $src_version != "$version" ]]; then
   download "$src_pkg"
   rm -rf "$cache/srcpkg"
-  run dpkg -x "$(deb_of "$src_pkg" "$(version_of "$src_pkg")")" "$cache/srcpkg"
+  run dpkg -x "$(deb_of "$src_pkg" "${got_version[$src_pkg]}")" "$cache/srcpkg"
   src_tar=$cache/srcpkg/usr/src/$src_pkg.tar.xz
   [[ -f $src_tar ]] || die "$src_pkg $version has no $src_tar"
 fi
@@ -170,7 +173,7 @@ fi
 root=$cache/root
 rm -rf "$root"
 mkdir -p "$root"
-for p in "${packages[@]}"; do run dpkg -x "$(deb_of "$p" "$(version_of "$p")")" "$root"; done
+for p in "${packages[@]}"; do run dpkg -x "$(deb_of "$p" "${got_version[$p]}")" "$root"; done
 # Trixie's packages ship the modules in /usr/lib/modules (merged /usr), where
 # bookworm's ship /lib/modules: make the root a merged-/usr one too, so that
 # ROOT/lib/modules is the place for both here and for modprobe -d/depmod -b
