@@ -143,6 +143,7 @@ std::vector<Field> sourceFields(SourceConfig& s) {
 
 // [camera]
 std::vector<Field> cameraFields(CameraConfig& m) {
+    using config_detail::boolean;
     using config_detail::choice;
     using config_detail::integer;
     using config_detail::real;
@@ -158,6 +159,7 @@ std::vector<Field> cameraFields(CameraConfig& m) {
                 {"NV12", drivers::camera::PixelFormat::kNv12}}),
         integer("camera", "buffers", &m.buffers, 2, 32),
         real("camera", "frame_timeout_s", &m.frame_timeout_s, 0, 3600, Bound::kOpen),
+        boolean("camera", "drop_repeated_frames", &m.drop_repeated_frames),
         real("camera", "retry_initial_s", &m.retry_initial_s, 0, 3600, Bound::kOpen),
         real("camera", "retry_max_s", &m.retry_max_s, 0, 3600, Bound::kOpen),
         real("camera", "fx_px", &m.fx_px, 0, 1e6),
@@ -270,6 +272,13 @@ bool checkSourceAndCamera(const DaemonConfig& c, config_detail::Checker& check) 
                        "\") needs the camera's calibration: camera.fx_px, fy_px, cx_px "
                        "and cy_px must all be > 0 (got fx_px = " +
                        drivers::priors::tomlread::num(m.fx_px) + ")")) {
+        return true;
+    }
+    if (m.drop_repeated_frames && s.kind == SourceKind::kLibcamera &&
+        check.fail({"camera.drop_repeated_frames", "source.kind"},
+                   "is a V4L2 option (a grabber or loopback device); libcamera's "
+                   "sensors never repeat a frame (got true with source.kind = "
+                   "\"libcamera\")")) {
         return true;
     }
     if (m.retry_max_s < m.retry_initial_s &&

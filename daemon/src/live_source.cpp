@@ -42,6 +42,11 @@ std::string LiveSource::describe() const {
     return camera_ ? camera_->describe() : name_ + " (not found)";
 }
 
+std::uint64_t LiveSource::repeatedFrames() const {
+    const std::lock_guard lock(mutex_);  // reopen() may be setting camera_
+    return camera_ ? camera_->repeatedFrames() : 0;
+}
+
 std::string LiveSource::mode() const {
     return camera_ ? camera_->mode() : std::string();
 }
@@ -87,6 +92,7 @@ drivers::camera::CameraOptions cameraOptions(const DaemonConfig& config) {
     o.pixel_format = c.pixel_format;
     o.buffers = c.buffers;
     o.frame_timeout_s = c.frame_timeout_s;
+    o.drop_repeated_frames = c.drop_repeated_frames;
     o.intrinsics.fx = static_cast<core::Scalar>(c.fx_px);
     o.intrinsics.fy = static_cast<core::Scalar>(c.fy_px);
     o.intrinsics.cx = static_cast<core::Scalar>(c.cx_px);

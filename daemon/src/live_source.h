@@ -15,6 +15,7 @@
 // so the pipeline can be built before the camera exists.
 
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -38,6 +39,7 @@ public:
     core::Result<bool> next(drivers::source::Frame& frame) override;
     [[nodiscard]] std::string describe() const override;
     [[nodiscard]] std::string mode() const override;
+    [[nodiscard]] std::uint64_t repeatedFrames() const override;
     core::Result<bool> reopen() override;
     void stop() override;
 
@@ -52,7 +54,7 @@ private:
     drivers::source::SequenceInfo info_;
     // camera_ is replaced by the capture thread (reopen) while stop() may come
     // from the main thread.
-    std::mutex mutex_;
+    mutable std::mutex mutex_;
     std::atomic<bool> stopped_{false};
 };
 

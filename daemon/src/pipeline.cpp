@@ -995,6 +995,9 @@ void Pipeline::publishStatus(bool force) {
     last_status_publish_ns_ = now;
     status_.frames_captured = captured_.load();
     status_.frames_dropped = dropped_.load();
+    if (live_ != nullptr) {
+        status_.camera_repeated = live_->repeatedFrames();
+    }
     status_.source_finished = source_finished_.load();
     status_.uptime_s = static_cast<double>(now - start_mono_ns_) * 1e-9;
     if (imu_ != nullptr) {

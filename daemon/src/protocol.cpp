@@ -443,6 +443,8 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         appendBool(out, s.camera_lost);
         key(out, "reconnects");
         appendJsonInt(out, s.camera_reconnects);
+        key(out, "repeated");
+        appendJsonInt(out, s.camera_repeated);
         out += '}';
     }
     appendTiming(out, s.timing);

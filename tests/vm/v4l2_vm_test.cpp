@@ -527,6 +527,40 @@ TEST_F(V4l2Vm, RecoverAfterUnbind) {
     EXPECT_GT(after.t_ns, frames.back().t_ns);
 }
 
+// drop_repeated_frames: with vivid's on-screen text (a frame counter) every
+// image differs and all are delivered; without it the colour bars repeat
+// exactly, so after the buffers already filled nothing new comes and next()
+// reports a frozen camera (kUnavailable, "no new image") within its timeout.
+TEST_F(V4l2Vm, RepeatedImagesAreNotFramesAndAFrozenImageIsALoss) {
+    CameraOptions o = vividOptions();
+    o.drop_repeated_frames = true;
+    o.frame_timeout_s = 3;
+    auto opened = openV4l2Camera(o);
+    ASSERT_TRUE(opened) << opened.error().message;
+    LiveCamera& cam = **opened;
+    std::vector<source::Frame> frames;
+    captureFrames(cam, 10, 0, 0, frames);
+    ASSERT_EQ(frames.size(), 10U);
+    EXPECT_EQ(cam.repeatedFrames(), 0U) << "the OSD's counter changes every image";
+
+    const VividControl still(vivid_.device, "OSD Text Mode", 2, 0);  // "None"
+    ASSERT_EQ(still.error(), "");
+    source::Frame f;
+    core::Result<bool> r = true;
+    int delivered = 0;
+    // The buffers filled before the change (4, one more being filled) and
+    // the first image without text are new; 20 would mean repeats go through.
+    while (delivered < 20 && (r = cam.next(f)) && *r) {
+        ++delivered;
+    }
+    ASSERT_FALSE(r) << delivered << " frames delivered after the OSD was turned off";
+    EXPECT_EQ(r.error().code, ErrorCode::kUnavailable) << r.error().message;
+    EXPECT_TRUE(contains(r.error().message, "no new image for 3 s")) << r.error().message;
+    EXPECT_TRUE(contains(r.error().message, "repeated the last one")) << r.error().message;
+    EXPECT_LE(delivered, 6);
+    EXPECT_GT(cam.repeatedFrames(), 10U) << "3 s of vivid's images at 25 fps were repeats";
+}
+
 TEST_F(V4l2Vm, StopWakesABlockedNext) {
     CameraOptions o = vividOptions();
     o.frame_timeout_s = 600;  // a next() that stop() does not wake fails the test by timing out

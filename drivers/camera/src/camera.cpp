@@ -1,5 +1,6 @@
 #include <cctype>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 
 #include <scaled/drivers/camera/camera.h>
@@ -63,6 +64,23 @@ core::Result<bool> LiveCamera::seek(std::size_t index) {
     return core::makeError(
         core::ErrorCode::kInvalidArgument,
         describe() + ": a live camera cannot seek (to frame " + std::to_string(index) + ")");
+}
+
+std::uint64_t rawSignature(const std::uint8_t* data, std::size_t size_bytes) {
+    constexpr std::uint64_t kFnvOffset = 14695981039346656037ULL;
+    constexpr std::uint64_t kFnvPrime = 1099511628211ULL;
+    constexpr std::size_t kStep = 61;
+    std::uint64_t h = kFnvOffset;
+    for (std::size_t shift = 0; shift < 64; shift += 8) {
+        h = (h ^ ((size_bytes >> shift) & 0xffU)) * kFnvPrime;
+    }
+    if (data == nullptr) {
+        return h;
+    }
+    for (std::size_t i = 0; i < size_bytes; i += kStep) {
+        h = (h ^ data[i]) * kFnvPrime;
+    }
+    return h;
 }
 
 }  // namespace scaled::drivers::camera

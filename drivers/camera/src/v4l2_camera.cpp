@@ -1150,10 +1150,11 @@ public:
         }
         const auto timeout_ns = std::llround(options_.frame_timeout_s * 1e9);
         const std::int64_t deadline = monotonicNs() + timeout_ns;
+        std::uint64_t repeats = 0;  // buffers this call dropped as repeats
         for (;;) {
             const std::int64_t left_ns = deadline - monotonicNs();
             if (left_ns <= 0) {
-                return timedOut();
+                return timedOut(repeats);
             }
             // Round up: a poll that returns a little early would spin.
             const auto left_ms = std::min<std::int64_t>((left_ns + 999'999) / 1'000'000, INT_MAX);
@@ -1209,8 +1210,21 @@ public:
                 }
                 continue;
             }
+            if (isRepeat(buf)) {
+                ++repeats;
+                repeated_.fetch_add(1, std::memory_order_relaxed);
+                auto requeued = requeue(buf);
+                if (!requeued) {
+                    return requeued.error();
+                }
+                continue;
+            }
             return deliver(buf, frame);
         }
+    }
+
+    [[nodiscard]] std::uint64_t repeatedFrames() const override {
+        return repeated_.load(std::memory_order_relaxed);
     }
 
     core::Result<bool> reopen() override {
@@ -1242,13 +1256,36 @@ private:
         return makeError(ErrorCode::kUnavailable, who + ": " + why);
     }
 
-    core::Error timedOut() {
+    core::Error timedOut(std::uint64_t repeats) {
         // A vanished node explains the silence better than a timeout.
         struct stat st = {};
         if (::stat(neg_.path.c_str(), &st) != 0 && errno == ENOENT) {
             return lose("device lost (the device node is gone)");
         }
+        if (repeats > 0) {
+            return lose("no new image for " + secondsText(options_.frame_timeout_s) + " s (" +
+                        std::to_string(repeats) + " buffers repeated the last one)");
+        }
         return lose("no frame for " + secondsText(options_.frame_timeout_s) + " s");
+    }
+
+    // With drop_repeated_frames: whether buf's pixels are the last new
+    // buffer's (its signature is kept across reopen(): a camera that came
+    // back showing the same frozen image is still not delivering).
+    bool isRepeat(const v4l2_buffer& buf) {
+        if (!options_.drop_repeated_frames) {
+            return false;
+        }
+        const CaptureStream::Mapping& m = stream_->buffers[buf.index];
+        const std::uint64_t signature =
+            rawSignature(static_cast<const std::uint8_t*>(m.addr),
+                         std::min<std::size_t>(buf.bytesused, m.length));
+        if (have_signature_ && signature == last_signature_) {
+            return true;
+        }
+        last_signature_ = signature;
+        have_signature_ = true;
+        return false;
     }
 
     core::Status requeue(v4l2_buffer& buf) {
@@ -1320,6 +1357,9 @@ private:
     std::int64_t next_id_ = 0;
     std::int64_t last_t_ns_ = 0;
     bool have_last_t_ = false;
+    std::uint64_t last_signature_ = 0;  // drop_repeated_frames: the last new buffer's
+    bool have_signature_ = false;
+    std::atomic<std::uint64_t> repeated_{0};
     // describe()/mode() may be called from other threads (status) while
     // reopen() changes them.
     mutable std::mutex text_mutex_;

@@ -389,6 +389,12 @@ TEST(DaemonConfig, ErrorsNameFileLineKeyRangeAndValue) {
          "calibration: camera.fx_px, fy_px, cx_px and cy_px must all be > 0 (got fx_px = 0)"},
         {"[camera]\nretry_initial_s = 10\nretry_max_s = 2\n",
          "3: camera.retry_max_s: must be >= camera.retry_initial_s = 10 (got 2)"},
+        {"[source]\nkind = \"libcamera\"\ndevice = \"0\"\n[camera]\nfx_px = 500\nfy_px = 500\n"
+         "cx_px = 320\ncy_px = 240\ndrop_repeated_frames = true\n",
+         "9: camera.drop_repeated_frames: is a V4L2 option (a grabber or loopback device); "
+         "libcamera's sensors never repeat a frame (got true with source.kind = \"libcamera\")"},
+        {"[camera]\ndrop_repeated_frames = 1\n",
+         "2: camera.drop_repeated_frames: must be true or false (got 1)"},
         {"[gpio]\nchip = \"gpiochip0\"\n",
          "2: gpio.status_line: gpio.chip is set (\"gpiochip0\") but no line is: set "
          "gpio.status_line and/or gpio.heartbeat_line (got -1)"},

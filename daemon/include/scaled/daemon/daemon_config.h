@@ -60,6 +60,9 @@ struct CameraConfig {
     drivers::camera::PixelFormat pixel_format = drivers::camera::PixelFormat::kAuto;  // v4l2 only
     int buffers = 4;               // mmap buffers / requests in flight, 2..32
     double frame_timeout_s = 2.0;  // no frame this long: fault, reopen
+    // A buffer repeating the previous one's pixels is dropped, not tracked
+    // (a grabber or loopback faster than its source); v4l2 only.
+    bool drop_repeated_frames = false;
     double retry_initial_s = 0.5;  // first wait before reopening a lost camera
     double retry_max_s = 5.0;      // the wait doubles up to this
     // Calibration of the camera at width_px x height_px (pixels). A live source

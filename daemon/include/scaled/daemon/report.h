@@ -167,9 +167,10 @@ struct PipelineStatus {
     bool live = false;
     bool camera_lost = false;             // waiting for the camera to come back
     std::uint64_t camera_reconnects = 0;  // times it was lost and came back
-    std::string camera_device;            // "/dev/video0 (vivid)"
-    std::string camera_mode;              // "YUYV 640x480 @ 30"; empty while lost
-    PipelineTiming timing;                // protocol: STATUS.timing (proto_minor 2)
+    std::uint64_t camera_repeated = 0;  // buffers dropped as repeats (camera.drop_repeated_frames)
+    std::string camera_device;          // "/dev/video0 (vivid)"
+    std::string camera_mode;            // "YUYV 640x480 @ 30"; empty while lost
+    PipelineTiming timing;              // protocol: STATUS.timing (proto_minor 2)
 };
 
 // Field-log health, published by the log service.

@@ -3,12 +3,14 @@
 // card name), seek, and listV4l2Cameras(). Capture itself is tested in the VM
 // (tests/vm/v4l2_vm_test.cpp, vivid).
 
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <string>
 #include <system_error>
 #include <temp_dir.h>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -50,6 +52,26 @@ TEST(PixelFormatNames, RoundTrip) {
     }
     EXPECT_STREQ(toString(PixelFormat::kMjpeg), "MJPEG");
     EXPECT_STREQ(toString(PixelFormat::kAuto), "auto");
+}
+
+// drop_repeated_frames tells a repeated buffer by rawSignature: equal bytes,
+// equal signatures; a change of any sampled byte, or of the size, changes it.
+TEST(RawSignature, EqualBuffersOnlyShareASignature) {
+    std::vector<std::uint8_t> a(640 * 480 * 2);
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        a[i] = static_cast<std::uint8_t>((i * 7919U) >> 3U);
+    }
+    const std::vector<std::uint8_t> b = a;
+    const std::uint64_t sig = rawSignature(a.data(), a.size());
+    EXPECT_EQ(sig, rawSignature(b.data(), b.size()));
+    std::vector<std::uint8_t> c = a;
+    c[61 * 1000] ^= 1U;  // a sampled byte, one bit
+    EXPECT_NE(sig, rawSignature(c.data(), c.size()));
+    EXPECT_NE(sig, rawSignature(a.data(), a.size() - 1));
+    std::vector<std::uint8_t> black(a.size(), 0);
+    std::vector<std::uint8_t> grey(a.size(), 1);
+    EXPECT_NE(rawSignature(black.data(), black.size()), rawSignature(grey.data(), grey.size()));
+    EXPECT_EQ(rawSignature(nullptr, 0), rawSignature(a.data(), 0));
 }
 
 TEST(PixelFormatNames, CaseInsensitiveWithV4l2Alias) {

@@ -67,6 +67,14 @@ struct CameraOptions {
     PixelFormat pixel_format = PixelFormat::kAuto;
     int buffers = 4;               // V4L2 mmap buffers / libcamera requests, 2..32
     double frame_timeout_s = 2.0;  // no frame for this long: kUnavailable
+    // A buffer whose pixels equal the previous buffer's (rawSignature) is not
+    // a frame: it goes back to the driver and next() waits for the next one
+    // within the same frame_timeout_s (so a camera that repeats one image
+    // that long is reported like a silent one). For a capture faster than
+    // its source: an HDMI or analogue grabber at 60 Hz behind a 30 Hz
+    // camera, a loopback device, vivid's Loop Video. A sensor's noise makes a
+    // true repeat impossible otherwise. V4L2 only; off by default.
+    bool drop_repeated_frames = false;
     // The camera's calibration; used as the SequenceInfo intrinsics. Width and
     // height must equal the negotiated size (else open fails, naming both).
     core::CameraIntrinsics intrinsics{};
@@ -101,6 +109,18 @@ public:
     virtual void stop() = 0;
     // Live cameras cannot seek: kInvalidArgument.
     core::Result<bool> seek(std::size_t index) override;
+    // Buffers not delivered because they repeated the previous one
+    // (CameraOptions::drop_repeated_frames), since open, across reopen().
+    // Thread-safe.
+    [[nodiscard]] virtual std::uint64_t repeatedFrames() const { return 0; }
 };
+
+// A signature of a raw buffer's bytes for telling a repeated buffer from a new
+// one: FNV-1a over the size and every 61st byte (about 10,000 bytes of a
+// 640x480 YUYV buffer: cheap at 60 Hz on a small board; 61 is prime, so the
+// samples walk through every byte position of the pixel formats' pixel
+// groups). Equal buffers give equal signatures; two images of a real sensor
+// differ in nearly every sampled byte.
+[[nodiscard]] std::uint64_t rawSignature(const std::uint8_t* data, std::size_t size_bytes);
 
 }  // namespace scaled::drivers::camera
