@@ -17,3 +17,8 @@ scaled_unit_test(camera_tests
 add_executable(camera_vm_tests vm/v4l2_vm_test.cpp support/allocation_counter.cpp)
 target_link_libraries(camera_vm_tests PRIVATE scaled_camera scaled_test_support scaled_warnings
   GTest::gtest GTest::gtest_main)
+
+# vivid_feed: plays a recorded sequence into vivid's video output, looped to
+# its capture, for the VM test vm.daemon_loop (tests/vm/daemon_loop_vm_test.sh).
+add_executable(vivid_feed vm/vivid_feed.cpp)
+target_link_libraries(vivid_feed PRIVATE scaled::dataset opencv_imgproc scaled_warnings)

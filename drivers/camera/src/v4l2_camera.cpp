@@ -1200,19 +1200,15 @@ public:
                 return lose("the driver returned buffer " + std::to_string(buf.index) + " of " +
                             std::to_string(stream_->buffers.size()));
             }
-            if ((buf.flags & V4L2_BUF_FLAG_ERROR) != 0) {
-                // The driver says this buffer's data is corrupt (e.g. a USB
-                // transfer error): skip it, and wait for the next one within
-                // the same deadline.
-                auto requeued = requeue(buf);
-                if (!requeued) {
-                    return requeued.error();
+            // A buffer the driver says is corrupt (e.g. a USB transfer error)
+            // or a repeat (drop_repeated_frames) goes back: wait for the next
+            // one within the same deadline.
+            const bool corrupt = (buf.flags & V4L2_BUF_FLAG_ERROR) != 0;
+            if (corrupt || isRepeat(buf)) {
+                if (!corrupt) {
+                    ++repeats;
+                    repeated_.fetch_add(1, std::memory_order_relaxed);
                 }
-                continue;
-            }
-            if (isRepeat(buf)) {
-                ++repeats;
-                repeated_.fetch_add(1, std::memory_order_relaxed);
                 auto requeued = requeue(buf);
                 if (!requeued) {
                     return requeued.error();
