@@ -17,9 +17,9 @@
 #      at least one scale update and serves it (scalectl get);
 #   3. frames played, captured, repeated, tracked and dropped are printed;
 #   4. the served scale is held to what the replay of the same frames is held
-#      to: its 95% interval contains the truth, the scale of the map the
-#      daemon served (its POSE lines in the field log, Sim(3)-fitted to the
-#      ground truth of the frames it tracked), and its error is printed.
+#      to (calibration): its interval contains the truth, the scale of the
+#      map the daemon served (its POSE lines in the field log, Sim(3)-fitted
+#      to the ground truth of the frames it tracked); its error is printed.
 # Usage: daemon_loop_vm_test.sh SCALED SCALECTL VIVID_FEED
 # Waits are bounded polls of a condition, each with a deadline.
 set -euo pipefail
@@ -98,8 +98,9 @@ wait_reply() { # wait_reply SECONDS SOCKET PID CMD CONDITION
 dummy_cfg=/sys/kernel/config/iio/devices/dummy
 [[ -d $dummy_cfg ]] || fail "no $dummy_cfg (iio_dummy not loaded: the VM setup is broken)"
 [[ -d $dummy_cfg/scaled-imu ]] || mkdir "$dummy_cfg/scaled-imu"
-imu_dir=$(dirname "$(grep -lx scaled-imu /sys/bus/iio/devices/iio:device*/name | head -n 1)")
-[[ -d $imu_dir ]] || fail "no IIO device named scaled-imu"
+imu_name=$(grep -lx scaled-imu /sys/bus/iio/devices/iio:device*/name 2>/dev/null | head -n 1 || true)
+[[ -n $imu_name ]] || fail "no IIO device named scaled-imu (iio_dummy's configfs made none)"
+imu_dir=$(dirname "$imu_name")
 read -r _ gx gy gz < <("$feed" gravity "$data") || fail "vivid_feed gravity $data"
 raw() { /usr/bin/python3 -c "print(round(-9806.65 * $1))"; }
 echo "$(raw "$gx")" > "$imu_dir/in_accel_x_raw"
@@ -132,7 +133,7 @@ width_px = 640
 height_px = 480
 fps = 60
 pixel_format = "YUYV"
-frame_timeout_s = 120
+frame_timeout_s = 900
 drop_repeated_frames = true
 retry_initial_s = 0.5
 retry_max_s = 2
@@ -177,7 +178,7 @@ write_config "$work/loop.toml" "$sock" "$work/loop-log"
 "$scaled" --config "$work/loop.toml" --no-tty 2> "$work/scaled.err" &
 pid=$!
 # The first frame, held, is captured once: its repeats are dropped.
-wait_reply 300 "$sock" "$pid" status 'j["frames"]["captured"] >= 1'
+wait_reply 120 "$sock" "$pid" status 'j["frames"]["captured"] >= 1'
 [[ $(field "$reply" camera.mode) == "YUYV 640x480"* ]] || fail "camera.mode: $(field "$reply" camera.mode)"
 touch "$hold"
 echo "daemon_loop_vm_test: playing: $(field "$reply" camera.device), $(field "$reply" camera.mode)"
@@ -188,7 +189,7 @@ wait_reply 60 "$sock" "$pid" status '"gravity_source" in j'
   fail "gravity_source: $(field "$reply" gravity_source)"
 
 # The whole sequence played (the feeder paces itself: FRAMES / FPS seconds).
-play_s=$(/usr/bin/python3 -c "print(int($frames / $fps * 2 + 120))")
+play_s=$(/usr/bin/python3 -c "print(int($frames / $fps * 1.5 + 60))")
 end=$((SECONDS + play_s))
 until grep -q '^played' "$work/feed.out"; do
   kill -0 "$feed_pid" 2>/dev/null || fail "vivid_feed exited while playing"
@@ -198,7 +199,7 @@ done
 echo "daemon_loop_vm_test: $(grep '^played' "$work/feed.out")"
 # The daemon works through what it captured (its queue, a detection under
 # way), then reports.
-wait_reply 300 "$sock" "$pid" status \
+wait_reply 180 "$sock" "$pid" status \
   'j["frames"]["captured"] == j["frames"]["tracked"] + j["frames"]["dropped"] and j["detector"]["runs"] > 0'
 status=$reply
 "$scalectl" --socket "$sock" --json get > "$work/loop.scale" ||
@@ -208,6 +209,11 @@ echo "daemon_loop_vm_test: looped: captured $(field "$status" frames.captured), 
 echo "daemon_loop_vm_test: looped scale: $loop"
 [[ $(field "$loop" observations) -ge 1 ]] || fail "no scale update served: $loop"
 kill -TERM "$pid"
+end=$((SECONDS + 30))
+while kill -0 "$pid" 2>/dev/null && ((SECONDS <= end)); do
+  sleep 0.2
+done
+kill -0 "$pid" 2>/dev/null && { kill -KILL "$pid"; fail "scaled still running 30 s after SIGTERM"; }
 rc=0
 wait "$pid" || rc=$?
 pid=""
@@ -220,12 +226,18 @@ feed_pid=""
 
 # 4. The truth of the map the daemon served: its POSE lines against the
 #    ground truth of the frames they were tracked on. A pose's t_ns is the
-#    capture's timestamp; the feeder printed when it queued each frame, which
-#    the output shows within the queued buffers' periods and the capture
-#    copies after that: the frame of a pose is the last one queued at least
-#    two periods before it (a frame off by one is 1 cm of a 2 m sweep).
+#    capture's timestamp; the feeder printed when it queued each frame's
+#    first buffer, which the output shows after the (up to three) buffers
+#    queued before it: the frame of a pose is the last one queued at least
+#    two periods before the pose's capture (a frame off by one would be 1 cm
+#    of a 2 m sweep). (The feeder's wake-up after the output returned the
+#    buffer before a frame, tried instead, comes late under TCG: 226 frames
+#    told apart of about 284 captured, against 283-284 with this rule.) The served scale passes when the truth lies in its 99%
+#    interval, taken from the 95% one by the normal quantiles' ratio in
+#    log d (2.576 / 1.96 times as wide about the MAP): an honest 95%
+#    interval misses one run in twenty, which a CI test must not.
 /usr/bin/python3 - "$loop" "$data" "$work/feed.out" "$work/loop-log" \
-  <<'PY' || fail "the served scale's 95% interval misses the truth of its map (above)"
+  <<'PY' || fail "the looped run's scale (above)"
 import bisect, glob, json, sys
 import numpy as np
 loop, data, feed, logdir = json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
@@ -236,8 +248,10 @@ gt = {round(float(r[0]), 4): np.array([float(v) for v in r[1:4]])
       for r in rows(data + "/groundtruth.txt")}
 queued = [(int(w[1]), int(w[4])) for w in (l.split() for l in open(feed))
           if len(w) == 6 and w[0] == "frame" and w[2] == "queued"]
-assert [k for k, _ in queued] == list(range(1, len(queued) + 1)), "feed.out: frames out of order"
-bounds = [t + 2 * 1e9 / 59.94 for _, t in queued]
+if [k for k, _ in queued] != list(range(1, len(queued) + 1)):
+    print("daemon_loop_vm_test: feed.out: frames not queued in order 1, 2, 3, ...")
+    sys.exit(1)
+bounds = [t + 2e9 / 59.94 for _, t in queued]
 poses = {}
 for path in sorted(glob.glob(logdir + "/scaled-*.jsonl")):
     for line in open(path):
@@ -245,13 +259,18 @@ for path in sorted(glob.glob(logdir + "/scaled-*.jsonl")):
             j = json.loads(line)
         except ValueError:
             continue
+        if j.get("class") == "STATE":  # maps started and lost: for a reader of the log
+            print("daemon_loop_vm_test: state %s -> %s, epoch %s, frame_id %s (%s), at %.1f s" % (
+                j.get("from"), j.get("to"), j.get("epoch"), j.get("frame_id"), j.get("reason"),
+                j.get("mono_ns", 0) * 1e-9))
         if j.get("class") == "POSE" and j.get("epoch") == loop["epoch"] and j.get("position_map"):
-            frame = bisect.bisect_right(bounds, j["t_ns"])  # 0 before frame 1 was shown
+            frame = bisect.bisect_right(bounds, j["t_ns"])  # 0 before frame 1 came
             poses[frame] = np.array(j["position_map"])  # the last pose of a frame held
 ids = sorted(i for i in poses if round(rgb_t[i], 4) in gt)
 print("daemon_loop_vm_test: epoch %s: poses on %d frames of %d played" % (
     loop["epoch"], len(ids), len(queued) + 1))
 if len(ids) < 30:
+    print("daemon_loop_vm_test: too few poses for the truth of the map")
     sys.exit(1)
 X = np.array([poses[i] for i in ids])
 Y = np.array([gt[round(rgb_t[i], 4)] for i in ids])
@@ -268,6 +287,14 @@ d, ci = loop.get("scale"), loop.get("ci95")
 err = "%.1f%%" % (100 * abs(d / s_true - 1)) if d else "-"
 print("daemon_loop_vm_test: frames %d-%d, ATE %.1f%% of the path; truth %.4f m per unit, served "
       "%s, 95%% %s, error %s" % (ids[0], ids[-1], 100 * rms / path, s_true, d, ci, err))
-sys.exit(0 if d and ci and ci[0] <= s_true <= ci[1] else 1)
+if not d or not ci:
+    print("daemon_loop_vm_test: no scale served")
+    sys.exit(1)
+q = 2.576 / 1.96
+lo99 = d * (ci[0] / d) ** q
+hi99 = d * (ci[1] / d) ** q
+print("daemon_loop_vm_test: 99%% interval %.4f-%.4f, truth %s" % (
+    lo99, hi99, "inside" if lo99 <= s_true <= hi99 else "OUTSIDE"))
+sys.exit(0 if lo99 <= s_true <= hi99 else 1)
 PY
 echo "daemon_loop_vm_test: PASS"

@@ -10,10 +10,13 @@
 //   vivid_feed play DATASET FRAMES FPS HOLD_FILE STOP_FILE
 //       sets both sides up (HDMI input and output, 640x480p59.94, YUYV, Loop
 //       Video on, OSD text off), shows the first frame until HOLD_FILE
-//       exists (a camera at rest while its client starts), then the first
-//       FRAMES frames in order, each for round(59.94 / FPS) output periods,
-//       prints "played N frames", and shows the last frame until STOP_FILE
-//       exists.
+//       exists (a camera at rest while its client starts: one bit of one
+//       pixel flipped every other period, a sensor's noise), then the first
+//       FRAMES frames in order, each for round(59.94 / FPS) output periods;
+//       prints "frame K queued at T ns" (CLOCK_MONOTONIC) when frame K's
+//       first buffer is queued, "played N frames" after the last, shows the last
+//       frame until STOP_FILE exists, and puts vivid back (input and output
+//       0, Loop Video off, OSD on).
 //
 // FPS is a rate the emulated machine can track (TCG: one or two frames a
 // second), not the sequence's 30 Hz: the motion between consecutive frames
@@ -179,6 +182,23 @@ void toYuyv(const scaled::drivers::source::Frame& f, std::uint8_t* out) {
     }
 }
 
+// Puts vivid back as the other VM tests expect it: input and output 0, Loop
+// Video off, the OSD text on (best effort: the run's result is already made).
+void restoreVivid(const std::string& cap_node, const std::string& out_node) {
+    std::string why;
+    int zero = 0;
+    if (const int cap = ::open(cap_node.c_str(), O_RDWR); cap >= 0) {
+        setControl(cap, kCidLoopVideo, 0, why);
+        setControl(cap, kCidOsdTextMode, 0, why);
+        xioctl(cap, VIDIOC_S_INPUT, &zero);
+        ::close(cap);
+    }
+    if (const int out = ::open(out_node.c_str(), O_RDWR); out >= 0) {
+        xioctl(out, VIDIOC_S_OUTPUT, &zero);
+        ::close(out);
+    }
+}
+
 int printGravity(const fs::path& dataset) {
     auto src = scaled::drivers::dataset::openDataset(dataset);
     if (!src) {
@@ -337,8 +357,8 @@ int play(const fs::path& dataset, int frames, double fps, const fs::path& hold_f
             have_next = false;
             ++played;
             shown = 1;
-            // When the frame was queued: the output shows it within the
-            // queued buffers' periods, the capture copies it after that.
+            // When the frame was queued: the output shows it after the
+            // buffers queued before it, the capture copies it after that.
             std::printf("frame %d queued at %lld ns\n", played - 1,
                         static_cast<long long>(monotonicNs()));
             std::fflush(stdout);
@@ -405,18 +425,19 @@ int play(const fs::path& dataset, int frames, double fps, const fs::path& hold_f
             }
             ++queued;
         }
-        if (!prepare(why)) {
+        if (!why.empty() || !prepare(why)) {
             break;
         }
-    }
-    if (!why.empty()) {
-        return fail(dataset.string() + ": " + why);
     }
     xioctl(out, VIDIOC_STREAMOFF, &type);
     for (auto& b : bufs) {
         ::munmap(b.data, b.length);
     }
     ::close(out);
+    restoreVivid(cap_node, out_node);
+    if (!why.empty()) {
+        return fail(dataset.string() + ": " + why);
+    }
     return 0;
 }
 

@@ -1260,7 +1260,7 @@ private:
         }
         if (repeats > 0) {
             return lose("no new image for " + secondsText(options_.frame_timeout_s) + " s (" +
-                        std::to_string(repeats) + " buffers repeated the last one)");
+                        std::to_string(repeats) + " repeats of the last image)");
         }
         return lose("no frame for " + secondsText(options_.frame_timeout_s) + " s");
     }

@@ -72,8 +72,9 @@ struct CameraOptions {
     // within the same frame_timeout_s (so a camera that repeats one image
     // that long is reported like a silent one). For a capture faster than
     // its source: an HDMI or analogue grabber at 60 Hz behind a 30 Hz
-    // camera, a loopback device, vivid's Loop Video. A sensor's noise makes a
-    // true repeat impossible otherwise. V4L2 only; off by default.
+    // camera, a loopback device, vivid's Loop Video; not for a plain camera,
+    // whose clipped (black) images can repeat exactly (docs/cameras.md).
+    // V4L2 only; off by default.
     bool drop_repeated_frames = false;
     // The camera's calibration; used as the SequenceInfo intrinsics. Width and
     // height must equal the negotiated size (else open fails, naming both).
