@@ -66,46 +66,14 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# python3 reads the JSON replies (the guest runs the host's /usr).
-field() { # field JSON_LINE EXPR  -> prints j[EXPR...], e.g. field "$line" frames.captured
-  /usr/bin/python3 -c '
-import json, sys
-v = json.loads(sys.argv[1])
-for k in sys.argv[2].split("."):
-    v = v.get(k) if isinstance(v, dict) else None
-print("" if v is None else v)' "$1" "$2"
-}
-# Polls `scalectl CMD --json` on SOCKET until the python condition on its
-# reply (j) holds; the process PID must stay alive.
-wait_reply() { # wait_reply SECONDS SOCKET PID CMD CONDITION
-  local end=$((SECONDS + $1)) line=""
-  while ((SECONDS <= end)); do
-    kill -0 "$3" 2>/dev/null || fail "scaled exited while waiting for: $5"
-    if line=$("$scalectl" --socket "$2" --json --timeout 5 "$4" 2>/dev/null | head -n 1) &&
-      [[ -n $line ]] &&
-      /usr/bin/python3 -c 'import json,sys; j=json.loads(sys.argv[1]); sys.exit(0 if ('"$5"') else 1)' "$line"; then
-      reply=$line
-      return 0
-    fi
-    sleep 0.5
-  done
-  fail "no $4 reply with $5 within $1 s (last: ${line:-none})"
-}
+. "$here/daemon_lib.sh"
 
 # The IMU: iio_dummy (fetch-kernel.sh's 3-axis patch) reading what the
 # camera's accelerometer reads at the first frame, IMU axes on the camera's:
 # f = -g down_C, in mm/s^2.
-dummy_cfg=/sys/kernel/config/iio/devices/dummy
-[[ -d $dummy_cfg ]] || fail "no $dummy_cfg (iio_dummy not loaded: the VM setup is broken)"
-[[ -d $dummy_cfg/scaled-imu ]] || mkdir "$dummy_cfg/scaled-imu"
-imu_name=$(grep -lx scaled-imu /sys/bus/iio/devices/iio:device*/name 2>/dev/null | head -n 1 || true)
-[[ -n $imu_name ]] || fail "no IIO device named scaled-imu (iio_dummy's configfs made none)"
-imu_dir=$(dirname "$imu_name")
 read -r _ gx gy gz < <("$feed" gravity "$data") || fail "vivid_feed gravity $data"
 raw() { /usr/bin/python3 -c "print(round(-9806.65 * $1))"; }
-echo "$(raw "$gx")" > "$imu_dir/in_accel_x_raw"
-echo "$(raw "$gy")" > "$imu_dir/in_accel_y_raw"
-echo "$(raw "$gz")" > "$imu_dir/in_accel_z_raw"
+scaled_imu "$(raw "$gx")" "$(raw "$gy")" "$(raw "$gz")"
 echo "daemon_loop_vm_test: dataset gravity at frame 0: $gx $gy $gz"
 
 # The sequence plays K = 30 / rate times slower than it was recorded, where
@@ -178,13 +146,13 @@ write_config "$work/loop.toml" "$sock" "$work/loop-log"
 "$scaled" --config "$work/loop.toml" --no-tty 2> "$work/scaled.err" &
 pid=$!
 # The first frame, held, is captured once: its repeats are dropped.
-wait_reply 120 "$sock" "$pid" status 'j["frames"]["captured"] >= 1'
+wait_reply 120 status 'j["frames"]["captured"] >= 1'
 [[ $(field "$reply" camera.mode) == "YUYV 640x480"* ]] || fail "camera.mode: $(field "$reply" camera.mode)"
 touch "$hold"
 echo "daemon_loop_vm_test: playing: $(field "$reply" camera.device), $(field "$reply" camera.mode)"
 
 # 2. The map's vertical is the accelerometer's.
-wait_reply 60 "$sock" "$pid" status '"gravity_source" in j'
+wait_reply 60 status '"gravity_source" in j'
 [[ $(field "$reply" gravity_source) == "accelerometer (iio:device"*"[scaled-imu]"* ]] ||
   fail "gravity_source: $(field "$reply" gravity_source)"
 
@@ -199,7 +167,7 @@ done
 echo "daemon_loop_vm_test: $(grep '^played' "$work/feed.out")"
 # The daemon works through what it captured (its queue, a detection under
 # way), then reports.
-wait_reply 180 "$sock" "$pid" status \
+wait_reply 180 status \
   'j["frames"]["captured"] == j["frames"]["tracked"] + j["frames"]["dropped"] and j["detector"]["runs"] > 0'
 status=$reply
 "$scalectl" --socket "$sock" --json get > "$work/loop.scale" ||

@@ -39,15 +39,7 @@ fail() {
   exit 1
 }
 
-# python3 reads the JSON replies (the guest runs the host's /usr).
-field() { # field JSON_LINE EXPR  -> prints j[EXPR...], e.g. field "$line" camera.mode
-  /usr/bin/python3 -c '
-import json, sys
-v = json.loads(sys.argv[1])
-for k in sys.argv[2].split("."):
-    v = v.get(k) if isinstance(v, dict) else None
-print("" if v is None else v)' "$1" "$2"
-}
+. "$here/daemon_lib.sh"
 
 work=$(mktemp -d /tmp/daemon-vm.XXXXXX)
 sock=$work/scaled.sock
@@ -78,14 +70,7 @@ saw_both() { # saw_both LINE WINDOW_S
 # (imu_vm_test may have made it in this boot already), reading what a camera
 # pitched 30 degrees down measures with the IMU's axes on the camera's:
 # f = -g (0, cos 30, sin 30) = (0, -8.493, -4.903) m/s^2.
-dummy_cfg=/sys/kernel/config/iio/devices/dummy
-[[ -d $dummy_cfg ]] || fail "no $dummy_cfg (iio_dummy not loaded: the VM setup is broken)"
-[[ -d $dummy_cfg/scaled-imu ]] || mkdir "$dummy_cfg/scaled-imu"
-imu_dir=$(dirname "$(grep -lx scaled-imu /sys/bus/iio/devices/iio:device*/name | head -n 1)")
-[[ -d $imu_dir ]] || fail "no IIO device named scaled-imu"
-echo 0 > "$imu_dir/in_accel_x_raw"
-echo -8493 > "$imu_dir/in_accel_y_raw"
-echo -4903 > "$imu_dir/in_accel_z_raw"
+scaled_imu 0 -8493 -4903
 
 cat > "$work/scaled.toml" <<EOF
 [source]
@@ -125,21 +110,6 @@ EOF
 "$scaled" --config "$work/scaled.toml" --no-tty 2> "$work/scaled.err" &
 pid=$!
 trap 'kill "$pid" 2>/dev/null || true' EXIT
-
-# Polls `scalectl CMD --json` until the python condition on its reply holds.
-wait_reply() { # wait_reply SECONDS CMD CONDITION  (CONDITION in python on j)
-  local end=$((SECONDS + $1)) line=""
-  while ((SECONDS <= end)); do
-    kill -0 "$pid" 2>/dev/null || fail "scaled exited while waiting for: $3"
-    if line=$("$scalectl" --json --timeout 2 "$2" 2>/dev/null | head -n 1) && [[ -n $line ]] &&
-      /usr/bin/python3 -c 'import json,sys; j=json.loads(sys.argv[1]); sys.exit(0 if ('"$3"') else 1)' "$line"; then
-      reply=$line
-      return 0
-    fi
-    sleep 0.2
-  done
-  fail "no $2 reply with $3 within $1 s (last: ${line:-none})"
-}
 
 # 1. Streaming from vivid.
 wait_reply 120 status 'j["frames"]["captured"] >= 10'
