@@ -4,7 +4,7 @@
 Usage (from the project root, after a release build):
     tools/scale_ablation.py [--bin build/release/bin] [--data ../shared/data/redkitchen]
                             [--jobs 2] [--row NAME=K=V,K=V]... [--per-run] [--set K=V]...
-                            [--wide]
+                            [--wide | --phases]
 
 Every row is scale-eval with the given --set overrides (on top of --set, which applies to all
 rows) over the ten runs of ../shared/tools/generality.py (tracker.seed 1..8, --frames 0:300,
@@ -21,6 +21,12 @@ median and worst (and how many runs are at most 10%) of the error 5 s after the 
 against the whole-run truth and against the sliding-window truth, over the seeds and over the
 windows; how many runs keep the window truth within 8% of the run's own (the map's drift);
 metric ATE; the smallest ci95 coverage.
+
+With --phases, the ten runs at each of the detector's ten phases (detection.phase_frames 0..9:
+which frame of every ten the detector sees; 100 runs a row): per row the issue 18 figures at
+each phase (median and worst of the seeds' medians 5 s after the map started, each half), how
+many phases are within 5% / 10% / 10% / 10%, the seeds' median against the window truth and the
+smallest ci95 coverage. The phase is a lottery like the seed: which views the estimator gets.
 """
 import argparse
 import concurrent.futures as cf
@@ -74,8 +80,13 @@ def main():
     ap.add_argument("--flag", action="append", default=[], help="a scale-eval flag for every row")
     ap.add_argument("--per-run", action="store_true")
     ap.add_argument("--wide", action="store_true", help="26 runs (seeds 1-16, five windows)")
+    ap.add_argument("--phases", action="store_true",
+                    help="the ten runs at each detection.phase_frames 0..9 (100 runs)")
     a = ap.parse_args()
     runs = WIDE_RUNS if a.wide else RUNS
+    if a.phases:
+        runs = [("%s phase %d" % (rn, ph), args + ["--set", "detection.phase_frames=%d" % ph])
+                for ph in PHASES for rn, args in RUNS]
     exe = os.path.join(a.bin, "scale-eval")
     if not os.access(exe, os.X_OK):
         sys.exit("scale_ablation: %s not found (build the release preset first)" % exe)
@@ -94,6 +105,9 @@ def main():
                 jobs[(name, run_name)] = pool.submit(run, exe, a.data, args + common + extra)
     if a.wide:
         print_wide(rows, jobs, a.per_run)
+        return
+    if a.phases:
+        print_phases(rows, jobs, a.per_run)
         return
     print("| row | seeds: median / worst of the medians | 0:300 | 300:600 | min ci95 coverage |"
           " wrong converged | obs / 100 frames | final 95% width / limit |")
@@ -141,6 +155,51 @@ def stat(values, bound):
         return "-"
     return "%s / %s (%d/%d)" % (fmt(statistics.median(v), True), fmt(max(v), True),
                                 sum(1 for x in v if x <= bound), len(values))
+
+
+PHASES = range(10)
+
+
+def print_phases(rows, jobs, per_run):
+    print("| row | seeds: median of the medians, per phase | median / worst over phases (<= 5%) |"
+          " worst seed, median / worst over phases (<= 10%) | 0:300 (<= 10%) | 300:600 (<= 10%) |"
+          " vs window truth, seeds: median / worst over phases | min ci95 coverage |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, _ in rows:
+        res = {rn: jobs[(name, rn)].result() for (n, rn) in jobs if n == name}
+        errs = [d for d in res.values() if "_error" in d]
+        if errs:
+            print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+            continue
+        err = lambda d: d["rel_error_after_5s"]["median"]  # noqa: E731
+        werr = lambda d: d["rel_error_after_5s_window"]["median"]  # noqa: E731
+        med, worst, first, second, window = [], [], [], [], []
+        for ph in PHASES:
+            seeds = [err(res["seed %d phase %d" % (s, ph)]) for s in range(1, 9)]
+            seeds = [x if x is not None else float("inf") for x in seeds]
+            med.append(statistics.median(seeds))
+            worst.append(max(seeds))
+            first.append(err(res["frames 0:300 phase %d" % ph]))
+            second.append(err(res["frames 300:600 phase %d" % ph]))
+            w = [werr(res["seed %d phase %d" % (s, ph)]) for s in range(1, 9)]
+            window.append(statistics.median(x for x in w if x is not None))
+        cov = [d["ci95_coverage"] for d in res.values() if d["ci95_coverage"] is not None]
+
+        def over(v, bound):
+            v = [x if x is not None else float("inf") for x in v]
+            return "%s / %s (%d/%d)" % (fmt(statistics.median(v), True), fmt(max(v), True),
+                                        sum(1 for x in v if x <= bound), len(v))
+        print("| %s | %s | %s | %s | %s | %s | %s / %s | %s |" % (
+            name, " ".join("%.1f" % (100 * x) for x in med), over(med, 0.05), over(worst, 0.10),
+            over(first, 0.10), over(second, 0.10), fmt(statistics.median(window), True),
+            fmt(max(window), True), fmt(min(cov) if cov else None, True)))
+        if per_run:
+            for ph in PHASES:
+                print("|   phase %d | seeds %s | | | %s | %s | | |" % (
+                    ph, " ".join("%.1f" % (100 * err(res["seed %d phase %d" % (s, ph)]))
+                                 if err(res["seed %d phase %d" % (s, ph)]) is not None else "-"
+                                 for s in range(1, 9)),
+                    fmt(first[ph], True), fmt(second[ph], True)))
 
 
 def print_wide(rows, jobs, per_run):

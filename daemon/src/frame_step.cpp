@@ -23,9 +23,13 @@ FrameStepResult FrameStep::trackWith(const drivers::source::Frame& frame,
     if (r.map_started) {
         frames_in_map_ = 0;
     }
-    if (r.ok) {
+    const bool relocalising = r.stats.health == core::slam::SlamHealth::kRelocalising;
+    if (r.ok || relocalising) {
+        // A frame of the map, tracked or not: the detector's schedule keeps
+        // its phase through a relocalisation (the same frames are detected
+        // as if the camera had not been lost).
         ++frames_in_map_;
-    } else if (r.stats.health != core::slam::SlamHealth::kRelocalising) {
+    } else {
         // Lost or diverged: the next frame starts a new map with a new,
         // unrelated scale. (Relocalising keeps the map: the tracker looks for
         // the camera in it for up to tracker.relocalise_s.)
@@ -55,7 +59,7 @@ bool FrameStep::detectionDue(const FrameStepResult& result, const DetectionSched
     const bool due =
         schedule.period_s > 0
             ? static_cast<double>(t_ns - last_detection_t_ns_) * 1e-9 >= schedule.period_s
-            : (frames_in_map_ - 1) % schedule.every_frames == 0;
+            : (frames_in_map_ - 1) % schedule.every_frames == schedule.phase_frames;
     if (due) {
         last_detection_t_ns_ = t_ns;
     }

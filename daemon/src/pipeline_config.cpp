@@ -259,6 +259,7 @@ std::vector<Field> detectorFields(PipelineConfig& c) {
         integer("detector", "nice", &d.nice, D::nice),
         integer("detector", "max_detections", &d.max_detections, D::max_detections),
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
+        integer("detection", "phase_frames", &c.detection.phase_frames, 0, 99999),
         real("detection", "period_s", &c.detection.period_s, 0, 3600),
     };
 }
@@ -464,6 +465,13 @@ Status checkPipeline(const PipelineConfig& c, const Locator& where, ProblemList*
     }
     if (auto v = drivers::vision::validate(c.tracker);
         !v && check.fail({"tracker"}, v.error().message)) {
+        return check.result();
+    }
+    if (c.detection.phase_frames >= c.detection.every_frames &&
+        check.fail({"detection.phase_frames", "detection.every_frames"},
+                   "must be less than detection.every_frames = " +
+                       std::to_string(c.detection.every_frames) + " (got " +
+                       std::to_string(c.detection.phase_frames) + ")")) {
         return check.result();
     }
     const auto& o = c.estimator.objects;

@@ -137,6 +137,7 @@ void appendCounts(std::string& s, const EvalResult& r, const daemon::PipelineCon
     s += ",\"epochs\":" + std::to_string(r.epochs);
     s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
     s += ",\"detect_every_frames\":" + std::to_string(cfg.detection.every_frames);
+    s += ",\"detect_phase_frames\":" + std::to_string(cfg.detection.phase_frames);
     s += ",\"updates\":" + std::to_string(r.updates.size());
     s += ",\"observations\":" + std::to_string(r.observations.size());
     s += ",\"ground_truth\":" + std::string(r.has_ground_truth ? "true" : "false");

@@ -1,7 +1,9 @@
 // The frame step the daemon, scale-eval and slam-run share (frame_step.h):
 // a new map's vertical asked once per map, a restart asks again, and the
-// detection schedule counts the map's tracked frames.
+// detection schedule counts the map's frames, those spent relocalising in it
+// included, so a relocalisation keeps its phase.
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -19,16 +21,20 @@ class FrameStepTest : public ::testing::Test {
 protected:
     void SetUp() override {
         sim_.seed = 3;
-        sim_.duration_s = 2.0;
-        auto src = drivers::sim::openSimSource(sim_);
-        ASSERT_TRUE(src.ok()) << src.error().message;
-        source_ = std::move(*src);
+        reopen(2.0);
         auto camera = core::PinholeRadialCamera::create(drivers::sim::simIntrinsics(sim_));
         ASSERT_TRUE(camera.ok()) << camera.error().message;
         auto tracker =
             drivers::vision::MonoTracker::create(*camera, defaultPipelineConfig().tracker);
         ASSERT_TRUE(tracker.ok()) << tracker.error().message;
         tracker_.emplace(std::move(*tracker));
+    }
+
+    void reopen(double duration_s) {
+        sim_.duration_s = duration_s;
+        auto src = drivers::sim::openSimSource(sim_);
+        ASSERT_TRUE(src.ok()) << src.error().message;
+        source_ = std::move(*src);
     }
 
     // The next frame of the sim.
@@ -90,6 +96,71 @@ TEST_F(FrameStepTest, DetectionIsDueOnEveryNthFrameOfTheMapButNotItsFirst) {
         }
     }
     EXPECT_EQ(due, (std::vector<std::int64_t>{4, 7, 10}));
+}
+
+TEST_F(FrameStepTest, ThePhaseChoosesWhichFrameOfEachPeriodIsDue) {
+    FrameStep step(*tracker_);
+    DetectionSchedule schedule;
+    schedule.every_frames = 3;
+    schedule.phase_frames = 2;
+    std::vector<std::int64_t> due;
+    for (int i = 0; i < 12; ++i) {
+        const drivers::source::Frame& f = next();
+        const FrameStepResult r = step.track(
+            f, nullptr, [](const drivers::source::Frame&) { return drivers::imu::MapGravity{}; });
+        ASSERT_TRUE(r.ok);
+        if (step.detectionDue(r, schedule, f.t_ns)) {
+            due.push_back(r.frames_in_map);
+        }
+    }
+    EXPECT_EQ(due, (std::vector<std::int64_t>{3, 6, 9, 12}));
+}
+
+TEST_F(FrameStepTest, ARelocalisationKeepsTheDetectionSchedulesPhase) {
+    // 60 frames tracked, 12 black (the tracker loses the camera and looks for
+    // it in the same map), then the scene again: the frames due are the same
+    // frames of the sequence as without the outage (every third from the
+    // map's first), however many frames the relocalisation took. Counting
+    // only tracked frames shifted the schedule by the outage and changed
+    // which views the scale estimator got (docs/accuracy.md).
+    reopen(4.0);
+    FrameStep step(*tracker_);
+    DetectionSchedule schedule;
+    schedule.every_frames = 3;
+    std::vector<std::int64_t> due;
+    std::vector<std::int64_t> tracked_after;
+    int relocalising = 0;
+    for (int i = 0; i < 115; ++i) {
+        drivers::source::Frame f = next();
+        if (i >= 60 && i < 72) {
+            f.gray = cv::Mat::zeros(f.gray.size(), f.gray.type());
+        }
+        const FrameStepResult r = step.track(
+            f, nullptr, [](const drivers::source::Frame&) { return drivers::imu::MapGravity{}; });
+        ASSERT_FALSE(r.map_lost) << "frame " << i;
+        ASSERT_FALSE(r.map_started && i > 0) << "frame " << i << " started a new map";
+        const bool looking = r.stats.health == core::slam::SlamHealth::kRelocalising;
+        if (r.ok || looking) {
+            EXPECT_EQ(r.frames_in_map, i + 1) << "frame " << i;
+        }
+        relocalising += looking ? 1 : 0;
+        if (r.ok && i >= 72) {
+            tracked_after.push_back(i);
+        }
+        if (step.detectionDue(r, schedule, f.t_ns)) {
+            ASSERT_TRUE(r.ok) << "frame " << i;
+            due.push_back(i);
+        }
+    }
+    ASSERT_GT(relocalising, 0) << "the black frames never made the tracker look for the camera";
+    ASSERT_GE(tracked_after.size(), 10U) << "the camera was not found again in the map";
+    for (const std::int64_t i : due) {
+        EXPECT_EQ(i % 3, 0) << "frame " << i << " was due out of phase";
+    }
+    // Every tracked frame after the outage whose number is a multiple of 3 is due.
+    for (const std::int64_t i : tracked_after) {
+        EXPECT_EQ(std::find(due.begin(), due.end(), i) != due.end(), i % 3 == 0) << "frame " << i;
+    }
 }
 
 TEST_F(FrameStepTest, DetectionByPeriodCountsFrameTime) {

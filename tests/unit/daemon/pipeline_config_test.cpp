@@ -27,6 +27,7 @@ std::string applyError(const std::string& text, PipelineConfig& c) {
 TEST(PipelineConfig, DefaultsAreTheChosenOnes) {
     const PipelineConfig c = defaultPipelineConfig();
     EXPECT_EQ(c.detection.every_frames, 10);
+    EXPECT_EQ(c.detection.phase_frames, 0);
     EXPECT_EQ(c.estimator.likelihood.variance_model, core::VarianceModel::kPropagated);
     EXPECT_EQ(c.estimator.weighting, core::ObservationWeighting::kPerFeature);
     EXPECT_TRUE(c.estimator.likelihood.robust);
@@ -406,6 +407,9 @@ TEST(PipelineConfig, ErrorsNameFileLineKeyAndValue) {
               "test.toml:2: detection.every_frames: must be an integer in [1, 100000] (got 0)");
     EXPECT_EQ(applyError("[detection]\nevery_frames = 2.5\n", c),
               "test.toml:2: detection.every_frames: must be an integer in [1, 100000] (got 2.5)");
+    EXPECT_EQ(applyError("[detection]\nevery_frames = 5\nphase_frames = 5\n", c),
+              "test.toml:3: detection.phase_frames: must be less than detection.every_frames = 5 "
+              "(got 5)");
     EXPECT_EQ(applyError("[estimator]\nvariance = \"exact\"\n", c),
               "test.toml:2: estimator.variance: must be one of \"paper\", \"propagated\" (got "
               "\"exact\")");

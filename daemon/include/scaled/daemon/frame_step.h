@@ -35,7 +35,9 @@ struct FrameStepResult {
     // The vertical this frame's map was given (selectGravity's), when the
     // frame asked for one; else nullptr. Valid until the next track().
     const drivers::imu::MapGravity* gravity = nullptr;
-    std::int64_t frames_in_map = 0;  // tracked frames of the current map, this one included
+    // Frames of the current map since its first, this one included: tracked
+    // ones and those spent relocalising in it.
+    std::int64_t frames_in_map = 0;
 };
 
 class FrameStep {
@@ -65,7 +67,9 @@ public:
 
     // Whether the frame just tracked goes to the detector: a tracked frame,
     // not the map's first, and due by schedule (every_frames-th frame of the
-    // map, or period_s of frame time since the last one handed over).
+    // map from frame 1 + phase_frames, relocalising frames counted so a
+    // relocalisation keeps the phase; or period_s of frame time since the
+    // last one handed over).
     [[nodiscard]] bool detectionDue(const FrameStepResult& result,
                                     const DetectionSchedule& schedule, std::int64_t t_ns);
 

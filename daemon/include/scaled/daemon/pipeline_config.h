@@ -32,7 +32,13 @@
 namespace scaled::daemon {
 
 struct DetectionSchedule {
-    int every_frames = 10;  // run the detector on every Nth tracked frame (the paper: 10)
+    int every_frames = 10;  // run the detector on every Nth frame of the map (the paper: 10)
+    // Which frame of each every_frames: frame 1 + phase_frames + k * every_frames
+    // of the map (its first is frame 0). Key detection.phase_frames, in
+    // [0, every_frames). An evaluation axis like the RANSAC seed: which views
+    // the estimator gets moves its result (docs/accuracy.md, "The detector's
+    // phase"); 0 everywhere else.
+    int phase_frames = 0;
     // When > 0, run the detector at most this often instead (seconds of frame
     // time between the frames handed to it); every_frames is then ignored.
     // Key detection.period_s, in [0, 3600]. scale-eval follows the same
