@@ -22,6 +22,7 @@ FrameStepResult FrameStep::trackWith(const drivers::source::Frame& frame,
     r.map_started = r.ok && r.stats.new_map;
     if (r.map_started) {
         frames_in_map_ = 0;
+        map_start_t_ns_ = frame.t_ns;
     }
     const bool relocalising = r.stats.health == core::slam::SlamHealth::kRelocalising;
     if (r.ok || relocalising) {
@@ -53,7 +54,8 @@ void FrameStep::loseMap() {
 
 bool FrameStep::detectionDue(const FrameStepResult& result, const DetectionSchedule& schedule,
                              std::int64_t t_ns) {
-    if (!result.ok || frames_in_map_ <= 1) {
+    if (!result.ok || frames_in_map_ <= 1 ||
+        static_cast<double>(t_ns - map_start_t_ns_) * 1e-9 < schedule.min_map_age_s) {
         return false;
     }
     const bool due =

@@ -260,6 +260,7 @@ std::vector<Field> detectorFields(PipelineConfig& c) {
         integer("detector", "max_detections", &d.max_detections, D::max_detections),
         integer("detection", "every_frames", &c.detection.every_frames, 1, 100000),
         integer("detection", "phase_frames", &c.detection.phase_frames, 0, 99999),
+        real("detection", "min_map_age_s", &c.detection.min_map_age_s, 0, 3600),
         real("detection", "period_s", &c.detection.period_s, 0, 3600),
     };
 }

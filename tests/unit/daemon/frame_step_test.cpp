@@ -85,6 +85,7 @@ TEST_F(FrameStepTest, DetectionIsDueOnEveryNthFrameOfTheMapButNotItsFirst) {
     FrameStep step(*tracker_);
     DetectionSchedule schedule;
     schedule.every_frames = 3;
+    schedule.min_map_age_s = 0;
     std::vector<std::int64_t> due;
     for (int i = 0; i < 12; ++i) {
         const drivers::source::Frame& f = next();
@@ -98,11 +99,36 @@ TEST_F(FrameStepTest, DetectionIsDueOnEveryNthFrameOfTheMapButNotItsFirst) {
     EXPECT_EQ(due, (std::vector<std::int64_t>{4, 7, 10}));
 }
 
+TEST_F(FrameStepTest, NothingIsDueInTheMapsFirstSeconds) {
+    // min_map_age_s of frame time from the map's first frame: the sim runs at
+    // 30 fps, so 0.25 s is frames 0-7 (t = 0.233 s at frame 7); the schedule
+    // keeps its phase (every third frame from the map's first).
+    FrameStep step(*tracker_);
+    DetectionSchedule schedule;
+    schedule.every_frames = 3;
+    schedule.min_map_age_s = 0.25;
+    std::vector<std::int64_t> due;
+    std::int64_t t0_ns = 0;
+    for (int i = 0; i < 15; ++i) {
+        const drivers::source::Frame& f = next();
+        t0_ns = i == 0 ? f.t_ns : t0_ns;
+        const FrameStepResult r = step.track(
+            f, nullptr, [](const drivers::source::Frame&) { return drivers::imu::MapGravity{}; });
+        ASSERT_TRUE(r.ok);
+        if (step.detectionDue(r, schedule, f.t_ns)) {
+            EXPECT_GE(static_cast<double>(f.t_ns - t0_ns) * 1e-9, 0.25) << "frame " << i;
+            due.push_back(r.frames_in_map);
+        }
+    }
+    EXPECT_EQ(due, (std::vector<std::int64_t>{10, 13}));
+}
+
 TEST_F(FrameStepTest, ThePhaseChoosesWhichFrameOfEachPeriodIsDue) {
     FrameStep step(*tracker_);
     DetectionSchedule schedule;
     schedule.every_frames = 3;
     schedule.phase_frames = 2;
+    schedule.min_map_age_s = 0;
     std::vector<std::int64_t> due;
     for (int i = 0; i < 12; ++i) {
         const drivers::source::Frame& f = next();
@@ -127,6 +153,7 @@ TEST_F(FrameStepTest, ARelocalisationKeepsTheDetectionSchedulesPhase) {
     FrameStep step(*tracker_);
     DetectionSchedule schedule;
     schedule.every_frames = 3;
+    schedule.min_map_age_s = 0;
     std::vector<std::int64_t> due;
     std::vector<std::int64_t> tracked_after;
     int relocalising = 0;
@@ -167,6 +194,7 @@ TEST_F(FrameStepTest, DetectionByPeriodCountsFrameTime) {
     FrameStep step(*tracker_);
     DetectionSchedule schedule;
     schedule.period_s = 0.1;  // the sim runs at 30 fps: every third or fourth frame
+    schedule.min_map_age_s = 0;
     std::vector<std::int64_t> due_t_ns;
     for (int i = 0; i < 15; ++i) {
         const drivers::source::Frame& f = next();

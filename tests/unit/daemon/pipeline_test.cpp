@@ -232,13 +232,14 @@ TEST(Pipeline, LosslessRunTracksEveryFrameAndUpdatesEveryTenth) {
     EXPECT_EQ(st.detections_skipped, 0U);
     EXPECT_EQ(st.frame_id, 449);
     EXPECT_TRUE(st.source_finished);
-    // One map: detection on frames 10, 20, ..., 440 of the map (44 runs).
+    // One map: detection on frames 60, 70, ..., 440 of the map (39 runs; none
+    // in its first detection.min_map_age_s = 2 s).
     EXPECT_EQ(st.epoch, 1U);
-    EXPECT_EQ(st.detections_run, 44U);
-    EXPECT_EQ(st.scale_updates, 44U);
+    EXPECT_EQ(st.detections_run, 39U);
+    EXPECT_EQ(st.scale_updates, 39U);
 
     const auto scales = rec.scales();
-    ASSERT_EQ(scales.size(), 44U);
+    ASSERT_EQ(scales.size(), 39U);
     for (std::size_t i = 1; i < scales.size(); ++i) {
         EXPECT_GT(scales[i].frame_id, scales[i - 1].frame_id);
         EXPECT_GE(scales[i].observations, scales[i - 1].observations);
@@ -460,7 +461,7 @@ TEST(Pipeline, PaperModelPublishesAnEmptyObjectTable) {
     c.pipeline.estimator.model = core::EstimatorModel::kPaper;
     ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
     Recorder rec;
-    auto p = Pipeline::create(c, parts(2.0, true), hub, &rec);  // 60 frames
+    auto p = Pipeline::create(c, parts(3.0, true), hub, &rec);  // 90 frames: detections from 2 s
     ASSERT_TRUE(p.ok()) << p.error().message;
     ASSERT_TRUE((*p)->start().ok());
     ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
@@ -715,10 +716,10 @@ TEST(Pipeline, ASlowDetectorNeverBlocksTracking) {
     EXPECT_EQ(held.frames_dropped, 0U);
     EXPECT_EQ(held.epoch, 1U);
     EXPECT_EQ(held.detections_run, 0U);
-    // Detection is due on frames 10, 20, ..., 140 of the map (14): the first
-    // is held in the detector, the second waits in the mailbox, and each later
-    // one replaces the one waiting.
-    EXPECT_EQ(held.detections_skipped, 12U);
+    // Detection is due on frames 60, 70, ..., 140 of the map (9; none in its
+    // first 2 s): the first is held in the detector, the second waits in the
+    // mailbox, and each later one replaces the one waiting.
+    EXPECT_EQ(held.detections_skipped, 7U);
     EXPECT_FALSE(hub.scale().has_scale);
     gate->open();
     ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(60)));

@@ -66,7 +66,8 @@ public:
     void restart();
 
     // Whether the frame just tracked goes to the detector: a tracked frame,
-    // not the map's first, and due by schedule (every_frames-th frame of the
+    // not the map's first, at least min_map_age_s of frame time into the map
+    // (the map's unit is still settling before), and due by schedule (every_frames-th frame of the
     // map from frame 1 + phase_frames, relocalising frames counted so a
     // relocalisation keeps the phase; or period_s of frame time since the
     // last one handed over).
@@ -95,6 +96,7 @@ private:
     bool need_gravity_ = true;
     std::int64_t frames_in_map_ = 0;
     std::int64_t last_detection_t_ns_ = 0;
+    std::int64_t map_start_t_ns_ = 0;  // frame time of the current map's first frame
 };
 
 }  // namespace scaled::daemon

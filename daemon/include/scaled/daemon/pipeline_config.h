@@ -39,6 +39,13 @@ struct DetectionSchedule {
     // the estimator gets moves its result (docs/accuracy.md, "The detector's
     // phase"); 0 everywhere else.
     int phase_frames = 0;
+    // No detection in a map's first min_map_age_s seconds of frame time: its
+    // unit is still moving (redkitchen: the Sim(3) scale of the trajectory so
+    // far by 30-50% in the first two seconds), and an object measured then
+    // keeps that unit (docs/accuracy.md, "A map's first seconds"). Applies to
+    // both schedules; a relocalisation keeps the map's age. Key
+    // detection.min_map_age_s, in [0, 3600].
+    double min_map_age_s = 2.0;
     // When > 0, run the detector at most this often instead (seconds of frame
     // time between the frames handed to it); every_frames is then ignored.
     // Key detection.period_s, in [0, 3600]. scale-eval follows the same
