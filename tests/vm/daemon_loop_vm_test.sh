@@ -84,12 +84,12 @@ echo "daemon_loop_vm_test: dataset gravity at frame 0: $gx $gy $gz"
 # drift to the digit, docs/vm-tests.md): the velocity's random walk (variance
 # sigma_a^2 dt / reference_hz) with sigma_a / K^2 at reference rate / K, the
 # angular impulse sigma_alpha / K^2, the initial velocities / K, the largest
-# frame gap and the relocalisation time * K.
-read -r k sigma_a sigma_alpha ref_hz init_v init_w max_dt reloc_s < <(/usr/bin/python3 -c "
+# frame gap, the relocalisation time and the detector's wait in a new map * K.
+read -r k sigma_a sigma_alpha ref_hz init_v init_w max_dt reloc_s min_age < <(/usr/bin/python3 -c "
 rate = 59.94 / max(1, round(59.94 / $fps))
 k = 30.0 / rate
-print('%.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g' % (k, 8 / k**2, 1 / k**2, 30 / k, 0.1 / k,
-      0.1 / k, 1 * k, 3 * k))")
+print('%.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g' % (k, 8 / k**2, 1 / k**2, 30 / k, 0.1 / k,
+      0.1 / k, 1 * k, 3 * k, 2 * k))")
 
 write_config() { # write_config FILE SOCKET LOGDIR
   cat > "$1" <<EOF
@@ -117,6 +117,8 @@ init_sigma_v = $init_v
 init_sigma_w = $init_w
 max_dt_s = $max_dt
 relocalise_s = $reloc_s
+[detection]
+min_map_age_s = $min_age
 [imu]
 device = "scaled-imu"
 rate_hz = 50
