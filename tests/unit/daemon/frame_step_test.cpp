@@ -37,6 +37,24 @@ protected:
         source_ = std::move(*src);
     }
 
+    // Tracks the next n frames (all must be tracked) and returns the map's
+    // frame numbers (FrameStepResult::frames_in_map) of those due.
+    std::vector<std::int64_t> dueFramesInMap(FrameStep& step, const DetectionSchedule& schedule,
+                                             int n) {
+        std::vector<std::int64_t> due;
+        for (int i = 0; i < n; ++i) {
+            const drivers::source::Frame& f = next();
+            const FrameStepResult r = step.track(f, nullptr, [](const drivers::source::Frame&) {
+                return drivers::imu::MapGravity{};
+            });
+            EXPECT_TRUE(r.ok) << "frame " << i;
+            if (step.detectionDue(r, schedule, f.t_ns)) {
+                due.push_back(r.frames_in_map);
+            }
+        }
+        return due;
+    }
+
     // The next frame of the sim.
     const drivers::source::Frame& next() {
         auto got = source_->next(frame_);
@@ -86,16 +104,7 @@ TEST_F(FrameStepTest, DetectionIsDueOnEveryNthFrameOfTheMapButNotItsFirst) {
     DetectionSchedule schedule;
     schedule.every_frames = 3;
     schedule.min_map_age_s = 0;
-    std::vector<std::int64_t> due;
-    for (int i = 0; i < 12; ++i) {
-        const drivers::source::Frame& f = next();
-        const FrameStepResult r = step.track(
-            f, nullptr, [](const drivers::source::Frame&) { return drivers::imu::MapGravity{}; });
-        ASSERT_TRUE(r.ok);
-        if (step.detectionDue(r, schedule, f.t_ns)) {
-            due.push_back(r.frames_in_map);
-        }
-    }
+    const std::vector<std::int64_t> due = dueFramesInMap(step, schedule, 12);
     EXPECT_EQ(due, (std::vector<std::int64_t>{4, 7, 10}));
 }
 
@@ -107,20 +116,7 @@ TEST_F(FrameStepTest, NothingIsDueInTheMapsFirstSeconds) {
     DetectionSchedule schedule;
     schedule.every_frames = 3;
     schedule.min_map_age_s = 0.25;
-    std::vector<std::int64_t> due;
-    std::int64_t t0_ns = 0;
-    for (int i = 0; i < 15; ++i) {
-        const drivers::source::Frame& f = next();
-        t0_ns = i == 0 ? f.t_ns : t0_ns;
-        const FrameStepResult r = step.track(
-            f, nullptr, [](const drivers::source::Frame&) { return drivers::imu::MapGravity{}; });
-        ASSERT_TRUE(r.ok);
-        if (step.detectionDue(r, schedule, f.t_ns)) {
-            EXPECT_GE(static_cast<double>(f.t_ns - t0_ns) * 1e-9, 0.25) << "frame " << i;
-            due.push_back(r.frames_in_map);
-        }
-    }
-    EXPECT_EQ(due, (std::vector<std::int64_t>{10, 13}));
+    EXPECT_EQ(dueFramesInMap(step, schedule, 15), (std::vector<std::int64_t>{10, 13}));
 }
 
 TEST_F(FrameStepTest, ThePhaseChoosesWhichFrameOfEachPeriodIsDue) {
@@ -129,16 +125,7 @@ TEST_F(FrameStepTest, ThePhaseChoosesWhichFrameOfEachPeriodIsDue) {
     schedule.every_frames = 3;
     schedule.phase_frames = 2;
     schedule.min_map_age_s = 0;
-    std::vector<std::int64_t> due;
-    for (int i = 0; i < 12; ++i) {
-        const drivers::source::Frame& f = next();
-        const FrameStepResult r = step.track(
-            f, nullptr, [](const drivers::source::Frame&) { return drivers::imu::MapGravity{}; });
-        ASSERT_TRUE(r.ok);
-        if (step.detectionDue(r, schedule, f.t_ns)) {
-            due.push_back(r.frames_in_map);
-        }
-    }
+    const std::vector<std::int64_t> due = dueFramesInMap(step, schedule, 12);
     EXPECT_EQ(due, (std::vector<std::int64_t>{3, 6, 9, 12}));
 }
 
