@@ -63,6 +63,26 @@ def run(exe, data, args):
     return json.loads(lines[-1])
 
 
+def row_results(name, jobs):
+    """The row's results by run name; None (the row printed as its first error) if a run failed."""
+    res = {rn: f.result() for (n, rn), f in jobs.items() if n == name}
+    errs = [d for d in res.values() if "_error" in d]
+    if errs:
+        print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+        return None
+    return res
+
+
+def err(d):
+    """The run's median relative error 5 s or more after the map started (whole-run truth)."""
+    return d["rel_error_after_5s"]["median"]
+
+
+def werr(d):
+    """The same against the sliding-window truth."""
+    return d["rel_error_after_5s_window"]["median"]
+
+
 def fmt(v, pct=False):
     if v is None:
         return "-"
@@ -79,8 +99,9 @@ def main():
     ap.add_argument("--set", action="append", default=[], help="K=V for every row")
     ap.add_argument("--flag", action="append", default=[], help="a scale-eval flag for every row")
     ap.add_argument("--per-run", action="store_true")
-    ap.add_argument("--wide", action="store_true", help="26 runs (seeds 1-16, five windows)")
-    ap.add_argument("--phases", action="store_true",
+    matrix = ap.add_mutually_exclusive_group()
+    matrix.add_argument("--wide", action="store_true", help="26 runs (seeds 1-16, five windows)")
+    matrix.add_argument("--phases", action="store_true",
                     help="the ten runs at each detection.phase_frames 0..9 (100 runs)")
     a = ap.parse_args()
     runs = WIDE_RUNS if a.wide else RUNS
@@ -113,13 +134,10 @@ def main():
           " wrong converged | obs / 100 frames | final 95% width / limit |")
     print("|---|---|---|---|---|---|---|---|")
     for name, _ in rows:
-        res = {rn: jobs[(name, rn)].result() for rn, _ in RUNS}
-        errs = [res[rn] for rn, _ in RUNS if "_error" in res[rn]]
-        if errs:
-            print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+        res = row_results(name, jobs)
+        if res is None:
             continue
-        med = lambda d: d["rel_error_after_5s"]["median"]  # noqa: E731
-        seeds = [med(res["seed %d" % s]) for s in range(1, 9)]
+        seeds = [err(res["seed %d" % s]) for s in range(1, 9)]
         seeds_ok = [x for x in seeds if x is not None]
         cov = [res[rn]["ci95_coverage"] for rn, _ in RUNS if res[rn]["ci95_coverage"] is not None]
         wrong = sum(res[rn]["wrong_converged_updates"] for rn, _ in RUNS)
@@ -133,7 +151,7 @@ def main():
             fmt(statistics.median(seeds_ok) if seeds_ok else None, True),
             fmt(max(seeds_ok) if seeds_ok else None, True),
             "" if len(seeds_ok) == 8 else " (%d none)" % (8 - len(seeds_ok)),
-            fmt(med(res["frames 0:300"]), True), fmt(med(res["frames 300:600"]), True),
+            fmt(err(res["frames 0:300"]), True), fmt(err(res["frames 300:600"]), True),
             fmt(min(cov) if cov else None, True), wrong, fmt(obs),
             fmt(statistics.median(widths) if widths else None, True),
             fmt(statistics.median(limits) if limits else None, True)))
@@ -166,13 +184,9 @@ def print_phases(rows, jobs, per_run):
           " vs window truth, seeds: median / worst over phases | min ci95 coverage |")
     print("|---|---|---|---|---|---|---|---|")
     for name, _ in rows:
-        res = {rn: jobs[(name, rn)].result() for (n, rn) in jobs if n == name}
-        errs = [d for d in res.values() if "_error" in d]
-        if errs:
-            print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+        res = row_results(name, jobs)
+        if res is None:
             continue
-        err = lambda d: d["rel_error_after_5s"]["median"]  # noqa: E731
-        werr = lambda d: d["rel_error_after_5s_window"]["median"]  # noqa: E731
         med, worst, first, second, window = [], [], [], [], []
         for ph in PHASES:
             seeds = [err(res["seed %d phase %d" % (s, ph)]) for s in range(1, 9)]
@@ -208,15 +222,11 @@ def print_wide(rows, jobs, per_run):
           " min ci95 coverage |")
     print("|---|---|---|---|---|---|---|---|")
     for name, _ in rows:
-        res = {rn: jobs[(name, rn)].result() for rn, _ in WIDE_RUNS}
-        errs = [res[rn] for rn, _ in WIDE_RUNS if "_error" in res[rn]]
-        if errs:
-            print("| %s | error: %s |" % (name, errs[0]["_error"][:80]))
+        res = row_results(name, jobs)
+        if res is None:
             continue
         seeds = [res[rn] for rn, _ in WIDE_RUNS if rn.startswith("seed")]
         wins = [res[rn] for rn, _ in WIDE_RUNS if rn.startswith("frames")]
-        err = lambda d: d["rel_error_after_5s"]["median"]  # noqa: E731
-        werr = lambda d: d["rel_error_after_5s_window"]["median"]  # noqa: E731
         dev = [d["scale_true_window_max_dev"] for d in seeds + wins]
         ate = [d["metric_trajectory"]["ate_percent_of_path"] for d in seeds + wins]
         ate = [x for x in ate if x is not None]

@@ -67,10 +67,10 @@ public:
 
     // Whether the frame just tracked goes to the detector: a tracked frame,
     // not the map's first, at least min_map_age_s of frame time into the map
-    // (the map's unit is still settling before), and due by schedule (every_frames-th frame of the
-    // map from frame 1 + phase_frames, relocalising frames counted so a
-    // relocalisation keeps the phase; or period_s of frame time since the
-    // last one handed over).
+    // (the map's unit is still settling before), and due by schedule: the
+    // every_frames-th frame of the map from frame 1 + phase_frames (frames
+    // spent relocalising count, so a relocalisation keeps the phase), or
+    // period_s of frame time since the last one handed over.
     [[nodiscard]] bool detectionDue(const FrameStepResult& result,
                                     const DetectionSchedule& schedule, std::int64_t t_ns);
 
