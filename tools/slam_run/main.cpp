@@ -278,10 +278,10 @@ void setProgress(const Options& o, scaled::tools::SlamRunOptions& run) {
         run.progress = [](std::size_t done, std::size_t,
                           const scaled::drivers::vision::TrackStats& s) {
             std::fprintf(stderr,
-                         "frame %zu %s map %d visible %d searched %d matched %d inliers %d "
+                         "frame %zu %s map %d xyz %d visible %d searched %d matched %d inliers %d "
                          "rescued %d added %d ncc_evals %d coarse %d/%d reloc %d/%d near %d\n",
-                         done - 1, scaled::core::slam::toString(s.health), s.features, s.visible,
-                         s.predicted, s.matched, s.inliers, s.rescued, s.added,
+                         done - 1, scaled::core::slam::toString(s.health), s.features, s.euclidean,
+                         s.visible, s.predicted, s.matched, s.inliers, s.rescued, s.added,
                          s.search_evaluations, s.coarse_matches, s.coarse_searches,
                          s.relocalise_inliers, s.relocalise_candidates, s.near_loss ? 1 : 0);
         };

@@ -816,6 +816,9 @@ void MonoTracker::manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, b
         stats.added = addFeatures(gray, config_.slam.min_visible - stats.visible, false);
     }
     stats.features = static_cast<int>(slam_.features().size());
+    for (const auto& f : slam_.features()) {
+        stats.euclidean += f.kind == slam::FeatureKind::kXyz ? 1 : 0;
+    }
 }
 
 TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,

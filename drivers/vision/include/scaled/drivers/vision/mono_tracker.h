@@ -184,6 +184,7 @@ struct TrackStats {
     int rescued = 0;             // high-innovation inliers rescued
     int added = 0;               // new features initialised
     int features = 0;            // map size after the frame
+    int euclidean = 0;           // of which converted to XYZ (depth converged)
     int visible = 0;             // predicted in view
     int search_evaluations = 0;  // NCC evaluations (front-end cost)
     int coarse_searches = 0;     // features searched coarse-to-fine (pyramid_levels)
