@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include <gtest/gtest.h>
 
@@ -36,19 +37,20 @@ TEST(SlamRedkitchen, TracksEveryFrameWithSmallErrorAndDrift) {
     SlamRunOptions opt;  // the defaults slam-run uses
     // The first frame with a feature converted to XYZ (its depth converged):
     // none in the map's first second, then some (docs/slam.md: 2-4 s in).
-    std::size_t first_xyz_frame = 0;
+    std::optional<std::size_t> first_xyz_frame;
     bool counts_consistent = true;
     opt.progress = [&](std::size_t done, std::size_t, const drivers::vision::TrackStats& s) {
-        counts_consistent = counts_consistent && s.euclidean >= 0 && s.euclidean <= s.features;
-        if (first_xyz_frame == 0 && s.euclidean > 0) {
+        counts_consistent = counts_consistent && s.xyz_features <= s.features;
+        if (!first_xyz_frame && s.xyz_features > 0) {
             first_xyz_frame = done - 1;
         }
     };
     const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     EXPECT_TRUE(counts_consistent);
-    EXPECT_GE(first_xyz_frame, 30U);
-    EXPECT_LE(first_xyz_frame, 150U);
+    ASSERT_TRUE(first_xyz_frame.has_value()) << "no feature's depth converged";
+    EXPECT_GE(*first_xyz_frame, 30U);
+    EXPECT_LE(*first_xyz_frame, 150U);
     std::printf(
         "redkitchen: %zu/%zu tracked, %d re-init, ATE %.4f m of %.3f m (%.2f%%), "
         "scale %.4f, drift %.3f, %.1f measured, %.2f ms/frame\n",

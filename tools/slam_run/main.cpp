@@ -280,9 +280,9 @@ void setProgress(const Options& o, scaled::tools::SlamRunOptions& run) {
             std::fprintf(stderr,
                          "frame %zu %s map %d xyz %d visible %d searched %d matched %d inliers %d "
                          "rescued %d added %d ncc_evals %d coarse %d/%d reloc %d/%d near %d\n",
-                         done - 1, scaled::core::slam::toString(s.health), s.features, s.euclidean,
-                         s.visible, s.predicted, s.matched, s.inliers, s.rescued, s.added,
-                         s.search_evaluations, s.coarse_matches, s.coarse_searches,
+                         done - 1, scaled::core::slam::toString(s.health), s.features,
+                         s.xyz_features, s.visible, s.predicted, s.matched, s.inliers, s.rescued,
+                         s.added, s.search_evaluations, s.coarse_matches, s.coarse_searches,
                          s.relocalise_inliers, s.relocalise_candidates, s.near_loss ? 1 : 0);
         };
     } else if (isatty(STDERR_FILENO) == 1) {

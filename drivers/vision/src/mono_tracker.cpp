@@ -672,7 +672,7 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     has_map_ = true;
     stats.new_map = true;
     stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
-    stats.features = static_cast<int>(slam_.features().size());
+    countMap(stats);
     stats.visible = stats.added;
     stats.health = slam_.health();
     if (ba_) {
@@ -697,7 +697,7 @@ void MonoTracker::adjustWindow(TrackStats& stats) {
 bool MonoTracker::relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats,
                                   StageLap& lap) {
     stats.health = slam::SlamHealth::kRelocalising;
-    stats.features = static_cast<int>(slam_.features().size());
+    countMap(stats);
     if (static_cast<double>(t_ns - lost_t_ns_) * 1e-9 > config_.relocalise_s) {
         relocalising_ = false;  // given up: the caller starts a new map
         stats.health = slam::SlamHealth::kLost;
@@ -815,10 +815,14 @@ void MonoTracker::manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, b
     if (stats.health == slam::SlamHealth::kOk && stats.visible < config_.slam.min_visible) {
         stats.added = addFeatures(gray, config_.slam.min_visible - stats.visible, false);
     }
-    stats.features = static_cast<int>(slam_.features().size());
-    for (const auto& f : slam_.features()) {
-        stats.euclidean += f.kind == slam::FeatureKind::kXyz ? 1 : 0;
-    }
+    countMap(stats);
+}
+
+void MonoTracker::countMap(TrackStats& stats) const {
+    const auto features = slam_.features();
+    stats.features = static_cast<int>(features.size());
+    stats.xyz_features = static_cast<int>(std::ranges::count_if(
+        features, [](const slam::FeatureInfo& f) { return f.kind == slam::FeatureKind::kXyz; }));
 }
 
 TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,

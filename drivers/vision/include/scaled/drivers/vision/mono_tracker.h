@@ -184,7 +184,7 @@ struct TrackStats {
     int rescued = 0;             // high-innovation inliers rescued
     int added = 0;               // new features initialised
     int features = 0;            // map size after the frame
-    int euclidean = 0;           // of which converted to XYZ (depth converged)
+    int xyz_features = 0;        // of which converted to XYZ (depth converged)
     int visible = 0;             // predicted in view
     int search_evaluations = 0;  // NCC evaluations (front-end cost)
     int coarse_searches = 0;     // features searched coarse-to-fine (pyramid_levels)
@@ -298,6 +298,8 @@ private:
     // frame (near_loss_ratio; never one searched coarse-to-fine); counts
     // near_loss_run_.
     bool countNearLoss(const core::slam::UpdateReport& report, bool coarse_frame);
+    // The map's size and how many of its features are XYZ, into stats.
+    void countMap(TrackStats& stats) const;
     // After the update: map management, relocalisation on loss, new features.
     void manageMapAfterUpdate(std::int64_t t_ns, const cv::Mat& gray, bool bad_frame,
                               TrackStats& stats);
