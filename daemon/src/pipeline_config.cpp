@@ -335,6 +335,7 @@ std::vector<Field> objectFields(core::ObjectConfig& o) {
              O::view_reference_quantile),
         boolean("objects", "width_model", &o.width_model),
         boolean("objects", "one_height", &o.one_height),
+        boolean("objects", "cut_box_planes", &o.cut_box_planes),
     };
 }
 

@@ -198,13 +198,6 @@ int ObjectEvidence::activeSlot(int k) const {
     return -1;
 }
 
-bool ObjectEvidence::onBorder(const BoundingBox& b) const {
-    const Scalar m = extent_.border_margin_px;
-    return b.x_min_px <= m || b.y_min_px <= m ||
-           b.x_max_px >= static_cast<Scalar>(camera_.width() - 1) - m ||
-           b.y_max_px >= static_cast<Scalar>(camera_.height() - 1) - m;
-}
-
 Scalar ObjectEvidence::medianDepth(const FrameSnapshot& frame) {
     const Mat3 R_WtoC = frame.pose.R_CtoW.transpose();
     std::size_t n = 0;
@@ -328,26 +321,56 @@ int ObjectEvidence::newTrack(int class_index) {
     return slot;
 }
 
-int ObjectEvidence::collectCentreRays(const Track& t, int slot) {
+int ObjectEvidence::collectCentreRays(const Track& t, int slot, int& constraints) {
     const auto& k = camera_.intrinsics();
     const Scalar f = (k.fx + k.fy) / 2;
-    // The views' box-centre rays (boxes cut by the image border left out:
-    // their centre is not the object's).
+    const Scalar m = extent_.border_margin_px;
+    const auto w_px = static_cast<Scalar>(camera_.width() - 1);
+    const auto h_px = static_cast<Scalar>(camera_.height() - 1);
+    // The views' box-centre rays. A box cut by the image border is not
+    // centred on its object along the cut axis: cut at its top or bottom
+    // only, it gives the plane of its centre column (cut_box_planes); cut at
+    // a side, nothing.
     int n = 0;
+    constraints = 0;
     for (int i = 0; i < t.stored; ++i) {
         const View& v = view(slot, i);
-        if (onBorder(v.box)) {
+        const BoundingBox& b = v.box;
+        const bool cut_x = b.x_min_px <= m || b.x_max_px >= w_px - m;
+        const bool cut_y = b.y_min_px <= m || b.y_max_px >= h_px - m;
+        if (cut_x || (cut_y && !config_.cut_box_planes)) {
             continue;
         }
-        const auto ray_C = camera_.unproject(centreOf(v.box));
+        const Vec2 c = centreOf(b);
+        const auto ray_C = camera_.unproject(c);
         if (!ray_C) {
             continue;
         }
-        Ray& r = rays_[static_cast<std::size_t>(n++)];
+        Ray& r = rays_[static_cast<std::size_t>(n)];
+        r.plane = cut_y;
+        if (r.plane) {
+            // The centre column, through two points of the box (a line of
+            // the distorted image is nearly one of the undistorted one over
+            // a box).
+            const Vec2 a(c.x(), b.y_min_px);
+            const Vec2 e(c.x(), b.y_max_px);
+            const auto ra = camera_.unproject(a);
+            const auto re = camera_.unproject(e);
+            if (!ra || !re) {
+                continue;
+            }
+            const Vec3 normal_C = ra->cross(*re);
+            if (!(normal_C.norm() > 0)) {
+                continue;
+            }
+            r.normal_W = v.pose.R_CtoW * normal_C.normalized();
+        }
         r.view = i;
         r.dir_W = v.pose.R_CtoW * ray_C->normalized();
         r.sigma_angle =
             (config_.centre_rel_sigma * diagonalOf(v.box) + config_.centre_sigma_px) / f;
+        constraints += r.plane ? 1 : 2;
+        ++n;
     }
     return n;
 }
@@ -367,7 +390,12 @@ bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec
             return false;
         }
         const Scalar s = rays[i].sigma_angle * along;
-        chi2 += (e - along * rays[i].dir_W).squaredNorm() / (s * s);
+        if (rays[i].plane) {
+            const Scalar off = rays[i].normal_W.dot(e);
+            chi2 += off * off / (s * s);
+        } else {
+            chi2 += (e - along * rays[i].dir_W).squaredNorm() / (s * s);
+        }
         const auto px = camera_.project(v.pose.R_CtoW.transpose() * e);
         const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
         const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
@@ -388,8 +416,9 @@ bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec
 void ObjectEvidence::triangulate(Track& t, int slot) {
     t.anchored = false;
     t.has_estimate = false;
-    const int n = collectCentreRays(t, slot);
-    if (n < 2) {
+    int constraints = 0;
+    const int n = collectCentreRays(t, slot, constraints);
+    if (n < 2 || constraints < 4) {
         return;
     }
     const std::span<const Ray> rays(rays_.data(), static_cast<std::size_t>(n));
@@ -407,7 +436,9 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
                 iter == 0 ? v.depth_hint
                           : std::max((X - v.pose.p_CinW).dot(r.dir_W), v.depth_hint / 100);
             const Scalar s = r.sigma_angle * dist;
-            const Mat3 A = (Mat3::Identity() - r.dir_W * r.dir_W.transpose()) / (s * s);
+            const Mat3 A = (r.plane ? Mat3(r.normal_W * r.normal_W.transpose())
+                                    : Mat3(Mat3::Identity() - r.dir_W * r.dir_W.transpose())) /
+                           (s * s);
             H += A;
             b += A * v.pose.p_CinW;
         }
@@ -429,7 +460,7 @@ void ObjectEvidence::triangulate(Track& t, int slot) {
     // A-posteriori variance factor: rays that do not meet as well as their
     // assumed noise says (the box centre moving on the object, a pose error
     // of the map) widen the anchor's covariance accordingly.
-    const int dof = 2 * n - 3;
+    const int dof = constraints - 3;
     const Scalar factor =
         dof > 0 ? std::max(Scalar(1), agreement.chi2 / static_cast<Scalar>(dof)) : Scalar(1);
     const Mat3 P = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *

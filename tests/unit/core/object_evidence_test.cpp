@@ -387,6 +387,55 @@ TEST(ObjectEvidence, NoAnchorWithoutParallax) {
     EXPECT_EQ(post.summary().state, ScaleState::kNoData);
 }
 
+// The near chair of a handheld clip: after its first two views its legs
+// leave the image, so its boxes are cut at the bottom and their centres are
+// not the chair's; their horizontal centres still are.
+ObjectSummary chairWithCutBoxes(bool cut_box_planes, const Room& r) {
+    const PriorTable priors = roomPriors();
+    ObjectConfig oc;
+    oc.cut_box_planes = cut_box_planes;
+    ObjectEvidence objects = makeObjects(r, priors, oc);
+    std::vector<ObjectAssignment> a;
+    for (int k = 0; k < 12; ++k) {
+        BoundingBox box = r.boxOf(r.things[0], r.pose(k));
+        if (k >= 2) {
+            box.y_max_px = static_cast<Scalar>(r.cam.height() - 1);
+        }
+        const std::array<Detection, 1> dets{Detection{box, "chair", 0.9}};
+        const std::array<int, 1> cls{0};
+        a.assign(1, {});
+        int written = 0;
+        (void)objects.update(r.snapshot(k), dets, cls, a, {}, &written);
+    }
+    EXPECT_EQ(objects.activeCount(), 1);
+    ScaleSummary post;
+    post.state = ScaleState::kConverging;
+    post.map = r.d;
+    post.ci95 = {r.d, r.d};
+    return objects.summary(0, post);
+}
+
+TEST(ObjectEvidence, BoxesCutByTheBorderStillPlaceTheObject) {
+    Room r;
+    r.things.push_back({Vec3(Scalar(-0.3) / r.d, Scalar(2.5) / r.d, 0), Scalar(0.4) / r.d,
+                        Scalar(0.9) / r.d, "chair"});
+    const Room::Thing& t = r.things[0];
+    const Vec3 middle = t.centre + Vec3(0, 0, t.height / 2);
+    // Without the cut views: two rays 0.1 m apart at 2.5 m, too little
+    // parallax for an anchor.
+    const ObjectSummary rays_only = chairWithCutBoxes(false, r);
+    EXPECT_EQ(rays_only.state, ObjectState::kTentative);
+    // With them: each cut box's centre column is a plane through its camera;
+    // ten of them over 1.1 m of motion place the chair.
+    const ObjectSummary with_planes = chairWithCutBoxes(true, r);
+    EXPECT_EQ(with_planes.state, ObjectState::kUsed);
+    EXPECT_LT(with_planes.anchor_rel_sigma, Scalar(0.2));
+    // On the floor plan within the chair's width of its middle (the box's
+    // centre line is its near corners', not its axis).
+    const Vec3 off = with_planes.p_AinW - middle;
+    EXPECT_LT(off.head<2>().norm(), t.width) << with_planes.p_AinW.transpose();
+}
+
 TEST(ObjectEvidence, TheTableIsBounded) {
     Room r;
     for (int i = 0; i < 6; ++i) {

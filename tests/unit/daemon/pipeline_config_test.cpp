@@ -175,7 +175,7 @@ TEST(PipelineConfig, ObjectModelKeysAreRangeChecked) {
               "max_anchor_rel_sigma, anchor_box_margin, association_gate, epipolar_depth_min, "
               "epipolar_depth_max, max_gap_updates, box_edge_rel_sigma, object_rel_sigma, "
               "map_rel_sigma, "
-              "view_band, view_reference_quantile, width_model, one_height)");
+              "view_band, view_reference_quantile, width_model, one_height, cut_box_planes)");
     EXPECT_EQ(applyError("objects = 1\n", c), "test.toml:1: objects: must be a table ([objects])");
     auto bad = applyPipelineOverrides({"objects.max_views=0"}, c);
     ASSERT_FALSE(bad.ok());

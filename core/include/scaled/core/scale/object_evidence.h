@@ -101,6 +101,14 @@ struct ObjectConfig {
     // for the ablation only: every view draws its own height from the class
     // prior, as the paper's observations do.
     bool one_height = true;
+    // A box cut by the image border at its top or bottom only (the near
+    // chair whose legs leave the image) still centres the object left to
+    // right: its view constrains the anchor to the plane through the camera
+    // and the box's centre column. false: such views are left out of the
+    // triangulation, as boxes cut at a side always are (the plane of a row
+    // says little about depth when the camera moves sideways: with them a
+    // television on the wall anchored three times too far, docs/accuracy.md).
+    bool cut_box_planes = true;
     ApparentHeightPrior::GridSpec height_grid;
 };
 
@@ -254,10 +262,16 @@ private:
         double s_d = 0;
         double s_k = 0;
     };
-    struct Ray {  // a view's box-centre ray, for the triangulation
+    // A view's box-centre ray, for the triangulation; of a box cut at its
+    // top or bottom (cut_box_planes), the plane through the camera and the
+    // box's centre column (plane: its normal, and dir_W the ray through the
+    // cut box's centre, for the in-front and parallax tests).
+    struct Ray {
         int view = 0;
         Vec3 dir_W = Vec3::Zero();
+        Vec3 normal_W = Vec3::Zero();
         Scalar sigma_angle = 0;  // radians
+        bool plane = false;
     };
     struct Candidate {
         Scalar cost = 0;
@@ -288,7 +302,6 @@ private:
     }
     [[nodiscard]] int activeSlot(int k) const;
     [[nodiscard]] Scalar medianDepth(const FrameSnapshot& frame);
-    [[nodiscard]] bool onBorder(const BoundingBox& box) const;
     // Association distance of a box to a track (in gate units), or a negative
     // value when the track cannot take it.
     [[nodiscard]] Scalar associationCost(const Track& t, int slot, const FrameSnapshot& frame,
@@ -312,8 +325,10 @@ private:
         Scalar chi2 = 0;     // the rays' chi-square
         Scalar min_cos = 1;  // cosine of the largest angle between two rays
     };
-    // The usable views' box-centre rays into rays_; returns how many.
-    int collectCentreRays(const Track& t, int slot);
+    // The usable views' box-centre rays (and column planes) into rays_;
+    // returns how many, and the constraints they give (2 per ray, 1 per
+    // plane).
+    int collectCentreRays(const Track& t, int slot, int& constraints);
     // False when X is not in front of every ray's view.
     bool rayAgreement(int slot, std::span<const Ray> rays, const Vec3& X, RayAgreement& out) const;
     void triangulate(Track& t, int slot);
