@@ -382,6 +382,10 @@ bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec
     int inside = 0;
     Scalar chi2 = 0;
     Scalar min_cos = 1;
+    const auto sight = [&](std::size_t k) -> Vec3 {
+        return rays[k].plane ? Vec3((X - view(slot, rays[k].view).pose.p_CinW).normalized())
+                             : rays[k].dir_W;
+    };
     for (std::size_t i = 0; i < rays.size(); ++i) {
         const View& v = view(slot, rays[i].view);
         const Vec3 e = X - v.pose.p_CinW;
@@ -399,12 +403,16 @@ bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec
         const auto px = camera_.project(v.pose.R_CtoW.transpose() * e);
         const Scalar mw = config_.anchor_box_margin * (v.box.x_max_px - v.box.x_min_px);
         const Scalar mh = config_.anchor_box_margin * (v.box.y_max_px - v.box.y_min_px);
+        // A cut box holds the anchor left to right only (the object's middle
+        // may be outside the image).
         if (px && px->x() >= v.box.x_min_px - mw && px->x() <= v.box.x_max_px + mw &&
-            px->y() >= v.box.y_min_px - mh && px->y() <= v.box.y_max_px + mh) {
+            (rays[i].plane || (px->y() >= v.box.y_min_px - mh && px->y() <= v.box.y_max_px + mh))) {
             ++inside;
         }
+        // The parallax between the lines of sight (to X from a cut box's
+        // view: its centre moves on the object with the cut).
         for (std::size_t j = 0; j < i; ++j) {
-            min_cos = std::min(min_cos, rays[i].dir_W.dot(rays[j].dir_W));
+            min_cos = std::min(min_cos, sight(i).dot(sight(j)));
         }
     }
     out.inside = inside;
@@ -416,9 +424,12 @@ bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec
 void ObjectEvidence::triangulate(Track& t, int slot) {
     t.anchored = false;
     t.has_estimate = false;
+    // At least two views, one of them a whole box (a ray: the column planes
+    // of cut boxes all contain the camera's vertical and leave the anchor's
+    // height to noise), and one degree of freedom to spare.
     int constraints = 0;
     const int n = collectCentreRays(t, slot, constraints);
-    if (n < 2 || constraints < 4) {
+    if (n < 2 || constraints < 4 || constraints == n) {
         return;
     }
     const std::span<const Ray> rays(rays_.data(), static_cast<std::size_t>(n));

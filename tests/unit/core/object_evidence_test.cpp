@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <vector>
 
@@ -258,7 +259,7 @@ struct Room {
         FrameSnapshot s;
         s.pose = pose(k);
         s.features = features;
-        s.frame_id = 10 * k;
+        s.frame_id = std::int64_t{10} * k;
         return s;
     }
 };
@@ -390,7 +391,7 @@ TEST(ObjectEvidence, NoAnchorWithoutParallax) {
 // The near chair of a handheld clip: after its first two views its legs
 // leave the image, so its boxes are cut at the bottom and their centres are
 // not the chair's; their horizontal centres still are.
-ObjectSummary chairWithCutBoxes(bool cut_box_planes, const Room& r) {
+ObjectSummary chairWithCutBoxes(bool cut_box_planes, const Room& r, bool cut_at_side = false) {
     const PriorTable priors = roomPriors();
     ObjectConfig oc;
     oc.cut_box_planes = cut_box_planes;
@@ -398,7 +399,9 @@ ObjectSummary chairWithCutBoxes(bool cut_box_planes, const Room& r) {
     std::vector<ObjectAssignment> a;
     for (int k = 0; k < 12; ++k) {
         BoundingBox box = r.boxOf(r.things[0], r.pose(k));
-        if (k >= 2) {
+        if (k >= 2 && cut_at_side) {
+            box.x_min_px = 0;
+        } else if (k >= 2) {
             box.y_max_px = static_cast<Scalar>(r.cam.height() - 1);
         }
         const std::array<Detection, 1> dets{Detection{box, "chair", 0.9}};
@@ -421,10 +424,12 @@ TEST(ObjectEvidence, BoxesCutByTheBorderStillPlaceTheObject) {
                         Scalar(0.9) / r.d, "chair"});
     const Room::Thing& t = r.things[0];
     const Vec3 middle = t.centre + Vec3(0, 0, t.height / 2);
-    // Without the cut views: two rays 0.1 m apart at 2.5 m, too little
-    // parallax for an anchor.
+    // Without the cut views: two rays 0.1 m apart at 2.5 m, a depth too
+    // uncertain for an anchor.
     const ObjectSummary rays_only = chairWithCutBoxes(false, r);
     EXPECT_EQ(rays_only.state, ObjectState::kTentative);
+    // Boxes cut at a side give nothing (their rows' planes are left out).
+    EXPECT_EQ(chairWithCutBoxes(true, r, true).state, ObjectState::kTentative);
     // With them: each cut box's centre column is a plane through its camera;
     // ten of them over 1.1 m of motion place the chair.
     const ObjectSummary with_planes = chairWithCutBoxes(true, r);

@@ -12,8 +12,10 @@
 //    the table is bounded (max_objects; when it is full the object unused
 //    longest is replaced).
 // 2. Anchors. An object's anchor is the point its box-centre rays meet: a
-//    weighted least-squares triangulation over its views (boxes cut by the
-//    image border left out: their centre is not the object's), with the
+//    weighted least-squares triangulation over its views (a box cut by the
+//    image border at a side left out, its centre is not the object's; one
+//    cut at its top or bottom gives the plane of its centre column, and at
+//    least one whole box is needed), with the
 //    3x3 covariance of that fit. It needs min_parallax_deg between views,
 //    must lie in front of every view and inside (a margin around) most of
 //    its boxes, and is used once its depth uncertainty is below
