@@ -411,8 +411,9 @@ bool ObjectEvidence::rayAgreement(int slot, std::span<const Ray> rays, const Vec
         }
         // The parallax between the lines of sight (to X from a cut box's
         // view: its centre moves on the object with the cut).
+        const Vec3 sight_i = sight(i);
         for (std::size_t j = 0; j < i; ++j) {
-            min_cos = std::min(min_cos, sight(i).dot(sight(j)));
+            min_cos = std::min(min_cos, sight_i.dot(sight(j)));
         }
     }
     out.inside = inside;
