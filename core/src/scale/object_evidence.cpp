@@ -325,8 +325,6 @@ int ObjectEvidence::collectCentreRays(const Track& t, int slot, int& constraints
     const auto& k = camera_.intrinsics();
     const Scalar f = (k.fx + k.fy) / 2;
     const Scalar m = extent_.border_margin_px;
-    const auto w_px = static_cast<Scalar>(camera_.width() - 1);
-    const auto h_px = static_cast<Scalar>(camera_.height() - 1);
     // The views' box-centre rays. A box cut by the image border is not
     // centred on its object along the cut axis: cut at its top or bottom
     // only, it gives the plane of its centre column (cut_box_planes); cut at
@@ -336,8 +334,10 @@ int ObjectEvidence::collectCentreRays(const Track& t, int slot, int& constraints
     for (int i = 0; i < t.stored; ++i) {
         const View& v = view(slot, i);
         const BoundingBox& b = v.box;
-        const bool cut_x = b.x_min_px <= m || b.x_max_px >= w_px - m;
-        const bool cut_y = b.y_min_px <= m || b.y_max_px >= h_px - m;
+        const bool cut_x = edgeOnImageBorder(camera_, b, BoxEdge::kLeft, m) ||
+                           edgeOnImageBorder(camera_, b, BoxEdge::kRight, m);
+        const bool cut_y = edgeOnImageBorder(camera_, b, BoxEdge::kTop, m) ||
+                           edgeOnImageBorder(camera_, b, BoxEdge::kBottom, m);
         if (cut_x || (cut_y && !config_.cut_box_planes)) {
             continue;
         }

@@ -210,23 +210,6 @@ std::optional<Region> rollCompensated(const BoundingBox& box, Scalar alpha) {
     return r;
 }
 
-bool edgeOnImageBorder(const PinholeRadialCamera& cam, const BoundingBox& b, BoxEdge e,
-                       Scalar margin) {
-    const auto w = static_cast<Scalar>(cam.width() - 1);
-    const auto h = static_cast<Scalar>(cam.height() - 1);
-    switch (e) {
-        case BoxEdge::kLeft:
-            return b.x_min_px <= margin;
-        case BoxEdge::kRight:
-            return b.x_max_px >= w - margin;
-        case BoxEdge::kTop:
-            return b.y_min_px <= margin;
-        case BoxEdge::kBottom:
-            return b.y_max_px >= h - margin;
-    }
-    return true;
-}
-
 bool isSide(BoxEdge e) {
     return e == BoxEdge::kLeft || e == BoxEdge::kRight;
 }
@@ -288,6 +271,23 @@ std::optional<Scalar> closestOnLambda(const CameraPose& pose, const Vec3& p_FinW
 }
 
 }  // namespace
+
+bool edgeOnImageBorder(const PinholeRadialCamera& cam, const BoundingBox& b, BoxEdge e,
+                       Scalar margin) {
+    const auto w = static_cast<Scalar>(cam.width() - 1);
+    const auto h = static_cast<Scalar>(cam.height() - 1);
+    switch (e) {
+        case BoxEdge::kLeft:
+            return b.x_min_px <= margin;
+        case BoxEdge::kRight:
+            return b.x_max_px >= w - margin;
+        case BoxEdge::kTop:
+            return b.y_min_px <= margin;
+        case BoxEdge::kBottom:
+            return b.y_max_px >= h - margin;
+    }
+    return true;
+}
 
 ExtentStatus computeVerticalExtent(const PinholeRadialCamera& camera, const CameraPose& pose,
                                    const Vec3& up_W, const Vec3& p_FinW, const BoundingBox& box,

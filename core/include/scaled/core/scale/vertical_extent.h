@@ -55,6 +55,11 @@ const char* toString(ExtentStatus status);
 
 enum class BoxEdge : std::uint8_t { kLeft, kRight, kTop, kBottom };
 
+// Whether edge e of box b lies within margin pixels of the image border: the
+// object goes on past it, so the edge is not the object's.
+[[nodiscard]] bool edgeOnImageBorder(const PinholeRadialCamera& cam, const BoundingBox& b,
+                                     BoxEdge e, Scalar margin);
+
 struct ExtentConfig {
     Scalar border_margin_px = 2;     // an exit edge this close to the image border is truncated
     bool reject_side_exit = true;    // a side exit does not measure the object's top or bottom
