@@ -18,7 +18,7 @@
 //       frame until STOP_FILE exists, and puts vivid back (input and output
 //       0, Loop Video off, OSD on).
 //
-// FPS is a rate the emulated machine can track (TCG: one or two frames a
+// FPS is a rate the emulated machine can track (TCG: 0.75 to 1.5 frames a
 // second), not the sequence's 30 Hz: the motion between consecutive frames
 // is the sequence's, only slower in time. The capture runs at 59.94 Hz, so
 // it copies each frame several times; the daemon's
@@ -454,8 +454,8 @@ int main(int argc, char** argv) {
         const long frames = std::strtol(a[2].c_str(), &end_frames, 10);
         const double fps = std::strtod(a[3].c_str(), &end_fps);
         if (*end_frames != '\0' || *end_fps != '\0' || frames < 1 || frames > 100000 ||
-            !(fps >= 1 && fps <= 30)) {
-            return fail("FRAMES must be >= 1 and FPS in [1, 30]");
+            !(fps >= 0.5 && fps <= 30)) {
+            return fail("FRAMES must be >= 1 and FPS in [0.5, 30]");
         }
         return play(a[1], static_cast<int>(frames), fps, a[4], a[5]);
     }
