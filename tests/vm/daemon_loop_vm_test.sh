@@ -6,6 +6,8 @@
 # vertical from the kernel's iio_dummy (a 3-axis accelerometer, set to the
 # dataset's gravity at the first frame), detects with the real YOLOX-Nano and
 # serves its scale over the socket.
+#   0. one detection is timed in the guest and sets the playback's rate FPS
+#      (0.75-1.5 frames a second; a skip on a guest too slow for 0.75);
 #   1. the feeder holds the first frame (a camera at rest) until the daemon
 #      captured it, then plays every frame once at FPS (the emulated CPU cannot
 #      track 30 a second: the motion between frames is the sequence's, the
