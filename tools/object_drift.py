@@ -3,7 +3,8 @@
 
 Usage (from the project root, after a release build):
     tools/object_drift.py [--bin build/release/bin] [--data ../shared/data/redkitchen]
-                          [--seeds 1-8] [--set K=V]... [--min-views 4] [--work DIR] [--reuse]
+                          [--seeds 1-8] [--set K=V]... [--flag=--camera=FILE]...
+                          [--min-views 4] [--work DIR] [--reuse]
 
 scale-eval --out writes observations.csv: one row per view of an object, with its frame and
 its extent D (the box's top and bottom rays on the vertical line through the object's anchor),
@@ -93,6 +94,8 @@ def main():
         os.environ.get("SCALED_SHARED_DIR", "../shared"), "data", "redkitchen"))
     ap.add_argument("--seeds", default="1-8")
     ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--flag", action="append", default=[],
+                    help="a scale-eval flag for the tracker's runs (e.g. --flag=--camera=FILE)")
     ap.add_argument("--min-views", type=int, default=4)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--work", default="")
@@ -105,7 +108,8 @@ def main():
     work = a.work or tempfile.mkdtemp(prefix="object_drift.")
     seeds = parse_seeds(a.seeds)
     jobs = [(os.path.join(work, "truth"), ["--truth-geometry"])]
-    jobs += [(os.path.join(work, f"seed{s}"), ["--set", f"tracker.seed={s}"]) for s in seeds]
+    jobs += [(os.path.join(work, f"seed{s}"), ["--set", f"tracker.seed={s}"] + a.flag)
+             for s in seeds]
     with ThreadPoolExecutor(a.jobs) as pool:
         outs = list(pool.map(lambda j: run(a, j[0], j[1]), jobs))
     truth = views_of(outs[0])
