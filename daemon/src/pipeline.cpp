@@ -91,6 +91,7 @@ Result<std::unique_ptr<Pipeline>> Pipeline::create(const DaemonConfig& config, P
         return tracker.error();
     }
     p->tracker_.emplace(std::move(*tracker));
+    p->ba_worker_ = WindowBaWorker::attachTo(*p->tracker_);
     auto estimator =
         core::ScaleEstimator::create(config.pipeline.estimator, std::move(priors), *camera);
     if (!estimator) {

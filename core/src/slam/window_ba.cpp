@@ -75,6 +75,7 @@ Status validate(const WindowBaConfig& c) {
         {"huber_px", static_cast<double>(c.huber_px), L::huber_px},
         {"iterations", static_cast<double>(c.iterations), L::iterations},
         {"max_scale_step", static_cast<double>(c.max_scale_step), L::max_scale_step},
+        {"defer_frames", static_cast<double>(c.defer_frames), L::defer_frames},
     };
     if (const LimitCheck* bad = firstOutside(checks)) {
         return makeError(ErrorCode::kInvalidArgument, std::string("window_ba.") + bad->name +
@@ -86,6 +87,12 @@ Status validate(const WindowBaConfig& c) {
                          "window_ba.fixed_keyframes = " + std::to_string(c.fixed_keyframes) +
                              ": must leave at least 2 of window_keyframes (" +
                              std::to_string(c.window_keyframes) + ") free");
+    }
+    if (c.defer_frames >= c.keyframe_every) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "window_ba.defer_frames = " + std::to_string(c.defer_frames) +
+                             ": must be less than keyframe_every (" +
+                             std::to_string(c.keyframe_every) + ")");
     }
     if (c.step_keyframes > c.window_keyframes - c.fixed_keyframes) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -200,6 +207,11 @@ WindowBaReport WindowBa::addFrame(const CameraPose& T_CtoW,
         return report;
     }
     since_opt_ = 0;
+    if (config_.defer_frames > 0) {
+        report.keyframes = count_;
+        report.due = true;
+        return report;
+    }
     return optimise();
 }
 

@@ -167,6 +167,7 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, std::optional<slam::WindowBa> ba,
 void MonoTracker::reset() {
     has_map_ = false;
     if (ba_) {
+        dropDueOptimisation();
         ba_->reset();
     }
     relocalising_ = false;
@@ -676,18 +677,69 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     stats.visible = stats.added;
     stats.health = slam_.health();
     if (ba_) {
+        dropDueOptimisation();
         ba_->reset();
         adjustWindow(stats);
     }
 }
 
 void MonoTracker::adjustWindow(TrackStats& stats) {
-    if (!ba_ || slam_.health() != slam::SlamHealth::kOk) {
+    if (!ba_) {
         return;
     }
-    stats.window_ba = ba_->addFrame(slam_.pose(), slam_.observations());
-    const core::Scalar s = stats.window_ba.scale;
-    if (stats.window_ba.optimised && s != 1) {
+    const bool tracked = slam_.health() == slam::SlamHealth::kOk;
+    if (ba_due_) {
+        // A deferred optimisation runs: this frame only counts, until the
+        // defer_frames-th, which takes its result (and is then a frame of
+        // the window like any other: not a keyframe, defer_frames <
+        // keyframe_every).
+        if (++ba_due_frames_ < config_.window_ba.defer_frames) {
+            ba_due_tracked_ += tracked ? 1 : 0;
+            return;
+        }
+        finishDueOptimisation(stats);
+    }
+    if (!tracked) {
+        return;
+    }
+    const slam::WindowBaReport report = ba_->addFrame(slam_.pose(), slam_.observations());
+    if (report.due) {
+        ba_served_ = ba_->adjustedFromFilter();
+        ba_due_ = true;
+        ba_due_frames_ = 0;
+        ba_due_tracked_ = 0;
+        if (runner_ != nullptr) {
+            runner_->start(*ba_);
+        } else {
+            ba_inline_report_ = ba_->runDue();
+        }
+        stats.window_ba = report;
+        return;
+    }
+    if (!stats.window_ba.optimised) {
+        stats.window_ba = report;
+    }
+    applyWindowScale(report);
+}
+
+void MonoTracker::finishDueOptimisation(TrackStats& stats) {
+    const slam::WindowBaReport report = runner_ != nullptr ? runner_->wait() : ba_inline_report_;
+    ba_->finishDue(ba_due_tracked_);
+    ba_due_ = false;
+    stats.window_ba = report;
+    applyWindowScale(report);
+}
+
+void MonoTracker::dropDueOptimisation() {
+    if (ba_due_ && runner_ != nullptr) {
+        (void)runner_->wait();
+    }
+    ba_due_ = false;
+}
+
+void MonoTracker::applyWindowScale(const slam::WindowBaReport& report) {
+    const core::Scalar s = report.scale;
+    if (report.optimised && s != 1) {
         const core::Vec3 centre_W = slam_.pose().p_CinW;
         slam_.rescaleMap(s, centre_W);
         ba_->notifyRescaled(s, centre_W);

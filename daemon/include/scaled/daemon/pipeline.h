@@ -47,6 +47,7 @@
 #include <scaled/daemon/imu_service.h>
 #include <scaled/daemon/pose.h>
 #include <scaled/daemon/report.h>
+#include <scaled/daemon/window_ba_worker.h>
 #include <scaled/drivers/camera/camera.h>
 #include <scaled/drivers/detector/object_detector.h>
 #include <scaled/drivers/imu/gyro_feed.h>
@@ -261,6 +262,9 @@ private:
     std::mutex stop_mutex_;
     std::condition_variable stop_cv_;
     std::optional<drivers::vision::MonoTracker> tracker_;
+    // Runs tracker_'s deferred window optimisations; after tracker_, so it is
+    // destroyed first (it waits for a running one).
+    std::unique_ptr<WindowBaWorker> ba_worker_;
     std::optional<core::ScaleEstimator> estimator_;
     std::unique_ptr<drivers::detector::ObjectDetector> detector_;
 

@@ -54,6 +54,12 @@ struct WindowBaConfig {
     // of the units.
     bool scale_feedback = false;
     Scalar max_scale_step = Scalar(0.2);
+    // 0: addFrame() optimises when one is due. > 0: it only says so
+    // (WindowBaReport::due); the caller runs runDue(), possibly on another
+    // thread, and takes its result this many frames later (finishDue()), so
+    // the frame that starts an optimisation does not wait for it. Less than
+    // keyframe_every: no keyframe comes while one runs.
+    int defer_frames = 0;
 };
 
 struct WindowBaLimits {
@@ -68,6 +74,7 @@ struct WindowBaLimits {
     static constexpr ParamLimits huber_px = openClosed(0, 100);
     static constexpr ParamLimits iterations = closed(1, 100);
     static constexpr ParamLimits max_scale_step = closed(0, 10);
+    static constexpr ParamLimits defer_frames = closed(0, 999);  // < keyframe_every
 };
 
 Status validate(const WindowBaConfig& config);
@@ -117,6 +124,8 @@ struct WindowBaReport {
     // (Sim(3) over them and the newest fixed one): > 1, the filter's map had
     // shrunk; 1 when nothing was adjusted. Clamped by max_scale_step.
     Scalar scale = 1;
+    // defer_frames > 0: an optimisation is due; nothing was optimised yet.
+    bool due = false;
 };
 
 class WindowBa {
@@ -132,6 +141,15 @@ public:
     // by how much the caller should rescale the filter's map (about the
     // camera's position). Call notifyRescaled() after applying it.
     WindowBaReport addFrame(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs);
+
+    // With defer_frames > 0, after addFrame() said due: the optimisation
+    // itself. Between addFrame() and finishDue() nothing else may touch this
+    // object (another thread may be running this).
+    WindowBaReport runDue() { return optimise(); }
+    // Then, after the frames that passed while it ran (those addFrame() did
+    // not see: fewer than keyframe_every, so none is a keyframe), counted
+    // into the keyframe schedule.
+    void finishDue(int frames_passed) { frames_ += frames_passed; }
 
     // The filter's map was rescaled by s about centre_W: the stored filter
     // poses follow it.

@@ -28,6 +28,22 @@
 
 namespace scaled::drivers::vision {
 
+// Runs the window adjustment's deferred optimisations
+// (window_ba.defer_frames > 0) off the tracking thread: start() hands over
+// ba.runDue() and returns at once; wait() returns its report once it has
+// run. Without one, the tracker runs it on the frame that starts it; either
+// way its result is taken defer_frames frames later, so both give the same
+// poses to the bit.
+class OptimisationRunner {
+public:
+    OptimisationRunner() = default;
+    OptimisationRunner(const OptimisationRunner&) = delete;
+    OptimisationRunner& operator=(const OptimisationRunner&) = delete;
+    virtual ~OptimisationRunner() = default;
+    virtual void start(core::slam::WindowBa& ba) = 0;
+    virtual core::slam::WindowBaReport wait() = 0;
+};
+
 struct TrackerConfig {
     core::slam::SlamConfig slam;
     // Sliding-window bundle adjustment of the filter's tracks and the map
@@ -242,13 +258,22 @@ public:
     // The camera's pose: the filter's, or with window_ba the newest adjusted
     // keyframe composed with the filter's motion since it.
     [[nodiscard]] core::CameraPose pose() const {
-        return ba_ ? ba_->adjustedPose(slam_.pose()) : slam_.pose();
+        return ba_ ? servedFromFilter().apply(slam_.pose()) : slam_.pose();
     }
     // The filter's world carried into pose()'s (identity without window_ba):
     // for the filter's points, velocity and gravity in the served frame.
+    // While a deferred optimisation runs, the one from before it.
     [[nodiscard]] core::slam::Sim3 servedFromFilter() const {
-        return ba_ ? ba_->adjustedFromFilter() : core::slam::Sim3{};
+        if (!ba_) {
+            return {};
+        }
+        return ba_due_ ? ba_served_ : ba_->adjustedFromFilter();
     }
+    // Where window_ba.defer_frames > 0 runs its optimisations (nullptr: on the
+    // tracking thread). Set before the first frame; it must outlive every
+    // frame this tracker processes and wait() for a started optimisation
+    // before the tracker is destroyed.
+    void setOptimisationRunner(OptimisationRunner* runner) { runner_ = runner; }
     [[nodiscard]] bool hasMap() const { return has_map_; }
     // The gyro bias estimate (gyro_bias_time_s), camera frame, rad/s: kept
     // across maps (it belongs to the device, not the map).
@@ -273,6 +298,12 @@ private:
     // The window bundle adjustment's step after a tracked frame, and the
     // scale correction of the map it gives.
     void adjustWindow(TrackStats& stats);
+    // A deferred optimisation's end: its report into stats, the scale it
+    // hands the filter (scale_feedback).
+    void finishDueOptimisation(TrackStats& stats);
+    // Before the window is reset: wait for a running optimisation, drop it.
+    void dropDueOptimisation();
+    void applyWindowScale(const core::slam::WindowBaReport& report);
 
     // The steps of processFrame(). StageLap (mono_tracker.cpp) times them.
     class StageLap;
@@ -350,6 +381,12 @@ private:
 
     core::slam::EkfSlam slam_;
     std::optional<core::slam::WindowBa> ba_;  // when window_ba.enabled
+    OptimisationRunner* runner_ = nullptr;
+    bool ba_due_ = false;         // a deferred optimisation runs (ba_ is the runner's)
+    int ba_due_frames_ = 0;       // frames since it started
+    int ba_due_tracked_ = 0;      // of them, tracked ones (the window's frame count)
+    core::slam::Sim3 ba_served_;  // servedFromFilter() while it runs
+    core::slam::WindowBaReport ba_inline_report_;  // its report, run without a runner
     TrackerConfig config_;
     Matcher matcher_;
     core::Vec3 gravity_down_C_ = core::Vec3(0, 1, 0);

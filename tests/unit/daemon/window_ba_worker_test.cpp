@@ -1,0 +1,91 @@
+// The window adjustment's optimisations on the daemon's worker thread
+// (daemon/window_ba_worker.h, tracker.window_ba_defer_frames): the same poses
+// to the bit as the tracker running them itself, which is what scale-eval
+// and slam-run do.
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/daemon/frame_step.h>
+#include <scaled/daemon/pipeline_config.h>
+#include <scaled/daemon/window_ba_worker.h>
+#include <scaled/drivers/sim/sim_source.h>
+
+namespace scaled::daemon {
+namespace {
+
+struct SimRun {
+    std::vector<core::CameraPose> poses;
+    int optimisations = 0;
+    int tracked = 0;
+};
+
+// The sim's 4-s lap through a tracker with a small window (an optimisation
+// every 12 frames from frame 36 on), defer_frames = 2, and the worker or not.
+SimRun runSim(bool worker) {
+    drivers::sim::SimConfig sim;
+    sim.seed = 3;
+    sim.duration_s = 4.0;
+    auto source = drivers::sim::openSimSource(sim);
+    EXPECT_TRUE(source.ok());
+    auto camera = core::PinholeRadialCamera::create(drivers::sim::simIntrinsics(sim));
+    EXPECT_TRUE(camera.ok());
+    PipelineConfig config = defaultPipelineConfig();
+    auto& ba = config.tracker.window_ba;
+    ba.defer_frames = 2;
+    ba.window_keyframes = 20;
+    ba.fixed_keyframes = 8;
+    ba.step_keyframes = 4;
+    auto tracker = drivers::vision::MonoTracker::create(*camera, config.tracker);
+    EXPECT_TRUE(tracker.ok()) << tracker.error().message;
+    std::optional<WindowBaWorker> thread;  // before the tracker's use, destroyed after it
+    if (worker) {
+        thread.emplace();
+        tracker->setOptimisationRunner(&*thread);
+    }
+    FrameStep step(*tracker);
+    SimRun run;
+    drivers::source::Frame frame;
+    for (;;) {
+        auto got = (*source)->next(frame);
+        if (!got.ok() || !*got) {
+            break;
+        }
+        const FrameStepResult r = step.track(frame, nullptr, [](const drivers::source::Frame&) {
+            return drivers::imu::MapGravity{};
+        });
+        run.tracked += r.ok ? 1 : 0;
+        run.optimisations += r.stats.window_ba.optimised ? 1 : 0;
+        run.poses.push_back(tracker->pose());
+    }
+    return run;
+}
+
+TEST(DaemonWindowBa, TheWorkerThreadGivesTheTrackersOwnPoses) {
+    const SimRun inline_run = runSim(false);
+    const SimRun threaded = runSim(true);
+    ASSERT_GT(inline_run.tracked, 100);
+    EXPECT_GE(inline_run.optimisations, 4) << "the window was adjusted";
+    EXPECT_EQ(threaded.optimisations, inline_run.optimisations);
+    ASSERT_EQ(threaded.poses.size(), inline_run.poses.size());
+    int differ = 0;
+    for (std::size_t k = 0; k < threaded.poses.size(); ++k) {
+        const core::CameraPose& a = threaded.poses[k];
+        const core::CameraPose& b = inline_run.poses[k];
+        differ += (a.p_CinW == b.p_CinW && a.R_CtoW == b.R_CtoW) ? 0 : 1;
+    }
+    EXPECT_EQ(differ, 0) << "frames whose pose differs";
+}
+
+TEST(DaemonWindowBa, WaitingWithNothingStartedReturnsAtOnce) {
+    WindowBaWorker worker;
+    const core::slam::WindowBaReport r = worker.wait();
+    EXPECT_FALSE(r.optimised);
+}
+
+}  // namespace
+}  // namespace scaled::daemon
