@@ -24,12 +24,12 @@ struct SimRun {
     int tracked = 0;
 };
 
-// The sim's 4-s lap through a tracker with a small window (an optimisation
-// every 12 frames from frame 36 on), defer_frames = 2, and the worker or not.
+// The sim's first 2.5 s through a tracker with a small window (an optimisation
+// every 12 frames from frame 36 on: 4 in the 75 frames), defer_frames = 2, and the worker or not.
 SimRun runSim(bool worker) {
     drivers::sim::SimConfig sim;
     sim.seed = 3;
-    sim.duration_s = 4.0;
+    sim.duration_s = 2.5;
     auto source = drivers::sim::openSimSource(sim);
     EXPECT_TRUE(source.ok());
     auto camera = core::PinholeRadialCamera::create(drivers::sim::simIntrinsics(sim));
@@ -68,8 +68,8 @@ SimRun runSim(bool worker) {
 TEST(DaemonWindowBa, TheWorkerThreadGivesTheTrackersOwnPoses) {
     const SimRun inline_run = runSim(false);
     const SimRun threaded = runSim(true);
-    ASSERT_GT(inline_run.tracked, 100);
-    EXPECT_GE(inline_run.optimisations, 4) << "the window was adjusted";
+    ASSERT_GT(inline_run.tracked, 60);
+    EXPECT_GE(inline_run.optimisations, 3) << "the window was adjusted (4 when written)";
     EXPECT_EQ(threaded.optimisations, inline_run.optimisations);
     ASSERT_EQ(threaded.poses.size(), inline_run.poses.size());
     int differ = 0;
