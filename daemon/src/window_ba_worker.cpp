@@ -1,8 +1,12 @@
+#include <pthread.h>
+
 #include <scaled/daemon/window_ba_worker.h>
 
 namespace scaled::daemon {
 
-WindowBaWorker::WindowBaWorker() : thread_([this] { run(); }) {}
+WindowBaWorker::WindowBaWorker() : thread_([this] { run(); }) {
+    ::pthread_setname_np(thread_.native_handle(), "scaled-ba");
+}
 
 std::unique_ptr<WindowBaWorker> WindowBaWorker::attachTo(drivers::vision::MonoTracker& tracker) {
     const core::slam::WindowBaConfig& c = tracker.config().window_ba;

@@ -81,6 +81,49 @@ TEST(DaemonWindowBa, TheWorkerThreadGivesTheTrackersOwnPoses) {
     EXPECT_EQ(differ, 0) << "frames whose pose differs";
 }
 
+TEST(DaemonWindowBa, ANewMapWaitsForTheRunningOptimisation) {
+    // reset() on the frame that handed an optimisation to the worker: it waits
+    // for it before the window is reset (under TSan: no race), and the next
+    // map tracks and adjusts its window again.
+    drivers::sim::SimConfig sim;
+    sim.seed = 3;
+    sim.duration_s = 4.0;
+    auto source = drivers::sim::openSimSource(sim);
+    ASSERT_TRUE(source.ok());
+    auto camera = core::PinholeRadialCamera::create(drivers::sim::simIntrinsics(sim));
+    ASSERT_TRUE(camera.ok());
+    PipelineConfig config = defaultPipelineConfig();
+    auto& ba = config.tracker.window_ba;
+    ba.window_keyframes = 20;
+    ba.fixed_keyframes = 8;
+    ba.step_keyframes = 4;
+    auto tracker = drivers::vision::MonoTracker::create(*camera, config.tracker);
+    ASSERT_TRUE(tracker.ok());
+    WindowBaWorker worker;
+    tracker->setOptimisationRunner(&worker);
+    drivers::source::Frame frame;
+    int resets = 0;
+    int optimised_after = 0;
+    int tracked_after = 0;
+    for (;;) {
+        auto got = (*source)->next(frame);
+        if (!got.ok() || !*got) {
+            break;
+        }
+        const auto stats = tracker->processFrame(frame.t_ns, frame.gray);
+        if (resets == 0 && stats.window_ba.due) {
+            tracker->reset();
+            ++resets;
+        } else if (resets > 0) {
+            optimised_after += stats.window_ba.optimised ? 1 : 0;
+            tracked_after += stats.health == core::slam::SlamHealth::kOk ? 1 : 0;
+        }
+    }
+    EXPECT_EQ(resets, 1) << "an optimisation was handed over";
+    EXPECT_GT(tracked_after, 50);
+    EXPECT_GE(optimised_after, 1) << "the new map's window was adjusted";
+}
+
 TEST(DaemonWindowBa, WaitingWithNothingStartedReturnsAtOnce) {
     WindowBaWorker worker;
     const core::slam::WindowBaReport r = worker.wait();
