@@ -167,8 +167,7 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, std::optional<slam::WindowBa> ba,
 void MonoTracker::reset() {
     has_map_ = false;
     if (ba_) {
-        dropDueOptimisation();
-        ba_->reset();
+        resetWindow();
     }
     relocalising_ = false;
     previous_frame_good_ = false;
@@ -677,8 +676,7 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     stats.visible = stats.added;
     stats.health = slam_.health();
     if (ba_) {
-        dropDueOptimisation();
-        ba_->reset();
+        resetWindow();
         adjustWindow(stats);
     }
 }
@@ -730,11 +728,12 @@ void MonoTracker::finishDueOptimisation(TrackStats& stats) {
     applyWindowScale(report);
 }
 
-void MonoTracker::dropDueOptimisation() {
+void MonoTracker::resetWindow() {
     if (ba_due_ && runner_ != nullptr) {
         (void)runner_->wait();
     }
     ba_due_ = false;
+    ba_->reset();
 }
 
 void MonoTracker::applyWindowScale(const slam::WindowBaReport& report) {

@@ -4,6 +4,7 @@
 // and slam-run do.
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -24,43 +25,68 @@ struct SimRun {
     int tracked = 0;
 };
 
-// The sim's first 2.5 s through a tracker with a small window (an optimisation
-// every 12 frames from frame 36 on: 4 in the 75 frames), defer_frames = 2, and the worker or not.
-SimRun runSim(bool worker) {
+// The sim (seed 3) for duration_s and a tracker with a small window (an
+// optimisation every 12 frames from frame 36 on) deferring by defer_frames.
+struct SimTracker {
+    std::unique_ptr<drivers::source::FrameSource> source;
+    std::optional<drivers::vision::MonoTracker> tracker;
+    drivers::source::Frame frame;
+
+    // The next frame into `frame`; false at the sim's end.
+    bool next() {
+        auto got = source->next(frame);
+        return got.ok() && *got;
+    }
+};
+
+SimTracker makeSimTracker(double duration_s, int defer_frames) {
+    SimTracker st;
     drivers::sim::SimConfig sim;
     sim.seed = 3;
-    sim.duration_s = 2.5;
+    sim.duration_s = duration_s;
     auto source = drivers::sim::openSimSource(sim);
     EXPECT_TRUE(source.ok());
     auto camera = core::PinholeRadialCamera::create(drivers::sim::simIntrinsics(sim));
     EXPECT_TRUE(camera.ok());
+    if (!source.ok() || !camera.ok()) {
+        return st;
+    }
+    st.source = std::move(*source);
     PipelineConfig config = defaultPipelineConfig();
     auto& ba = config.tracker.window_ba;
-    ba.defer_frames = 2;
+    ba.defer_frames = defer_frames;
     ba.window_keyframes = 20;
     ba.fixed_keyframes = 8;
     ba.step_keyframes = 4;
     auto tracker = drivers::vision::MonoTracker::create(*camera, config.tracker);
     EXPECT_TRUE(tracker.ok()) << tracker.error().message;
+    if (tracker.ok()) {
+        st.tracker.emplace(std::move(*tracker));
+    }
+    return st;
+}
+
+// The sim's first 2.5 s (4 optimisations in the 75 frames), defer_frames = 2,
+// and the worker or not.
+SimRun runSim(bool worker) {
+    SimTracker st = makeSimTracker(2.5, 2);
+    SimRun run;
+    if (!st.tracker) {
+        return run;
+    }
     std::optional<WindowBaWorker> thread;  // before the tracker's use, destroyed after it
     if (worker) {
         thread.emplace();
-        tracker->setOptimisationRunner(&*thread);
+        st.tracker->setOptimisationRunner(&*thread);
     }
-    FrameStep step(*tracker);
-    SimRun run;
-    drivers::source::Frame frame;
-    for (;;) {
-        auto got = (*source)->next(frame);
-        if (!got.ok() || !*got) {
-            break;
-        }
-        const FrameStepResult r = step.track(frame, nullptr, [](const drivers::source::Frame&) {
+    FrameStep step(*st.tracker);
+    while (st.next()) {
+        const FrameStepResult r = step.track(st.frame, nullptr, [](const drivers::source::Frame&) {
             return drivers::imu::MapGravity{};
         });
         run.tracked += r.ok ? 1 : 0;
         run.optimisations += r.stats.window_ba.optimised ? 1 : 0;
-        run.poses.push_back(tracker->pose());
+        run.poses.push_back(st.tracker->pose());
     }
     return run;
 }
@@ -85,34 +111,17 @@ TEST(DaemonWindowBa, ANewMapWaitsForTheRunningOptimisation) {
     // reset() on the frame that handed an optimisation to the worker: it waits
     // for it before the window is reset (under TSan: no race), and the next
     // map tracks and adjusts its window again.
-    drivers::sim::SimConfig sim;
-    sim.seed = 3;
-    sim.duration_s = 4.0;
-    auto source = drivers::sim::openSimSource(sim);
-    ASSERT_TRUE(source.ok());
-    auto camera = core::PinholeRadialCamera::create(drivers::sim::simIntrinsics(sim));
-    ASSERT_TRUE(camera.ok());
-    PipelineConfig config = defaultPipelineConfig();
-    auto& ba = config.tracker.window_ba;
-    ba.window_keyframes = 20;
-    ba.fixed_keyframes = 8;
-    ba.step_keyframes = 4;
-    auto tracker = drivers::vision::MonoTracker::create(*camera, config.tracker);
-    ASSERT_TRUE(tracker.ok());
+    SimTracker st = makeSimTracker(4.0, 1);
+    ASSERT_TRUE(st.tracker);
     WindowBaWorker worker;
-    tracker->setOptimisationRunner(&worker);
-    drivers::source::Frame frame;
+    st.tracker->setOptimisationRunner(&worker);
     int resets = 0;
     int optimised_after = 0;
     int tracked_after = 0;
-    for (;;) {
-        auto got = (*source)->next(frame);
-        if (!got.ok() || !*got) {
-            break;
-        }
-        const auto stats = tracker->processFrame(frame.t_ns, frame.gray);
+    while (st.next()) {
+        const auto stats = st.tracker->processFrame(st.frame.t_ns, st.frame.gray);
         if (resets == 0 && stats.window_ba.due) {
-            tracker->reset();
+            st.tracker->reset();
             ++resets;
         } else if (resets > 0) {
             optimised_after += stats.window_ba.optimised ? 1 : 0;

@@ -301,8 +301,9 @@ private:
     // A deferred optimisation's end: its report into stats, the scale it
     // hands the filter (scale_feedback).
     void finishDueOptimisation(TrackStats& stats);
-    // Before the window is reset: wait for a running optimisation, drop it.
-    void dropDueOptimisation();
+    // A new window (ba_ engaged): a running optimisation is waited for and
+    // dropped first.
+    void resetWindow();
     void applyWindowScale(const core::slam::WindowBaReport& report);
 
     // The steps of processFrame(). StageLap (mono_tracker.cpp) times them.
