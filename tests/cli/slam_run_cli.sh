@@ -36,6 +36,10 @@ assert abs(max(scales) / min(scales) - w["range"]) < 1e-3 * w["range"], (w, max(
 assert 1 <= w["range"] < 1.2, w
 nis = d["nis_by_feature_age"]
 assert sum(nis["matches"]) > 1000 and all(0 < m < 9.21 for m in nis["mean"] if m), nis
+# The filter's attitude against the truth: within 2 degrees on the rendered
+# room (1.0 measured), its vertical (synth-render writes gravity.txt) within 1.
+a = d["attitude_error_deg"]
+assert 0 < a["final"] <= a["max"] < 2 and 0 < a["tilt_final"] <= a["tilt_max"] < 1, a
 PY
 set +e
 err=$("$run" --dataset "$tmp/seq" --window 2 2>&1 >/dev/null); rc=$?

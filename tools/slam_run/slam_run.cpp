@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <numbers>
 #include <optional>
 
 #include <Eigen/Geometry>
@@ -27,7 +28,11 @@ struct Segment {
     std::vector<std::int64_t> t_ns;
     std::vector<core::CameraPose> poses;
     std::vector<std::optional<Vec3>> gt;
-    std::vector<core::Mat3> gt_R;  // ground-truth attitude (where gt has a value)
+    std::vector<core::Mat3> gt_R;             // ground-truth attitude (where gt has a value)
+    std::vector<std::optional<Vec3>> down_C;  // the true vertical, when the dataset has one
+    // The filter's attitude (its world is the map's first camera; pose()'s
+    // turns with the window adjustment's at its first optimisation).
+    std::vector<core::Mat3> filter_R;
 };
 
 // Rotation vector (axis times angle) of R.
@@ -56,6 +61,38 @@ std::optional<Vec3> rotationGain(const std::vector<core::CameraPose>& poses,
         return std::nullopt;
     }
     return sxy.cwiseQuotient(sxx).cast<core::Scalar>();
+}
+
+double angleDeg(const Vec3& a, const Vec3& b) {
+    const double c = std::clamp(static_cast<double>(a.normalized().dot(b.normalized())), -1.0, 1.0);
+    return std::acos(c) * 180.0 / std::numbers::pi;
+}
+
+// The filter's rotation since the segment's first frame against the ground
+// truth's, per frame (degrees): the whole rotation's error, and the error of
+// the vertical it carries from the first frame (where the dataset gives one).
+std::optional<AttitudeError> attitudeError(const Segment& seg) {
+    const auto& est_R = seg.filter_R;
+    const auto& gt_R = seg.gt_R;
+    if (est_R.size() != gt_R.size() || est_R.empty()) {
+        return std::nullopt;
+    }
+    AttitudeError e;
+    const std::optional<Vec3>& down0 = seg.down_C.front();
+    for (std::size_t k = 0; k < est_R.size(); ++k) {
+        const core::Mat3 est = est_R.front().transpose() * est_R[k];
+        const core::Mat3 gt = gt_R.front().transpose() * gt_R[k];
+        const double deg = static_cast<double>(rotationVector(gt.transpose() * est).norm()) *
+                           180.0 / std::numbers::pi;
+        e.max = std::max(e.max, deg);
+        e.final = deg;
+        if (down0 && seg.down_C[k]) {
+            const double tilt = angleDeg(*seg.down_C[k], est.transpose() * *down0);
+            e.tilt_max = std::max(e.tilt_max.value_or(0), tilt);
+            e.tilt_final = tilt;
+        }
+    }
+    return e;
 }
 
 // Sums over the frames, averaged into the result at the end.
@@ -118,6 +155,8 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         if (frame.T_CtoW_gt) {
             seg.gt_R.push_back(frame.T_CtoW_gt->R_CtoW);
         }
+        seg.down_C.push_back(frame.gravity_down_C);
+        seg.filter_R.push_back(tracker.filter().pose().R_CtoW);
         if (stats.relocalised) {
             ++result.relocalisations;
             result.relocalisations_verified += stats.relocalise_verified ? 1 : 0;
@@ -191,6 +230,7 @@ void evaluateLongestSegment(const std::vector<Segment>& segments, int window_fra
     if (const auto g = rotationGain(longest->poses, longest->gt_R, 30)) {
         result.rotation_gain_30 = g->cast<double>();
     }
+    result.attitude_error_deg = attitudeError(*longest);
 }
 
 }  // namespace
@@ -321,6 +361,14 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
             const Eigen::Vector3d& g = *r.rotation_gain_30;
             s += ",\"rotation_gain_30_frames\":[" + num(g.x()) + "," + num(g.y()) + "," +
                  num(g.z()) + "]";
+        }
+        if (r.attitude_error_deg) {
+            const AttitudeError& e = *r.attitude_error_deg;
+            s += ",\"attitude_error_deg\":{\"max\":" + num(e.max) + ",\"final\":" + num(e.final);
+            if (e.tilt_max && e.tilt_final) {
+                s += ",\"tilt_max\":" + num(*e.tilt_max) + ",\"tilt_final\":" + num(*e.tilt_final);
+            }
+            s += "}";
         }
     }
     s += ",\"gravity_source\":" + jsonString(r.gravity_source);

@@ -36,6 +36,15 @@ struct SlamRunOptions {
         progress;
 };
 
+struct AttitudeError {
+    double max = 0;  // the whole rotation's error, degrees
+    double final = 0;
+    // The error of the vertical (gravity's direction in the camera) carried
+    // from the first frame, where the dataset gives the true one.
+    std::optional<double> tilt_max;
+    std::optional<double> tilt_final;
+};
+
 struct SlamRunResult {
     std::size_t frames = 0;
     std::size_t tracked_frames = 0;  // frames tracked (healthy, not starting a replacement map)
@@ -74,6 +83,13 @@ struct SlamRunResult {
     // the tracker's rotation over 30 frames against the ground truth's: 1
     // when it turns as much as the camera did (docs/accuracy.md, issue 18).
     std::optional<Eigen::Vector3d> rotation_gain_30;
+    // The filter's rotation since the segment's first frame against the
+    // ground truth's: its largest and last error. The vertical the scale
+    // estimator measures objects along is carried by this rotation (in the
+    // served map too: pose() and the vertical turn together with the window
+    // adjustment's world); on a map started in motion it can turn away by
+    // tens of degrees (docs/slam.md, "A map started in motion").
+    std::optional<AttitudeError> attitude_error_deg;
     // Mean normalised innovation squared of the accepted matches per feature
     // age bin (searches so far: [1, 5), [5, 15), [15, 50), 50+; 2 = consistent)
     // and the matches in each: is a young feature as trustworthy as its S says?
