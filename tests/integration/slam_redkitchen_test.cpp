@@ -213,22 +213,29 @@ TEST(SlamKitti, TheRandomWalkVelocityNoiseKeepsKittiWithinFivePercent) {
 }
 
 // Issue 21: every third frame (10 Hz): the motion between frames is three
-// times larger; the coarse-to-fine search keeps every frame tracked in one map.
-TEST(SlamRedkitchen, TenHertzIsTrackedInOneMap) {
+// times larger; the coarse-to-fine search keeps every frame tracked without a
+// loss. The filter's start in motion turns 14 degrees where the camera turned
+// 6 (docs/slam.md "A map started in motion"): the start check restarts the map
+// at 1.6 s, and the run is then tracked to its end in that map.
+TEST(SlamRedkitchen, TenHertzIsTrackedWithoutALoss) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
     SlamRunOptions opt;
     opt.selection.stride = 3;
     const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
-    std::printf("redkitchen at 10 Hz: %zu/%zu tracked, %d re-init, ATE %.2f%%\n", r->tracked_frames,
-                r->frames, r->reinitialisations, 100 * r->ate_rmse_m / r->path_length_m);
+    std::printf(
+        "redkitchen at 10 Hz: %zu/%zu tracked, %d re-init, %zu start restarts, ATE %.2f%%\n",
+        r->tracked_frames, r->frames, r->reinitialisations, r->start_restarts,
+        100 * r->ate_rmse_m / r->path_length_m);
     EXPECT_EQ(r->frames, 200U);
-    EXPECT_EQ(r->tracked_frames, 200U);
+    EXPECT_GE(r->tracked_frames, 199U) << "the restart's frame starts the map";
     EXPECT_EQ(r->reinitialisations, 0);
+    EXPECT_LE(r->start_restarts, 1U);
     ASSERT_TRUE(r->has_gt);
-    // The issue asks 3% on every seed; the default seed's 10 Hz run is held
-    // to its measured figure with room (docs/slam.md has seeds 1-8).
-    EXPECT_LE(r->ate_rmse_m, 0.05 * r->path_length_m);
+    // The issue's 3%, on the restarted map (3.4% before the start check).
+    EXPECT_LE(r->ate_rmse_m, 0.03 * r->path_length_m);
+    ASSERT_TRUE(r->attitude_error_deg && r->attitude_error_deg->tilt_max);
+    EXPECT_LT(*r->attitude_error_deg->tilt_max, 10.0) << "19-25 degrees before the start check";
 }
 
 }  // namespace

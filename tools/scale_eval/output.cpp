@@ -136,6 +136,7 @@ void appendCounts(std::string& s, const EvalResult& r, const daemon::PipelineCon
     s += ",\"unreadable_frames\":" + std::to_string(r.unreadable_frames);
     s += ",\"epochs\":" + std::to_string(r.epochs);
     s += ",\"relocalisations\":" + std::to_string(r.relocalisations);
+    s += ",\"start_restarts\":" + std::to_string(r.start_restarts);
     s += ",\"detect_every_frames\":" + std::to_string(cfg.detection.every_frames);
     s += ",\"detect_phase_frames\":" + std::to_string(cfg.detection.phase_frames);
     s += ",\"updates\":" + std::to_string(r.updates.size());

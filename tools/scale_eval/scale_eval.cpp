@@ -478,6 +478,13 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
     if (stats.gyro == core::slam::GyroCoverage::kOk) {
         ++r.gyro_frames;
     }
+    if (stats.start_redone) {
+        // The start check replaced a young map (tracker.start_check_s): a new
+        // map, whose frame, vertical and unit are not the old one's. Its
+        // epoch ends as a lost map's does (the daemon starts a new epoch).
+        ++r.start_restarts;
+        endMap(r);
+    }
 
     FrameRow row;
     row.frame = frame.id;

@@ -136,6 +136,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
     result.ms_per_frame_max = std::max(result.ms_per_frame_max, r.track_ms);
     ++result.frames;
     result.near_loss_frames += stats.near_loss ? 1 : 0;
+    result.start_restarts += stats.start_redone ? 1 : 0;
     if (r.ok) {
         // A frame that starts a replacement map was not tracked.
         if (!stats.new_map || result.frames == 1) {
@@ -147,6 +148,9 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
             result.nis_by_age_count[b] += stats.nis_count[b];
         }
         sums.in_map += stats.features;
+        if (stats.start_redone) {
+            segments.emplace_back();  // a new map: its own origin, attitude and unit
+        }
         Segment& seg = segments.back();
         seg.t_ns.push_back(frame.t_ns);
         seg.poses.push_back(tracker.pose());
@@ -325,6 +329,7 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"relocalise_dropped_features\":" + std::to_string(r.relocalise_dropped_features);
     s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
     s += ",\"near_loss_frames\":" + std::to_string(r.near_loss_frames);
+    s += ",\"start_restarts\":" + std::to_string(r.start_restarts);
     if (r.window_ba_optimisations > 0) {
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +
              ",\"mean_points\":" + num(r.window_ba_mean_points) +

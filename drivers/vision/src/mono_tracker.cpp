@@ -1,15 +1,18 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 
 #include <scaled/core/slam/feature_model.h>
 #include <scaled/core/slam/quaternion.h>
 #include <scaled/drivers/vision/mono_tracker.h>
+#include <scaled/drivers/vision/two_view.h>
 
 namespace scaled::drivers::vision {
 
@@ -90,6 +93,11 @@ core::Status validate(const TrackerConfig& c) {
         {"gyro_bias_sigma_radps", d(c.gyro_bias_sigma_radps), L::gyro_bias_sigma_radps},
         {"gyro_bias_time_s", d(c.gyro_bias_time_s), L::gyro_bias_time_s},
         {"gyro_max_gap_s", d(c.gyro_max_gap_s), L::gyro_max_gap_s},
+        {"start_check_s", d(c.start_check_s), L::start_check_s},
+        {"start_check_deg", d(c.start_check_deg), L::start_check_deg},
+        {"start_check_flow_px", d(c.start_check_flow_px), L::start_check_flow_px},
+        {"start_check_depth_rel_sigma", d(c.start_check_depth_rel_sigma),
+         L::start_check_depth_rel_sigma},
         {"min_ncc", d(c.match.min_ncc), L::min_ncc},
         {"max_search_pixels", d(c.match.max_search_pixels), L::max_search_pixels},
     };
@@ -157,6 +165,16 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, std::optional<slam::WindowBa> ba,
     matcher_.reserve(config.patch_size, std::max({config.match.max_search_pixels,
                                                   config.coarse_max_search_pixels, 3}));
     reloc_candidates_.reserve(static_cast<size_t>(config.slam.max_features));
+    {
+        const auto n = static_cast<size_t>(config.slam.max_features);
+        auto& sc = start_check_;
+        sc.px_S.reserve(n);
+        sc.x_S.reserve(n);
+        sc.x_K.reserve(n);
+        sc.px_K.reserve(n);
+        sc.depth_K.reserve(n);
+        sc.scratch.reserve(n);
+    }
     corner_briefs_.reserve(static_cast<size_t>(config.relocalise_corners));
     corner_has_brief_.reserve(static_cast<size_t>(config.relocalise_corners));
     reloc_points_W_.reserve(static_cast<size_t>(config.slam.max_features));
@@ -672,6 +690,10 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     has_map_ = true;
     stats.new_map = true;
     stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
+    start_check_.active = config_.start_check_s > 0;
+    start_check_.map_t0_ns = t_ns;
+    start_check_.down_S = gravity_down_C_;
+    beginStartCheckLink();
     countMap(stats);
     stats.visible = stats.added;
     stats.health = slam_.health();
@@ -929,9 +951,139 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     copyUpdateReport(report, stats);
     stats.near_loss = countNearLoss(report, coarse_frame);
     manageMapAfterUpdate(t_ns, gray, report.bad_frame, stats);
+    if (start_check_.active && stats.health == slam::SlamHealth::kOk &&
+        checkStart(t_ns, gray, stats)) {
+        stats.stage_us.map = lap.next();
+        return stats;
+    }
     adjustWindow(stats);
     stats.stage_us.map = lap.next();
     return stats;
+}
+
+void MonoTracker::beginStartCheckLink() {
+    StartCheck& c = start_check_;
+    c.suspect = false;
+    c.next_flow_px = 0;
+    c.R_StoW = slam_.pose().R_CtoW;
+    c.px_S.clear();
+    for (const auto& o : slam_.observations()) {
+        c.px_S.emplace_back(o.id, o.z_px);
+    }
+}
+
+double MonoTracker::collectStartPairs() {
+    StartCheck& c = start_check_;
+    c.x_S.clear();
+    c.x_K.clear();
+    c.px_K.clear();
+    c.scratch.clear();
+    const auto& cam = slam_.camera();
+    for (const auto& o : slam_.observations()) {
+        const auto it = std::find_if(c.px_S.begin(), c.px_S.end(),
+                                     [&](const auto& p) { return p.first == o.id; });
+        if (it == c.px_S.end()) {
+            continue;
+        }
+        const auto ray_S = cam.unproject(it->second);
+        const auto ray_K = cam.unproject(o.z_px);
+        if (!ray_S || !ray_K || !(ray_S->z() > 0) || !(ray_K->z() > 0)) {
+            continue;
+        }
+        c.x_S.emplace_back(ray_S->head<2>() / ray_S->z());
+        c.x_K.emplace_back(ray_K->head<2>() / ray_K->z());
+        c.px_K.push_back(o.z_px);
+        c.scratch.push_back(static_cast<double>((o.z_px - it->second).norm()));
+    }
+    if (c.x_S.size() < static_cast<std::size_t>(TrackerConfig::kStartCheckMinPairs)) {
+        return -1;
+    }
+    const auto mid = c.scratch.begin() + static_cast<std::ptrdiff_t>(c.scratch.size() / 2);
+    std::nth_element(c.scratch.begin(), mid, c.scratch.end());
+    return *mid;
+}
+
+bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
+    StartCheck& c = start_check_;
+    if (static_cast<double>(t_ns - c.map_t0_ns) * 1e-9 > config_.start_check_s) {
+        c.active = false;
+        return false;
+    }
+    // The link's features seen now: their pixels then and now.
+    const double flow_px = collectStartPairs();
+    if (flow_px < std::max(config_.start_check_flow_px, c.next_flow_px)) {
+        return false;
+    }
+    c.depth_K.assign(c.x_K.size(), 0.0);
+    const double focal = static_cast<double>(slam_.camera().intrinsics().fx);
+    const auto two = estimateTwoViewMotion(c.x_S, c.x_K, focal, 1.0, c.depth_K);
+    if (!two || two->inliers < TrackerConfig::kStartCheckMinInliers) {
+        return false;
+    }
+    // The link's rotation by the two views and by the filter.
+    const core::Mat3 R_KtoS_filter = c.R_StoW.transpose() * slam_.pose().R_CtoW;
+    const Eigen::AngleAxis<Scalar> diff(two->R_KtoS.transpose() * R_KtoS_filter);
+    const double diff_deg = std::abs(static_cast<double>(diff.angle())) * 180.0 / std::numbers::pi;
+    if (diff_deg <= config_.start_check_deg) {
+        // Agreed: the next link starts here, the vertical carried across this one.
+        c.down_S = R_KtoS_filter.transpose() * c.down_S;
+        beginStartCheckLink();
+        return false;
+    }
+    if (!c.suspect) {
+        // Once may be the two views' error: look again over a longer baseline.
+        c.suspect = true;
+        c.next_flow_px = flow_px * TrackerConfig::kStartCheckConfirm;
+        return false;
+    }
+    // The filter has turned away from both: start again here.
+    return restartFromTwoViews(t_ns, gray, two->R_KtoS, stats);
+}
+
+bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
+                                      const core::Mat3& R_KtoS, TrackStats& stats) {
+    StartCheck& c = start_check_;
+    c.scratch.clear();
+    for (const double z : c.depth_K) {
+        if (z > 0) {
+            c.scratch.push_back(z);
+        }
+    }
+    if (c.scratch.size() < static_cast<std::size_t>(TrackerConfig::kStartCheckMinInliers) / 2) {
+        return false;
+    }
+    const auto zmid = c.scratch.begin() + static_cast<std::ptrdiff_t>(c.scratch.size() / 2);
+    std::nth_element(c.scratch.begin(), zmid, c.scratch.end());
+    const double unit = *zmid;
+    // The vertical carried by the two views, not the filter.
+    const core::Vec3 down_K = R_KtoS.transpose() * c.down_S;
+    const core::Vec3 map_down = gravity_down_C_;
+    DepthPrior saved_prior = std::move(depth_prior_);
+    const core::Scalar saved_sigma = depth_prior_rel_sigma_;
+    // A new corner takes the depth of the two views' point within 5 px of it
+    // (in the unit of their median); the others start at rho0.
+    depth_prior_ = [this, unit](const core::Vec2& px) -> std::optional<core::Scalar> {
+        const StartCheck& sc = start_check_;
+        double best = 25.0;
+        std::optional<core::Scalar> depth;
+        for (std::size_t i = 0; i < sc.px_K.size(); ++i) {
+            const double d2 = static_cast<double>((sc.px_K[i] - px).squaredNorm());
+            if (sc.depth_K[i] > 0 && d2 < best) {
+                best = d2;
+                depth = static_cast<core::Scalar>(sc.depth_K[i] / unit);
+            }
+        }
+        return depth;
+    };
+    depth_prior_rel_sigma_ = static_cast<core::Scalar>(config_.start_check_depth_rel_sigma);
+    gravity_down_C_ = down_K;
+    startNewMap(t_ns, gray, stats);
+    stats.start_redone = true;
+    start_check_.active = false;  // one restart per start
+    gravity_down_C_ = map_down;
+    depth_prior_ = std::move(saved_prior);
+    depth_prior_rel_sigma_ = saved_sigma;
+    return true;
 }
 
 }  // namespace scaled::drivers::vision

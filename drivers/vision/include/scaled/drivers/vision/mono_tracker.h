@@ -123,6 +123,25 @@ struct TrackerConfig {
     // map's own rotation rate over the interval is averaged with this time
     // constant (seconds) into the estimate the next frames subtract. 0: none.
     double gyro_bias_time_s = 10;
+    // The start check (docs/slam.md "A map started in motion"): for its first
+    // start_check_s seconds a new map's rotation is compared with two views'
+    // (two_view.h: the essential matrix of the features it began with, or
+    // began the current link with, and where they are now), whenever their
+    // median image motion reaches start_check_flow_px. Two links in a row
+    // that disagree by more than start_check_deg (the second over at least
+    // kStartCheckConfirm times the first's motion) restart the map at that
+    // frame: its vertical carried by the two views' rotation, its first
+    // features at the two views' depths (relative std start_check_depth_rel_sigma,
+    // the unit their median). A link that agrees starts the next one. The
+    // filter can take a slide for a turn while its depths are unknown and
+    // then keeps a vertical 20-60 degrees off; two views cannot. 0: off.
+    double start_check_s = 2;
+    double start_check_deg = 3;
+    double start_check_flow_px = 15;
+    double start_check_depth_rel_sigma = 0.3;
+    static constexpr double kStartCheckConfirm = 1.5;
+    static constexpr int kStartCheckMinPairs = 12;
+    static constexpr int kStartCheckMinInliers = 10;
 };
 
 // The allowed values of the front end's parameters (core/param_limits.h; the
@@ -159,6 +178,10 @@ struct TrackerLimits {
     static constexpr core::ParamLimits gyro_bias_sigma_radps = core::closed(0, 10);
     static constexpr core::ParamLimits gyro_bias_time_s = core::closed(0, 3600);
     static constexpr core::ParamLimits gyro_max_gap_s = core::openClosed(0, 1);
+    static constexpr core::ParamLimits start_check_s = core::closed(0, 60);
+    static constexpr core::ParamLimits start_check_deg = core::openClosed(0, 90);
+    static constexpr core::ParamLimits start_check_flow_px = core::openClosed(0, 1000);
+    static constexpr core::ParamLimits start_check_depth_rel_sigma = core::openClosed(0, 10);
 };
 
 // Checks TrackerLimits, core::slam::SlamLimits and the parameters' relations;
@@ -193,7 +216,10 @@ struct StageTimes {
 
 struct TrackStats {
     core::slam::SlamHealth health = core::slam::SlamHealth::kUninitialised;
-    bool new_map = false;        // this frame started a new map
+    bool new_map = false;  // this frame started a new map
+    // ...because the start check found the previous one's start wrong (the
+    // previous map was at most start_check_s old).
+    bool start_redone = false;
     int predicted = 0;           // features searched
     int matched = 0;             // found by NCC
     int inliers = 0;             // low-innovation inliers of 1-point RANSAC
@@ -430,6 +456,34 @@ private:
     int near_loss_run_ = 0;
     DepthPrior depth_prior_;
     core::Scalar depth_prior_rel_sigma_ = 0;
+    // The start check (start_check_s): the current link's first frame (its
+    // features' pixels, the filter's attitude, the vertical), and whether the
+    // last check disagreed. Buffers reserved at create().
+    struct StartCheck {
+        bool active = false;
+        bool suspect = false;
+        std::int64_t map_t0_ns = 0;
+        double next_flow_px = 0;
+        core::Mat3 R_StoW = core::Mat3::Identity();  // the filter's attitude at the link's start
+        core::Vec3 down_S = core::Vec3(0, 1, 0);     // gravity in the link's first camera
+        std::vector<std::pair<std::uint64_t, core::Vec2>> px_S;
+        std::vector<core::Vec2> x_S;  // pairs of the check, normalised
+        std::vector<core::Vec2> x_K;
+        std::vector<core::Vec2> px_K;
+        std::vector<double> depth_K;
+        std::vector<double> scratch;
+    };
+    StartCheck start_check_;
+    void beginStartCheckLink();
+    // After a tracked frame: true when it restarted the map.
+    bool checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats);
+    // The link's features seen in this frame into x_S, x_K, px_K: their
+    // median motion in pixels, or -1 with fewer than kStartCheckMinPairs.
+    double collectStartPairs();
+    // A new map at this frame: the vertical by R_KtoS, the first features at
+    // depth_K's depths. false (nothing done) with too few depths.
+    bool restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray, const core::Mat3& R_KtoS,
+                             TrackStats& stats);
 };
 
 }  // namespace scaled::drivers::vision
