@@ -4,7 +4,7 @@
 # starts with the camera moving at 0.26 m/s. Skips without ../shared.
 #   - seed 4 at 30 Hz: without the start check (--set start_check_s=0) the
 #     filter's vertical turns more than 30 degrees away (55 measured); with it
-#     (the default) the map is restarted once and keeps it within 10 (4).
+#     (the default) the map is restarted once and keeps it within 10 (8.9).
 #   - the reversing tool refuses a folder that is not a dataset and a target
 #     that is not empty, and gives the frames in reverse with their poses.
 #   tests/cli/start_in_motion_cli.sh PATH/TO/slam-run SOURCE_DIR SHARED_DIR

@@ -33,6 +33,8 @@ struct Segment {
     // The filter's attitude (its world is the map's first camera; pose()'s
     // turns with the window adjustment's at its first optimisation).
     std::vector<core::Mat3> filter_R;
+    // The map's own vertical in the camera (what the estimator measures along).
+    std::vector<Vec3> map_down_C;
 };
 
 // Rotation vector (axis times angle) of R.
@@ -69,8 +71,9 @@ double angleDeg(const Vec3& a, const Vec3& b) {
 }
 
 // The filter's rotation since the segment's first frame against the ground
-// truth's, per frame (degrees): the whole rotation's error, and the error of
-// the vertical it carries from the first frame (where the dataset gives one).
+// truth's, per frame (degrees), and the error of the map's vertical in the
+// camera (where the dataset gives the true one): the vertical the map was
+// given at its start carried by the filter's rotation.
 std::optional<AttitudeError> attitudeError(const Segment& seg) {
     const auto& est_R = seg.filter_R;
     const auto& gt_R = seg.gt_R;
@@ -78,7 +81,7 @@ std::optional<AttitudeError> attitudeError(const Segment& seg) {
         return std::nullopt;
     }
     AttitudeError e;
-    const std::optional<Vec3>& down0 = seg.down_C.front();
+
     for (std::size_t k = 0; k < est_R.size(); ++k) {
         const core::Mat3 est = est_R.front().transpose() * est_R[k];
         const core::Mat3 gt = gt_R.front().transpose() * gt_R[k];
@@ -86,8 +89,8 @@ std::optional<AttitudeError> attitudeError(const Segment& seg) {
                            180.0 / std::numbers::pi;
         e.max = std::max(e.max, deg);
         e.final = deg;
-        if (down0 && seg.down_C[k]) {
-            const double tilt = angleDeg(*seg.down_C[k], est.transpose() * *down0);
+        if (seg.down_C[k]) {
+            const double tilt = angleDeg(*seg.down_C[k], seg.map_down_C[k]);
             e.tilt_max = std::max(e.tilt_max.value_or(0), tilt);
             e.tilt_final = tilt;
         }
@@ -161,6 +164,8 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         }
         seg.down_C.push_back(frame.gravity_down_C);
         seg.filter_R.push_back(tracker.filter().pose().R_CtoW);
+        seg.map_down_C.push_back(tracker.filter().pose().R_CtoW.transpose() *
+                                 -tracker.filter().upW());
         if (stats.relocalised) {
             ++result.relocalisations;
             result.relocalisations_verified += stats.relocalise_verified ? 1 : 0;

@@ -39,8 +39,9 @@ struct SlamRunOptions {
 struct AttitudeError {
     double max = 0;  // the whole rotation's error, degrees
     double final = 0;
-    // The error of the vertical (gravity's direction in the camera) carried
-    // from the first frame, where the dataset gives the true one.
+    // The error of the map's vertical in the camera (the one it was given at
+    // its start, carried by the filter's rotation), where the dataset gives
+    // the true one.
     std::optional<double> tilt_max;
     std::optional<double> tilt_final;
 };

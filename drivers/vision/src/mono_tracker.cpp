@@ -690,9 +690,11 @@ void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats
     has_map_ = true;
     stats.new_map = true;
     stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
-    start_check_.active = config_.start_check_s > 0;
+    // A map whose first depths are given has its start fixed already.
+    start_check_.active = config_.start_check_s > 0 && !depth_prior_;
     start_check_.map_t0_ns = t_ns;
     start_check_.down_S = gravity_down_C_;
+    start_check_.gyro_bias_C = gyro_bias_C_;
     beginStartCheckLink();
     countMap(stats);
     stats.visible = stats.added;
@@ -1017,8 +1019,9 @@ bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats&
     c.depth_K.assign(c.x_K.size(), 0.0);
     const double focal = static_cast<double>(slam_.camera().intrinsics().fx);
     const auto two = estimateTwoViewMotion(c.x_S, c.x_K, focal, 1.0, c.depth_K);
-    if (!two || two->inliers < TrackerConfig::kStartCheckMinInliers) {
-        return false;
+    if (!two || two->inliers < TrackerConfig::kStartCheckMinInliers ||
+        two->median_parallax_deg < TrackerConfig::kStartCheckMinParallaxDeg) {
+        return false;  // too few pairs, or a turn with too little slide for two views
     }
     // The link's rotation by the two views and by the filter.
     const core::Mat3 R_KtoS_filter = c.R_StoW.transpose() * slam_.pose().R_CtoW;
@@ -1077,6 +1080,8 @@ bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
     };
     depth_prior_rel_sigma_ = static_cast<core::Scalar>(config_.start_check_depth_rel_sigma);
     gravity_down_C_ = down_K;
+    // The bias learned from the map given up is not trusted.
+    gyro_bias_C_ = c.gyro_bias_C;
     startNewMap(t_ns, gray, stats);
     stats.start_redone = true;
     start_check_.active = false;  // one restart per start

@@ -179,7 +179,7 @@ core::Result<TwoViewMotion> estimateTwoViewMotion(std::span<const core::Vec2> x_
         A.col(1) = -p.ray_K[j];
         const Eigen::Vector2d z = A.colPivHouseholderQr().solve(-p.t_S_inK);
         if (!depth_K.empty() && z(0) > 0 && z(1) > 0 && z(1) < 50) {
-            depth_K[p.index[j]] = z(1);
+            depth_K[p.index[j]] = z(1) * p.ray_K[j].norm();  // along the ray, not its z
         }
     }
     if (!parallax.empty()) {

@@ -30,7 +30,7 @@ double angleDeg(const Mat3& R) {
 struct Scene {
     std::vector<Vec2> x_S;
     std::vector<Vec2> x_K;
-    std::vector<double> depth_K;  // true
+    std::vector<double> depth_K;  // true distance from K along the ray
 };
 
 Scene makeScene(const Mat3& R_KtoS, const Vec3& p_KinS, int n, double noise_px, int outliers,
@@ -55,7 +55,7 @@ Scene makeScene(const Mat3& R_KtoS, const Vec3& p_KinS, int n, double noise_px, 
             k.x() += static_cast<Scalar>(40 / focal_px);
         }
         s.x_K.push_back(k);
-        s.depth_K.push_back(static_cast<double>(p_K.z()));
+        s.depth_K.push_back(static_cast<double>(p_K.norm()));  // along the ray
     }
     return s;
 }

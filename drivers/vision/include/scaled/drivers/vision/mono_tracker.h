@@ -127,14 +127,18 @@ struct TrackerConfig {
     // start_check_s seconds a new map's rotation is compared with two views'
     // (two_view.h: the essential matrix of the features it began with, or
     // began the current link with, and where they are now), whenever their
-    // median image motion reaches start_check_flow_px. Two links in a row
-    // that disagree by more than start_check_deg (the second over at least
-    // kStartCheckConfirm times the first's motion) restart the map at that
-    // frame: its vertical carried by the two views' rotation, its first
-    // features at the two views' depths (relative std start_check_depth_rel_sigma,
-    // the unit their median). A link that agrees starts the next one. The
-    // filter can take a slide for a turn while its depths are unknown and
-    // then keeps a vertical 20-60 degrees off; two views cannot. 0: off.
+    // median image motion reaches start_check_flow_px and their median
+    // parallax (the rotation taken out) kStartCheckMinParallaxDeg. A link that
+    // disagrees by more than start_check_deg is looked at again once its
+    // features have moved kStartCheckConfirm times as far; a second
+    // disagreement restarts the map at that frame: its vertical carried by
+    // the two views' rotation, its first features at the two views' depths
+    // (relative std start_check_depth_rel_sigma, the unit their median), the
+    // gyro bias as it was when the map began. A link that agrees starts the
+    // next one. A map whose first depths are given (setDepthPrior) is not
+    // checked. The filter can take a slide for a turn while its depths are
+    // unknown and then keeps a vertical 20-60 degrees off; two views cannot.
+    // 0: off.
     double start_check_s = 2;
     double start_check_deg = 3;
     double start_check_flow_px = 15;
@@ -142,6 +146,7 @@ struct TrackerConfig {
     static constexpr double kStartCheckConfirm = 1.5;
     static constexpr int kStartCheckMinPairs = 12;
     static constexpr int kStartCheckMinInliers = 10;
+    static constexpr double kStartCheckMinParallaxDeg = 0.5;
 };
 
 // The allowed values of the front end's parameters (core/param_limits.h; the
@@ -464,8 +469,9 @@ private:
         bool suspect = false;
         std::int64_t map_t0_ns = 0;
         double next_flow_px = 0;
-        core::Mat3 R_StoW = core::Mat3::Identity();  // the filter's attitude at the link's start
-        core::Vec3 down_S = core::Vec3(0, 1, 0);     // gravity in the link's first camera
+        core::Mat3 R_StoW = core::Mat3::Identity();   // the filter's attitude at the link's start
+        core::Vec3 down_S = core::Vec3(0, 1, 0);      // gravity in the link's first camera
+        core::Vec3 gyro_bias_C = core::Vec3::Zero();  // the gyro bias when the map began
         std::vector<std::pair<std::uint64_t, core::Vec2>> px_S;
         std::vector<core::Vec2> x_S;  // pairs of the check, normalised
         std::vector<core::Vec2> x_K;

@@ -28,8 +28,8 @@ struct TwoViewMotion {
 // x_S, x_K: the same points in views S and K, normalised image coordinates
 // (x/z, y/z of the undistorted ray); threshold_px / focal_px is the RANSAC
 // threshold on the unit image plane. depth_K (same size as x_K, or empty):
-// each point's depth in K in units of |t|, 0 where it is not an inlier or not
-// in front of both views. An error when there are fewer than 8 pairs, the
+// each point's distance from K along its ray in units of |t|, 0 where it is
+// not an inlier or not in front of both views. An error when there are fewer than 8 pairs, the
 // sizes differ or no motion is found (OpenCV's exceptions are caught here).
 // Allocates (OpenCV): used on a new map's first seconds only.
 [[nodiscard]] core::Result<TwoViewMotion> estimateTwoViewMotion(std::span<const core::Vec2> x_S,
