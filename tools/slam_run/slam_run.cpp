@@ -33,8 +33,8 @@ struct Segment {
     // The filter's attitude (its world is the map's first camera; pose()'s
     // turns with the window adjustment's at its first optimisation).
     std::vector<core::Mat3> filter_R;
-    // The map's own vertical in the camera (what the estimator measures along).
-    std::vector<Vec3> map_down_C;
+    // The map's vertical (what the estimator measures along), in its world.
+    Vec3 up_W = Vec3::Zero();
 };
 
 // Rotation vector (axis times angle) of R.
@@ -90,7 +90,7 @@ std::optional<AttitudeError> attitudeError(const Segment& seg) {
         e.max = std::max(e.max, deg);
         e.final = deg;
         if (seg.down_C[k]) {
-            const double tilt = angleDeg(*seg.down_C[k], seg.map_down_C[k]);
+            const double tilt = angleDeg(*seg.down_C[k], est_R[k].transpose() * -seg.up_W);
             e.tilt_max = std::max(e.tilt_max.value_or(0), tilt);
             e.tilt_final = tilt;
         }
@@ -164,8 +164,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
         }
         seg.down_C.push_back(frame.gravity_down_C);
         seg.filter_R.push_back(tracker.filter().pose().R_CtoW);
-        seg.map_down_C.push_back(tracker.filter().pose().R_CtoW.transpose() *
-                                 -tracker.filter().upW());
+        seg.up_W = tracker.filter().upW();
         if (stats.relocalised) {
             ++result.relocalisations;
             result.relocalisations_verified += stats.relocalise_verified ? 1 : 0;
