@@ -2,9 +2,12 @@
 # A map started in motion (docs/slam.md): redkitchen played backwards
 # (tools/reverse_sequence.py: the lists reversed, the image folders linked)
 # starts with the camera moving at 0.26 m/s. Skips without ../shared.
-#   - seed 4 at 30 Hz: without the start check (--set start_check_s=0) the
-#     filter's vertical turns more than 30 degrees away (55 measured); with it
-#     (the default) the map is restarted once and keeps it within 10 (8.9).
+#   - seeds 4 and 6 at 30 Hz: without the start check (--set start_check_s=0)
+#     the filter's vertical turns more than 30 degrees away (58 and 42
+#     measured); with it (the default) the map is begun again, in the same
+#     frame and unit, one to three times (twice measured), every frame is
+#     tracked in that one map and the vertical stays within 12 degrees (7.3
+#     and 9.9).
 #   - the reversing tool refuses a folder that is not a dataset and a target
 #     that is not empty, and gives the frames in reverse with their poses.
 #   tests/cli/start_in_motion_cli.sh PATH/TO/slam-run SOURCE_DIR SHARED_DIR
@@ -40,15 +43,20 @@ set +e
 set -e
 [[ $rc1 -ne 0 && $rc2 -ne 0 ]] || fail "a non-empty target ($rc1) or a folder without rgb.txt ($rc2) accepted"
 
-off=$("$run" --dataset "$tmp/rev" --seed 4 --json --set start_check_s=0)
-on=$("$run" --dataset "$tmp/rev" --seed 4 --json)
-"$py" - "$off" "$on" <<'PY' || fail "the start check does not keep the vertical: $on (without it: $off)"
+for seed in 4 6; do
+    off=$("$run" --dataset "$tmp/rev" --seed $seed --json --set start_check_s=0)
+    on=$("$run" --dataset "$tmp/rev" --seed $seed --json)
+    "$py" - "$seed" "$off" "$on" <<'PY' || fail "seed $seed: the start check does not keep the vertical: $on (without it: $off)"
 import json, sys
-off, on = json.loads(sys.argv[1]), json.loads(sys.argv[2])
-print("without the check: tilt %.1f deg, ATE %.2f%%; with it: tilt %.1f deg, ATE %.2f%%, %d restart(s)" % (
-    off["attitude_error_deg"]["tilt_max"], off["ate_percent_of_path"],
-    on["attitude_error_deg"]["tilt_max"], on["ate_percent_of_path"], on["start_restarts"]))
+seed, off, on = sys.argv[1], json.loads(sys.argv[2]), json.loads(sys.argv[3])
+print("seed %s without the check: tilt %.1f deg, ATE %.2f%%; with it: tilt %.1f deg, ATE %.2f%%, "
+      "%d restart(s), %d/%d frames tracked" % (
+    seed, off["attitude_error_deg"]["tilt_max"], off["ate_percent_of_path"],
+    on["attitude_error_deg"]["tilt_max"], on["ate_percent_of_path"], on["start_restarts"],
+    on["tracked_frames"], on["frames"]))
 assert off["start_restarts"] == 0 and off["attitude_error_deg"]["tilt_max"] > 30, off
-assert on["start_restarts"] == 1 and on["reinitialisations"] == 0, on
-assert on["attitude_error_deg"]["tilt_max"] < 10 and on["ate_percent_of_path"] < 3, on
+assert 1 <= on["start_restarts"] <= 3 and on["reinitialisations"] == 0, on
+assert on["tracked_frames"] == on["frames"] == 600, on
+assert on["attitude_error_deg"]["tilt_max"] < 12 and on["ate_percent_of_path"] < 3, on
 PY
+done

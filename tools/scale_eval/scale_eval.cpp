@@ -478,13 +478,9 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
     if (stats.gyro == core::slam::GyroCoverage::kOk) {
         ++r.gyro_frames;
     }
-    if (stats.start_redone) {
-        // The start check replaced a young map (tracker.start_check_s): a new
-        // map, whose frame, vertical and unit are not the old one's. Its
-        // epoch ends as a lost map's does (the daemon starts a new epoch).
-        ++r.start_restarts;
-        endMap(r);
-    }
+    // The start check began a young map again (tracker.start_check_s) in
+    // the same frame and unit: the epoch goes on, as the daemon's does.
+    r.start_restarts += stats.start_redone ? 1 : 0;
 
     FrameRow row;
     row.frame = frame.id;

@@ -172,7 +172,7 @@ struct EvalResult {
     std::size_t tracking_lost_frames = 0;
     int epochs = 1;
     int relocalisations = 0;  // losses the tracker recovered from in the same map (epoch)
-    int start_restarts = 0;   // young maps the start check replaced (each a new epoch)
+    int start_restarts = 0;   // young maps the start check began again (same epoch)
     std::size_t unreadable_frames = 0;
     bool has_ground_truth = false;
     std::string gravity_source;

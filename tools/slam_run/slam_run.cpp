@@ -151,9 +151,6 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
             result.nis_by_age_count[b] += stats.nis_count[b];
         }
         sums.in_map += stats.features;
-        if (stats.start_redone) {
-            segments.emplace_back();  // a new map: its own origin, attitude and unit
-        }
         Segment& seg = segments.back();
         seg.t_ns.push_back(frame.t_ns);
         seg.poses.push_back(tracker.pose());

@@ -58,8 +58,9 @@ struct SlamRunResult {
     int relocalise_dropped_features = 0;
     int relocalising_frames = 0;  // frames spent looking for the camera in a lost map
     int near_loss_frames = 0;     // near-loss frames (tracker.near_loss_ratio)
-    // Maps restarted by the start check (TrackerConfig::start_check_s): each
-    // is a new map (not counted in reinitialisations, not a loss).
+    // Maps the start check began again (TrackerConfig::start_check_s): the
+    // same map's frame and unit, new features (not a reinitialisation, not a
+    // loss, not a new segment).
     std::size_t start_restarts = 0;
     // tracker.window_ba: its optimisations, their mean points and residual
     // after (px); the trajectory is then the adjusted one (MonoTracker::pose).

@@ -804,6 +804,19 @@ bool EkfSlam::relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sig
     return true;
 }
 
+bool EkfSlam::restartAt(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p,
+                        Scalar sigma_theta) {
+    if (health_ == SlamHealth::kUninitialised || !T_CtoW.p_CinW.allFinite() ||
+        !T_CtoW.R_CtoW.allFinite() || !std::isfinite(sigma_p) || !std::isfinite(sigma_theta)) {
+        return false;
+    }
+    const Vec3 up_W = up_W_;
+    const std::int64_t frame = frame_;
+    initialise(t_ns, -up_W);
+    frame_ = frame;  // relocalise() counts this frame
+    return relocalise(t_ns, T_CtoW, sigma_p, sigma_theta);
+}
+
 int EkfSlam::removeFeaturesAddedAfter(std::int64_t frame) {
     int removed = 0;
     for (int s = static_cast<int>(features_.size()) - 1; s >= 0; --s) {

@@ -172,6 +172,7 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, std::optional<slam::WindowBa> ba,
         sc.x_S.reserve(n);
         sc.x_K.reserve(n);
         sc.px_K.reserve(n);
+        sc.id_K.reserve(n);
         sc.depth_K.reserve(n);
         sc.scratch.reserve(n);
     }
@@ -682,20 +683,27 @@ void MonoTracker::updateGyroBias(const slam::GyroRate& rate, const core::Mat3& R
 
 void MonoTracker::startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
     slam_.initialise(t_ns, gravity_down_C_);
+    stats.new_map = true;
+    beginMap(t_ns, gray, stats);
+}
+
+void MonoTracker::beginMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
     last_good_pose_ = slam_.pose();
     last_good_frame_ = slam_.frameIndex();
     clearAppearances();
     previous_frame_good_ = true;  // the map's origin: a reference for the gyro bias
     near_loss_run_ = 0;
     has_map_ = true;
-    stats.new_map = true;
     stats.added = addFeatures(gray, config_.slam.min_visible + config_.max_new_per_frame, true);
     // A map whose first depths are given has its start fixed already.
     start_check_.active = config_.start_check_s > 0 && !depth_prior_;
     start_check_.map_t0_ns = t_ns;
-    start_check_.down_S = gravity_down_C_;
+    if (stats.new_map) {
+        start_check_.restarts = 0;
+    }
     start_check_.gyro_bias_C = gyro_bias_C_;
-    beginStartCheckLink();
+    beginStartCheckLink({});
+    start_check_.R_chain = start_check_.R_StoW;
     countMap(stats);
     stats.visible = stats.added;
     stats.health = slam_.health();
@@ -954,7 +962,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     stats.near_loss = countNearLoss(report, coarse_frame);
     manageMapAfterUpdate(t_ns, gray, report.bad_frame, stats);
     if (start_check_.active && stats.health == slam::SlamHealth::kOk &&
-        checkStart(t_ns, gray, stats)) {
+        checkStart(t_ns, gray, preds, stats)) {
         stats.stage_us.map = lap.next();
         return stats;
     }
@@ -963,39 +971,54 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     return stats;
 }
 
-void MonoTracker::beginStartCheckLink() {
+void MonoTracker::beginStartCheckLink(std::span<const slam::FeaturePrediction> preds) {
     StartCheck& c = start_check_;
     c.suspect = false;
     c.next_flow_px = 0;
     c.R_StoW = slam_.pose().R_CtoW;
+    c.p_SinW = slam_.pose().p_CinW;
     c.px_S.clear();
+    // Every feature found in this frame, whether the filter took it or not
+    // (a filter that has turned wrong rejects the matches that say so), and
+    // those just added. (A map's first frame has no predictions.)
+    for (const slam::FeatureMatch& m : preds.empty()
+                                           ? std::span<const slam::FeatureMatch>{}
+                                           : std::span<const slam::FeatureMatch>(matches_)) {
+        c.px_S.emplace_back(preds[static_cast<std::size_t>(m.prediction)].id, m.z_px);
+    }
     for (const auto& o : slam_.observations()) {
-        c.px_S.emplace_back(o.id, o.z_px);
+        if (std::ranges::find_if(c.px_S, [&](const auto& p) { return p.first == o.id; }) ==
+            c.px_S.end()) {
+            c.px_S.emplace_back(o.id, o.z_px);
+        }
     }
 }
 
-double MonoTracker::collectStartPairs() {
+double MonoTracker::collectStartPairs(std::span<const slam::FeaturePrediction> preds) {
     StartCheck& c = start_check_;
     c.x_S.clear();
     c.x_K.clear();
     c.px_K.clear();
+    c.id_K.clear();
     c.scratch.clear();
     const auto& cam = slam_.camera();
-    for (const auto& o : slam_.observations()) {
+    for (const slam::FeatureMatch& m : matches_) {
+        const std::uint64_t id = preds[static_cast<std::size_t>(m.prediction)].id;
         const auto it = std::find_if(c.px_S.begin(), c.px_S.end(),
-                                     [&](const auto& p) { return p.first == o.id; });
+                                     [&](const auto& p) { return p.first == id; });
         if (it == c.px_S.end()) {
             continue;
         }
         const auto ray_S = cam.unproject(it->second);
-        const auto ray_K = cam.unproject(o.z_px);
+        const auto ray_K = cam.unproject(m.z_px);
         if (!ray_S || !ray_K || !(ray_S->z() > 0) || !(ray_K->z() > 0)) {
             continue;
         }
         c.x_S.emplace_back(ray_S->head<2>() / ray_S->z());
         c.x_K.emplace_back(ray_K->head<2>() / ray_K->z());
-        c.px_K.push_back(o.z_px);
-        c.scratch.push_back(static_cast<double>((o.z_px - it->second).norm()));
+        c.px_K.push_back(m.z_px);
+        c.id_K.push_back(id);
+        c.scratch.push_back(static_cast<double>((m.z_px - it->second).norm()));
     }
     if (c.x_S.size() < static_cast<std::size_t>(TrackerConfig::kStartCheckMinPairs)) {
         return -1;
@@ -1005,15 +1028,21 @@ double MonoTracker::collectStartPairs() {
     return *mid;
 }
 
-bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats) {
+bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray,
+                             std::span<const slam::FeaturePrediction> preds, TrackStats& stats) {
     StartCheck& c = start_check_;
     if (static_cast<double>(t_ns - c.map_t0_ns) * 1e-9 > config_.start_check_s) {
         c.active = false;
         return false;
     }
     // The link's features seen now: their pixels then and now.
-    const double flow_px = collectStartPairs();
-    if (flow_px < std::max(config_.start_check_flow_px, c.next_flow_px)) {
+    const double flow_px = collectStartPairs(preds);
+    // A suspect link is looked at again once its features have moved
+    // farther, or at once when too few of them are left to wait for that.
+    const bool last_chance =
+        c.suspect &&
+        c.x_S.size() <= 2 * static_cast<std::size_t>(TrackerConfig::kStartCheckMinPairs);
+    if (flow_px < config_.start_check_flow_px || (!last_chance && flow_px < c.next_flow_px)) {
         return false;
     }
     c.depth_K.assign(c.x_K.size(), 0.0);
@@ -1023,14 +1052,22 @@ bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats&
         two->median_parallax_deg < TrackerConfig::kStartCheckMinParallaxDeg) {
         return false;  // too few pairs, or a turn with too little slide for two views
     }
-    // The link's rotation by the two views and by the filter.
+    // The link's rotation by the two views and by the filter; the vertical
+    // by the filter and by the two views' rotations chained from the start.
     const core::Mat3 R_KtoS_filter = c.R_StoW.transpose() * slam_.pose().R_CtoW;
     const Eigen::AngleAxis<Scalar> diff(two->R_KtoS.transpose() * R_KtoS_filter);
     const double diff_deg = std::abs(static_cast<double>(diff.angle())) * 180.0 / std::numbers::pi;
-    if (diff_deg <= config_.start_check_deg) {
-        // Agreed: the next link starts here, the vertical carried across this one.
-        c.down_S = R_KtoS_filter.transpose() * c.down_S;
-        beginStartCheckLink();
+    const core::Mat3 R_KtoW_two = c.R_chain * two->R_KtoS;
+    const core::Vec3 down_W = -slam_.upW();
+    const core::Vec3 down_filter = slam_.pose().R_CtoW.transpose() * down_W;
+    const core::Vec3 down_two = R_KtoW_two.transpose() * down_W;
+    const double tilt_deg =
+        std::acos(std::clamp(static_cast<double>(down_filter.dot(down_two)), -1.0, 1.0)) * 180.0 /
+        std::numbers::pi;
+    if (diff_deg <= config_.start_check_deg && tilt_deg <= config_.start_check_deg) {
+        // Agreed: the next link starts here, the attitude carried across this one.
+        c.R_chain = R_KtoW_two;
+        beginStartCheckLink(preds);
         return false;
     }
     if (!c.suspect) {
@@ -1040,31 +1077,65 @@ bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats&
         return false;
     }
     // The filter has turned away from both: start again here.
-    return restartFromTwoViews(t_ns, gray, two->R_KtoS, stats);
+    return restartFromTwoViews(t_ns, gray, *two, R_KtoW_two, stats);
 }
 
-bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
-                                      const core::Mat3& R_KtoS, TrackStats& stats) {
+double MonoTracker::startCheckUnit() {
+    // The map's unit per unit of the two views' baseline: the filter's
+    // distance to each of the pairs' features over the two views' depth,
+    // their median.
     StartCheck& c = start_check_;
     c.scratch.clear();
-    for (const double z : c.depth_K) {
-        if (z > 0) {
-            c.scratch.push_back(z);
+    const core::Vec3 p_KinW = slam_.pose().p_CinW;
+    const auto features = slam_.features();
+    for (std::size_t i = 0; i < c.id_K.size(); ++i) {
+        if (!(c.depth_K[i] > 0)) {
+            continue;
+        }
+        const auto it = std::ranges::find_if(
+            features, [&](const slam::FeatureInfo& f) { return f.id == c.id_K[i]; });
+        slam::MapPoint point;
+        if (it == features.end() ||
+            !slam_.mapPoint(static_cast<int>(it - features.begin()), point)) {
+            continue;
+        }
+        const double distance = static_cast<double>((point.p_FinW - p_KinW).norm());
+        if (std::isfinite(distance) && distance > 0) {
+            c.scratch.push_back(distance / c.depth_K[i]);
         }
     }
     if (c.scratch.size() < static_cast<std::size_t>(TrackerConfig::kStartCheckMinInliers) / 2) {
+        return 0;
+    }
+    const auto mid = c.scratch.begin() + static_cast<std::ptrdiff_t>(c.scratch.size() / 2);
+    std::nth_element(c.scratch.begin(), mid, c.scratch.end());
+    return *mid;
+}
+
+bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
+                                      const TwoViewMotion& two, const core::Mat3& R_KtoW,
+                                      TrackStats& stats) {
+    StartCheck& c = start_check_;
+    const double unit = startCheckUnit();
+    if (!(unit > 0) || !std::isfinite(unit)) {
         return false;
     }
-    const auto zmid = c.scratch.begin() + static_cast<std::ptrdiff_t>(c.scratch.size() / 2);
-    std::nth_element(c.scratch.begin(), zmid, c.scratch.end());
-    const double unit = *zmid;
-    // The vertical carried by the two views, not the filter.
-    const core::Vec3 down_K = R_KtoS.transpose() * c.down_S;
-    const core::Vec3 map_down = gravity_down_C_;
+    // This frame's pose by the two views from the link's first frame, whose
+    // pose the filter had right (the map's origin, or a link it agreed on):
+    // the world frame, its vertical and its unit go on.
+    core::CameraPose T_KtoW;
+    T_KtoW.R_CtoW = R_KtoW;
+    T_KtoW.p_CinW = c.p_SinW + static_cast<Scalar>(unit) * (c.R_StoW * two.t_KinS);
+    const auto sigma_theta =
+        static_cast<Scalar>(TrackerConfig::kStartCheckRestartSigmaDeg * std::numbers::pi / 180.0);
+    const auto sigma_p = static_cast<Scalar>(TrackerConfig::kStartCheckRestartSigmaBaseline * unit);
+    if (!slam_.restartAt(t_ns, T_KtoW, sigma_p, sigma_theta)) {
+        return false;
+    }
     DepthPrior saved_prior = std::move(depth_prior_);
     const core::Scalar saved_sigma = depth_prior_rel_sigma_;
     // A new corner takes the depth of the two views' point within 5 px of it
-    // (in the unit of their median); the others start at rho0.
+    // (in the map's unit); the others start at rho0.
     depth_prior_ = [this, unit](const core::Vec2& px) -> std::optional<core::Scalar> {
         const StartCheck& sc = start_check_;
         double best = 25.0;
@@ -1073,19 +1144,20 @@ bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
             const double d2 = static_cast<double>((sc.px_K[i] - px).squaredNorm());
             if (sc.depth_K[i] > 0 && d2 < best) {
                 best = d2;
-                depth = static_cast<core::Scalar>(sc.depth_K[i] / unit);
+                depth = static_cast<core::Scalar>(sc.depth_K[i] * unit);
             }
         }
         return depth;
     };
     depth_prior_rel_sigma_ = static_cast<core::Scalar>(config_.start_check_depth_rel_sigma);
-    gravity_down_C_ = down_K;
     // The bias learned from the map given up is not trusted.
     gyro_bias_C_ = c.gyro_bias_C;
-    startNewMap(t_ns, gray, stats);
+    beginMap(t_ns, gray, stats);
     stats.start_redone = true;
-    start_check_.active = false;  // one restart per start
-    gravity_down_C_ = map_down;
+    // The begun-again map is checked as a new one, kStartCheckMaxRestarts
+    // times at most.
+    start_check_.active = ++start_check_.restarts < TrackerConfig::kStartCheckMaxRestarts;
+    start_check_.map_t0_ns = t_ns;
     depth_prior_ = std::move(saved_prior);
     depth_prior_rel_sigma_ = saved_sigma;
     return true;

@@ -515,6 +515,56 @@ TEST(EkfSlam, RelocalisationPutsTheCameraBackIntoTheMapItLost) {
     EXPECT_GT(kept, 10) << "features from before the loss are measured again";
 }
 
+TEST(EkfSlam, RestartAtBeginsTheMapAgainInTheSameWorldFrame) {
+    // A metric map tracked for 30 frames, then begun again (MonoTracker's
+    // start check) with the camera at its true pose: no feature is kept, the
+    // world's vertical and the frame count go on, and the features added
+    // from there on (at their true depths) follow the truth in the same frame.
+    PointSimOptions opt;
+    opt.known_depth_rel_sigma = Scalar(0.05);
+    const auto cam = test::makeCamera(0, 0, 500);
+    PointSlamSim sim(cam, opt);
+    auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());
+    ASSERT_TRUE(slam.ok());
+    core::CameraPose T;
+    EXPECT_FALSE(slam->restartAt(1, T, 0.01, 0.01)) << "no map yet";
+    slam->initialise(sim.timeNs(0), sim.gravityDownC0());
+    for (int k = 0; k < 30; ++k) {
+        sim.step(*slam, k);
+    }
+    ASSERT_EQ(slam->health(), SlamHealth::kOk);
+    ASSERT_FALSE(slam->features().empty());
+    const Vec3 up_W = slam->upW();
+    const std::int64_t frame = slam->frameIndex();
+    T.p_CinW = Vec3(std::numeric_limits<Scalar>::quiet_NaN(), 0, 0);
+    EXPECT_FALSE(slam->restartAt(sim.timeNs(30), T, 0.01, 0.01));
+    EXPECT_EQ(slam->frameIndex(), frame) << "a refused input changes nothing";
+
+    const core::CameraPose truth = sim.truthInC0(Scalar(30) / opt.fps);
+    const Scalar sigma_p = Scalar(0.02);
+    const Scalar sigma_theta = Scalar(0.01);
+    ASSERT_TRUE(slam->restartAt(sim.timeNs(30), truth, sigma_p, sigma_theta));
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+    EXPECT_TRUE(slam->features().empty());
+    EXPECT_EQ(slam->stateDim(), kCameraDim);
+    EXPECT_EQ(slam->upW(), up_W);
+    EXPECT_EQ(slam->frameIndex(), frame + 1);
+    EXPECT_LT((slam->pose().p_CinW - truth.p_CinW).norm(), 1e-5);
+    EXPECT_LT(rotationError(slam->pose().R_CtoW, truth.R_CtoW).norm(), 1e-5);
+    const Mat6x6 Pp = slam->poseCovariance();
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(Pp(i, i), sigma_p * sigma_p, 1e-9);
+        EXPECT_NEAR(Pp(3 + i, 3 + i), sigma_theta * sigma_theta, 1e-7);
+    }
+    for (int k = 31; k < 120; ++k) {
+        sim.step(*slam, k);
+    }
+    EXPECT_EQ(slam->health(), SlamHealth::kOk);
+    EXPECT_FALSE(slam->features().empty());
+    const core::CameraPose end = sim.truthInC0(Scalar(119) / opt.fps);
+    EXPECT_LT((slam->pose().p_CinW - end.p_CinW).norm(), 0.05);
+}
+
 TEST(EkfSlam, RelocaliseRefusesBadInput) {
     const auto cam = test::makeCamera(0, 0, 500);
     auto slam = EkfSlam::create(cam, test::pointSimSlamConfig());

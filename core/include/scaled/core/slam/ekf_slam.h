@@ -244,6 +244,12 @@ public:
     // Nothing happens (false) before initialise() or for a non-finite input.
     bool relocalise(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p,
                     Scalar sigma_theta);
+    // Empties the map and puts the camera at T_CtoW in the same world frame
+    // (its origin, vertical and unit kept), uncertain as relocalise() makes
+    // it: a map whose start was found wrong begins again without a new frame
+    // (MonoTracker's start check). The frame count goes on. Nothing happens
+    // (false) before initialise() or for a non-finite input.
+    bool restartAt(std::int64_t t_ns, const CameraPose& T_CtoW, Scalar sigma_p, Scalar sigma_theta);
     // Removes the features added after `frame` (frameIndex()): after a loss,
     // those the filter added while it was no longer tracking, from a pose
     // that was a guess. Returns how many.

@@ -25,6 +25,7 @@
 #include <scaled/drivers/vision/corner_detector.h>
 #include <scaled/drivers/vision/matcher.h>
 #include <scaled/drivers/vision/patch.h>
+#include <scaled/drivers/vision/two_view.h>
 
 namespace scaled::drivers::vision {
 
@@ -123,18 +124,27 @@ struct TrackerConfig {
     // map's own rotation rate over the interval is averaged with this time
     // constant (seconds) into the estimate the next frames subtract. 0: none.
     double gyro_bias_time_s = 10;
-    // The start check (docs/slam.md "A map started in motion"): for its first
-    // start_check_s seconds a new map's rotation is compared with two views'
-    // (two_view.h: the essential matrix of the features it began with, or
-    // began the current link with, and where they are now), whenever their
-    // median image motion reaches start_check_flow_px and their median
-    // parallax (the rotation taken out) kStartCheckMinParallaxDeg. A link that
-    // disagrees by more than start_check_deg is looked at again once its
-    // features have moved kStartCheckConfirm times as far; a second
-    // disagreement restarts the map at that frame: its vertical carried by
-    // the two views' rotation, its first features at the two views' depths
-    // (relative std start_check_depth_rel_sigma, the unit their median), the
-    // gyro bias as it was when the map began. A link that agrees starts the
+    // The start check (docs/slam.md "A map started in motion", "The start
+    // check"): for its first start_check_s seconds a new map's attitude is
+    // compared with two views' (two_view.h: the essential matrix of the
+    // features found in the link's first frame and now, whether the filter
+    // took the matches or not), whenever their median image motion reaches
+    // start_check_flow_px and their median parallax (the rotation taken out)
+    // kStartCheckMinParallaxDeg. Two things are compared: the link's rotation
+    // by the filter and by the two views, and the vertical by the filter and
+    // by the two views' rotations chained from the map's start. Either off by
+    // more than start_check_deg makes the link suspect; it is looked at again
+    // once its features have moved kStartCheckConfirm times as far (or at
+    // once when at most 2 kStartCheckMinPairs of them are left), and a second
+    // disagreement begins the map again at that frame, in the same world
+    // frame and unit (not a new map: no new epoch): the camera where the
+    // chained two views put it (uncertain by kStartCheckRestartSigmaDeg and
+    // kStartCheckRestartSigmaBaseline of the link's baseline), its first
+    // features at the two views' depths (relative std
+    // start_check_depth_rel_sigma, in the map's unit by the median ratio of
+    // the filter's distances to theirs), the gyro bias as it was when the map
+    // began. The map begun again is checked as a new one, and is begun again
+    // kStartCheckMaxRestarts times at most. A link that agrees starts the
     // next one. A map whose first depths are given (setDepthPrior) is not
     // checked. The filter can take a slide for a turn while its depths are
     // unknown and then keeps a vertical 20-60 degrees off; two views cannot.
@@ -147,6 +157,9 @@ struct TrackerConfig {
     static constexpr int kStartCheckMinPairs = 12;
     static constexpr int kStartCheckMinInliers = 10;
     static constexpr double kStartCheckMinParallaxDeg = 0.5;
+    static constexpr double kStartCheckRestartSigmaDeg = 0.5;
+    static constexpr double kStartCheckRestartSigmaBaseline = 0.1;
+    static constexpr int kStartCheckMaxRestarts = 3;
 };
 
 // The allowed values of the front end's parameters (core/param_limits.h; the
@@ -222,8 +235,10 @@ struct StageTimes {
 struct TrackStats {
     core::slam::SlamHealth health = core::slam::SlamHealth::kUninitialised;
     bool new_map = false;  // this frame started a new map
-    // ...because the start check found the previous one's start wrong (the
-    // previous map was at most start_check_s old).
+    // The start check found the map's start wrong (the map was at most
+    // start_check_s old) and began it again at this frame: new features, the
+    // camera moved to where two views put it, the same world frame and unit
+    // (not a new map).
     bool start_redone = false;
     int predicted = 0;           // features searched
     int matched = 0;             // found by NCC
@@ -341,6 +356,9 @@ private:
     class StageLap;
     // The first frame of a map: initialise the filter, then the first features.
     void startNewMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats);
+    // What follows the filter's start: the first features, the relocalisation
+    // and start-check bookkeeping, the window.
+    void beginMap(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats);
     // A frame while relocalising: true when the camera is back in the map
     // (the frame's search and update follow), false when the frame ends here.
     bool relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats, StageLap& lap);
@@ -467,29 +485,40 @@ private:
     struct StartCheck {
         bool active = false;
         bool suspect = false;
+        int restarts = 0;
         std::int64_t map_t0_ns = 0;
         double next_flow_px = 0;
-        core::Mat3 R_StoW = core::Mat3::Identity();   // the filter's attitude at the link's start
-        core::Vec3 down_S = core::Vec3(0, 1, 0);      // gravity in the link's first camera
+        core::Mat3 R_StoW = core::Mat3::Identity();  // the filter's attitude at the link's start
+        core::Vec3 p_SinW = core::Vec3::Zero();      // and its position
+        // The attitude at the link's start by the two views' rotations of the
+        // links before, chained from the map's (re)start.
+        core::Mat3 R_chain = core::Mat3::Identity();
         core::Vec3 gyro_bias_C = core::Vec3::Zero();  // the gyro bias when the map began
         std::vector<std::pair<std::uint64_t, core::Vec2>> px_S;
         std::vector<core::Vec2> x_S;  // pairs of the check, normalised
         std::vector<core::Vec2> x_K;
         std::vector<core::Vec2> px_K;
+        std::vector<std::uint64_t> id_K;
         std::vector<double> depth_K;
         std::vector<double> scratch;
     };
     StartCheck start_check_;
-    void beginStartCheckLink();
+    void beginStartCheckLink(std::span<const core::slam::FeaturePrediction> preds);
     // After a tracked frame: true when it restarted the map.
-    bool checkStart(std::int64_t t_ns, const cv::Mat& gray, TrackStats& stats);
+    bool checkStart(std::int64_t t_ns, const cv::Mat& gray,
+                    std::span<const core::slam::FeaturePrediction> preds, TrackStats& stats);
     // The link's features seen in this frame into x_S, x_K, px_K: their
     // median motion in pixels, or -1 with fewer than kStartCheckMinPairs.
-    double collectStartPairs();
-    // A new map at this frame: the vertical by R_KtoS, the first features at
-    // depth_K's depths. false (nothing done) with too few depths.
-    bool restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray, const core::Mat3& R_KtoS,
-                             TrackStats& stats);
+    double collectStartPairs(std::span<const core::slam::FeaturePrediction> preds);
+    // The map's unit per unit of the two views' baseline (from the pairs'
+    // depths in both), or 0 with too few.
+    double startCheckUnit();
+    // The map begun again at this frame, in the same world frame and unit:
+    // the camera where the two views put it from the link's first frame, the
+    // first features at depth_K's depths. false (nothing done) with too few
+    // depths.
+    bool restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray, const TwoViewMotion& two,
+                             const core::Mat3& R_KtoW, TrackStats& stats);
 };
 
 }  // namespace scaled::drivers::vision
