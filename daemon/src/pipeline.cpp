@@ -566,6 +566,12 @@ void Pipeline::trackFrame(TrackingState& state, QueuedFrame& item) {
                      stats.relocalised ? "relocalised" : "tracking", false);
     }
     const std::uint64_t epoch = recordTracked(r, frame.id, state.tracked);
+    if (stats.start_redone && events_ != nullptr) {
+        // The start check began the map again in the same frame and unit
+        // (tracker.start_check_s): the pose jumps once, the epoch goes on.
+        events_->onState(DaemonState::kTracking, DaemonState::kTracking, epoch, frame.id,
+                         "start begun again");
+    }
     ++fps_window_frames_;
     if (r.ok) {
         publishPose(state, frame, epoch);
