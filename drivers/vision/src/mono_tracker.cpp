@@ -1120,9 +1120,12 @@ bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
     if (!(unit > 0) || !std::isfinite(unit)) {
         return false;
     }
-    // This frame's pose by the two views from the link's first frame, whose
-    // pose the filter had right (the map's origin, or a link it agreed on):
-    // the world frame, its vertical and its unit go on.
+    // This frame's pose by the two views: the attitude chained from the
+    // map's start (R_KtoW), the position from the link's first frame (the
+    // map's origin, or a link the filter agreed on) along the two views'
+    // translation, turned by the filter's attitude there (within
+    // start_check_deg of the chain's) and scaled to the map's unit. The world
+    // frame, its vertical and its unit go on.
     core::CameraPose T_KtoW;
     T_KtoW.R_CtoW = R_KtoW;
     T_KtoW.p_CinW = c.p_SinW + static_cast<Scalar>(unit) * (c.R_StoW * two.t_KinS);
