@@ -10,11 +10,15 @@
 #     and 9.9).
 #   - the reversing tool refuses a folder that is not a dataset and a target
 #     that is not empty, and gives the frames in reverse with their poses.
-#   tests/cli/start_in_motion_cli.sh PATH/TO/slam-run SOURCE_DIR SHARED_DIR
+#   - the daemon on the first 90 frames, seed 4: the start begun again in the
+#     same epoch, a STATE line `start begun again` for each time in the field
+#     log, no new map (skipped without the YOLOX-Nano model).
+#   tests/cli/start_in_motion_cli.sh PATH/TO/slam-run SOURCE_DIR SHARED_DIR PATH/TO/scaled
 set -euo pipefail
 run=$1
 src=$2
 shared=${SCALED_SHARED_DIR:-$3}
+daemon=$4
 source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
 rk="$shared/data/redkitchen"
@@ -60,3 +64,25 @@ assert on["tracked_frames"] == on["frames"] == 600, on
 assert on["attitude_error_deg"]["tilt_max"] < 12 and on["ate_percent_of_path"] < 3, on
 PY
 done
+
+model="$shared/models/yolox_nano.onnx"
+if [[ ! -f "$model" ]]; then
+    echo "the daemon's part skipped: $model not found"
+    exit 0
+fi
+"$daemon" --source "replay:$tmp/rev" --pacing fast --no-tty --log-dir "$tmp/log" \
+    --socket "$tmp/scaled.sock" --set source.max_frames=90 --set source.at_end=exit \
+    --set tracker.seed=4 --set "detector.model=$model" > "$tmp/daemon.out" 2>&1 \
+    || fail "the daemon failed: $(cat "$tmp/daemon.out")"
+"$py" - "$tmp/log" <<'PY' || fail "the daemon's field log does not show the start begun again in one epoch"
+import glob, json, sys
+states = [json.loads(l) for f in sorted(glob.glob(sys.argv[1] + "/*.jsonl")) for l in open(f)
+          if '"class":"STATE"' in l]
+redone = [s for s in states if s["reason"] == "start begun again"]
+print("daemon: %d STATE lines, %d 'start begun again' (frames %s)" % (
+    len(states), len(redone), [s["frame_id"] for s in redone]))
+assert 1 <= len(redone) <= 3, states
+assert all(s["from"] == s["to"] == "tracking" for s in redone), redone
+assert len({s["epoch"] for s in states}) == 1, states
+assert [s["reason"] for s in states].count("new map") == 1, states
+PY
