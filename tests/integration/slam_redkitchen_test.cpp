@@ -217,29 +217,35 @@ TEST(SlamKitti, TheRandomWalkVelocityNoiseKeepsKittiWithinFivePercent) {
 // times larger; the coarse-to-fine search keeps every frame tracked without a
 // loss. The filter's start in motion turns 14 degrees where the camera turned
 // 6 (docs/slam.md "A map started in motion"): the start check begins the map
-// again (in the same frame and unit, not a new map) at 0.4 s, and the run is
-// tracked to its end in it.
+// again (in the same frame and unit, not a new map) at 1.1 s, and the run is
+// tracked to its end in it. Seed 8's filter turns away by less than 3 degrees
+// a link: only the vertical chained from the map's start catches it (without:
+// 13 degrees, ATE 3.66%).
 TEST(SlamRedkitchen, TenHertzIsTrackedWithoutALoss) {
     SCALED_REQUIRE_DATASET(dir, "redkitchen");
-    SlamRunOptions opt;
-    opt.selection.stride = 3;
-    const auto r = runDataset(dir, opt);
-    ASSERT_TRUE(r.ok()) << r.error().message;
-    std::printf(
-        "redkitchen at 10 Hz: %zu/%zu tracked, %d re-init, %zu start restarts, ATE %.2f%%\n",
-        r->tracked_frames, r->frames, r->reinitialisations, r->start_restarts,
-        100 * r->ate_rmse_m / r->path_length_m);
-    EXPECT_EQ(r->frames, 200U);
-    EXPECT_EQ(r->tracked_frames, 200U) << "every frame, in one map";
-    EXPECT_EQ(r->reinitialisations, 0);
-    EXPECT_GE(r->start_restarts, 1U) << "the start in motion is caught";
-    EXPECT_LE(r->start_restarts,
-              std::size_t{drivers::vision::TrackerConfig::kStartCheckMaxRestarts});
-    ASSERT_TRUE(r->has_gt);
-    // The 3%, over the whole run (3.4% before the start check).
-    EXPECT_LE(r->ate_rmse_m, 0.03 * r->path_length_m);
-    ASSERT_TRUE(r->attitude_error_deg && r->attitude_error_deg->tilt_max);
-    EXPECT_LT(*r->attitude_error_deg->tilt_max, 10.0) << "19-25 degrees before the start check";
+    for (const std::uint64_t seed : {1U, 8U}) {
+        SlamRunOptions opt;
+        opt.selection.stride = 3;
+        opt.tracker.slam.seed = seed;
+        const auto r = runDataset(dir, opt);
+        ASSERT_TRUE(r.ok()) << r.error().message;
+        std::printf(
+            "redkitchen at 10 Hz, seed %llu: %zu/%zu tracked, %d re-init, %zu start "
+            "restarts, ATE %.2f%%\n",
+            static_cast<unsigned long long>(seed), r->tracked_frames, r->frames,
+            r->reinitialisations, r->start_restarts, 100 * r->ate_rmse_m / r->path_length_m);
+        EXPECT_EQ(r->frames, 200U);
+        EXPECT_EQ(r->tracked_frames, 200U) << "every frame, in one map; seed " << seed;
+        EXPECT_EQ(r->reinitialisations, 0) << seed;
+        EXPECT_GE(r->start_restarts, 1U) << "the start in motion is caught; seed " << seed;
+        EXPECT_LE(r->start_restarts,
+                  std::size_t{drivers::vision::TrackerConfig::kStartCheckMaxRestarts});
+        ASSERT_TRUE(r->has_gt);
+        // The 3%, over the whole run (3.4% and 3.7% before).
+        EXPECT_LE(r->ate_rmse_m, 0.03 * r->path_length_m) << seed;
+        ASSERT_TRUE(r->attitude_error_deg && r->attitude_error_deg->tilt_max);
+        EXPECT_LT(*r->attitude_error_deg->tilt_max, 12.0) << "19-25 and 13 degrees before";
+    }
 }
 
 }  // namespace
