@@ -81,7 +81,6 @@ std::optional<AttitudeError> attitudeError(const Segment& seg) {
         return std::nullopt;
     }
     AttitudeError e;
-
     for (std::size_t k = 0; k < est_R.size(); ++k) {
         const core::Mat3 est = est_R.front().transpose() * est_R[k];
         const core::Mat3 gt = gt_R.front().transpose() * gt_R[k];

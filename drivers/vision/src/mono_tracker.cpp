@@ -39,6 +39,15 @@ private:
 
 namespace {
 
+// The element at size / 2 once v is partly sorted in place (the upper median
+// for an even count); v must not be empty. Allocation-free.
+template <typename T>
+T upperMedianInPlace(std::vector<T>& v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+}
+
 // The filter's update report into the frame's stats.
 void copyUpdateReport(const slam::UpdateReport& report, TrackStats& stats) {
     stats.predicted = report.predicted;
@@ -645,9 +654,7 @@ bool MonoTracker::tryRelocalise(std::int64_t t_ns, const cv::Mat& gray, TrackSta
                        static_cast<Scalar>(P.z));
         depth_scratch_.push_back((R_WtoC * (p_W - pose->p_CinW)).z());
     }
-    const auto mid = depth_scratch_.begin() + static_cast<long>(depth_scratch_.size() / 2);
-    std::nth_element(depth_scratch_.begin(), mid, depth_scratch_.end());
-    const Scalar depth = std::max(*mid, Scalar(1e-3));
+    const Scalar depth = std::max(upperMedianInPlace(depth_scratch_), Scalar(1e-3));
     const auto px_angle =
         static_cast<Scalar>(config_.relocalise_reproj_px) / slam_.camera().intrinsics().fx;
     if (!slam_.relocalise(t_ns, *pose, 3 * px_angle * depth, 3 * px_angle)) {
@@ -1023,9 +1030,7 @@ double MonoTracker::collectStartPairs(std::span<const slam::FeaturePrediction> p
     if (c.x_S.size() < static_cast<std::size_t>(TrackerConfig::kStartCheckMinPairs)) {
         return -1;
     }
-    const auto mid = c.scratch.begin() + static_cast<std::ptrdiff_t>(c.scratch.size() / 2);
-    std::nth_element(c.scratch.begin(), mid, c.scratch.end());
-    return *mid;
+    return upperMedianInPlace(c.scratch);
 }
 
 bool MonoTracker::checkStart(std::int64_t t_ns, const cv::Mat& gray,
@@ -1107,9 +1112,7 @@ double MonoTracker::startCheckUnit() {
     if (c.scratch.size() < static_cast<std::size_t>(TrackerConfig::kStartCheckMinInliers) / 2) {
         return 0;
     }
-    const auto mid = c.scratch.begin() + static_cast<std::ptrdiff_t>(c.scratch.size() / 2);
-    std::nth_element(c.scratch.begin(), mid, c.scratch.end());
-    return *mid;
+    return upperMedianInPlace(c.scratch);
 }
 
 bool MonoTracker::restartFromTwoViews(std::int64_t t_ns, const cv::Mat& gray,
