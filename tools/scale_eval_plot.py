@@ -388,6 +388,10 @@ def fig_map_scale(ax, frames, summary):
                 color="tab:cyan", lw=1.2)
     plot_epochs(ax, x, frames["scale_est"], ep, "served estimate (MAP)",
                 color="0.4", lw=1, ls=":")
+    if "map_unit_depth" in frames and np.isfinite(frames["map_unit_depth"]).any():
+        # --depth-unit: the map's geometry by the depth images, per frame.
+        plot_epochs(ax, x, frames["map_unit_depth"], ep,
+                    "map geometry (depth images)", color="tab:orange", lw=0.8)
     if not np.isfinite(frames["scale_true"]).any():
         note(ax, "no ground truth")
         return

@@ -90,9 +90,25 @@ assert len(post) == 15 and len(post[0].split(",")) == 2 + 256, (len(post), len(p
 assert "[estimator]" in open(sys.argv[2] + "/config.toml").read()
 json.loads(open(sys.argv[2] + "/summary.json").read())
 PY
-# Deterministic: a second run gives the same estimates.
-"$ev" --dataset "$rk" --frames 0:200 "${paper[@]}" --out "$tmp/rk2" --no-plots > /dev/null 2>&1
+# Deterministic: a second run gives the same estimates, also while it reads
+# the depth images for the map's geometric unit (--depth-unit).
+"$ev" --dataset "$rk" --frames 0:200 "${paper[@]}" --out "$tmp/rk2" --no-plots --depth-unit --json \
+    > "$tmp/rk2.json" 2> /dev/null || fail "the --depth-unit run failed"
 cmp -s "$tmp/rk/updates.csv" "$tmp/rk2/updates.csv" || fail "two runs gave different updates.csv"
+"$py" - "$tmp/rk2.json" "$tmp/rk2" "$tmp/rk.json" <<'PY' || fail "--depth-unit check failed"
+import csv, json, sys
+j = json.loads(open(sys.argv[1]).read())
+assert "map_unit_depth" not in json.loads(open(sys.argv[3]).read())  # only when asked
+g = j["map_unit_depth"]
+# Every tracked frame after the first has measured features over the depth image.
+assert g["frames"] >= 190, g
+# The geometry's unit and the motion's agree within a factor of two.
+assert 0.5 < g["median"] / j["scale_true"] < 2, (g, j["scale_true"])
+assert g["window_range"] >= 1 and g["motion_over_geometry_range"] >= 1, g
+frames = list(csv.DictReader(open(sys.argv[2] + "/frames.csv")))
+values = [float(f["map_unit_depth"]) for f in frames if f["map_unit_depth"]]
+assert len(values) == g["frames"] and all(v > 0 for v in values), (len(values), g)
+PY
 
 # The figures, where matplotlib is installed.
 if "$py" -c 'import matplotlib, numpy' 2> /dev/null; then

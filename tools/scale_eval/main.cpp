@@ -161,6 +161,14 @@ constexpr OptionSpec<Options> kOptions[] = {
          o.dataset_options.gravity_from_groundtruth = true;
          return true;
      }},
+    {"--depth-unit", nullptr,
+     "the map's metres per unit by the dataset's depth images on every\n"
+     "tracked frame (frames.csv map_unit_depth; JSON map_unit_depth:\n"
+     "its window range, and the motion's scale_true_window over it)",
+     [](std::string_view, Options& o) {
+         o.eval.depth_unit = true;
+         return true;
+     }},
     {"--gyro-sim", "D:B",
      "the gyro prior fed by a gyro simulated from the ground truth\n"
      "(200 Hz, white noise D rad/s/sqrt(Hz), a bias drawn with\n"

@@ -175,6 +175,12 @@ void appendTruth(std::string& s, const EvalResult& r, const EvalOptions& options
     const MapScaleDrift drift = mapScaleDrift(r.frame_rows, r.updates);
     s += ",\"scale_true_window_range\":" + num(drift.window_range, 5);
     s += ",\"scale_true_window_max_dev\":" + num(drift.window_max_dev, 5);
+    if (options.depth_unit) {
+        const GeometryUnit g = geometryUnit(r.frame_rows, options.window_frames);
+        s += ",\"map_unit_depth\":{\"frames\":" + std::to_string(g.frames) +
+             ",\"median\":" + num(g.median, 5) + ",\"window_range\":" + num(g.window_range, 5) +
+             ",\"motion_over_geometry_range\":" + num(g.motion_over_geometry_range, 5) + "}";
+    }
 }
 
 // The estimate's relative errors (`last` against `truth` at the end) and the
@@ -278,7 +284,7 @@ void writeFrames(CsvFile& f, const EvalResult& r) {
     f.line(
         "frame,t_s,tracked,epoch,features_measured,scale_est,ci95_lo,ci95_hi,state,scale_true,"
         "scale_true_window,rel_error,rel_error_window,baseline_constant_rel_error,"
-        "baseline_single_rel_error");
+        "baseline_single_rel_error,map_unit_depth");
     for (const auto& fr : r.frame_rows) {
         const auto est = estimateOf(fr.scale);
         const bool has = est.has_value();
@@ -291,7 +297,7 @@ void writeFrames(CsvFile& f, const EvalResult& r) {
                field(fr.scale_true_window) + "," + field(relError(est, fr.scale_true)) + "," +
                field(relError(est, fr.scale_true_window)) + "," +
                field(relError(fr.baseline_constant, fr.scale_true)) + "," +
-               field(relError(fr.baseline_single, fr.scale_true)));
+               field(relError(fr.baseline_single, fr.scale_true)) + "," + field(fr.map_unit_depth));
     }
 }
 

@@ -279,6 +279,65 @@ MapScaleDrift mapScaleDrift(std::span<const FrameRow> frames, std::span<const Up
     return d;
 }
 
+GeometryUnit geometryUnit(std::span<const FrameRow> frames, int window_frames) {
+    GeometryUnit g;
+    std::vector<double> all;
+    std::vector<double> w;
+    struct Range {
+        double lo = 0;
+        double hi = 0;
+        void add(double v) {
+            lo = lo > 0 ? std::min(lo, v) : v;
+            hi = std::max(hi, v);
+        }
+        void close(std::optional<double>& out) {
+            if (lo > 0) {
+                out = std::max(out.value_or(1.0), hi / lo);
+            }
+            *this = {};
+        }
+    };
+    Range geometry;
+    Range motion;
+    std::optional<int> epoch;
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+        const FrameRow& f = frames[i];
+        if (f.map_unit_depth) {
+            all.push_back(*f.map_unit_depth);
+        }
+        if (epoch && *epoch != f.epoch) {
+            geometry.close(g.window_range);
+            motion.close(g.motion_over_geometry_range);
+        }
+        epoch = f.epoch;
+        if (!f.window_full || !f.scale_true_window) {
+            continue;
+        }
+        w.clear();
+        for (std::size_t k = i + 1; k-- > 0 && i - k < static_cast<std::size_t>(window_frames);) {
+            if (frames[k].epoch != f.epoch) {
+                break;
+            }
+            if (frames[k].map_unit_depth) {
+                w.push_back(*frames[k].map_unit_depth);
+            }
+        }
+        if (w.size() * 2 < static_cast<std::size_t>(window_frames)) {
+            continue;  // fewer than half the window's frames have one
+        }
+        const double unit = median(w);
+        geometry.add(unit);
+        motion.add(*f.scale_true_window / unit);
+    }
+    geometry.close(g.window_range);
+    motion.close(g.motion_over_geometry_range);
+    g.frames = static_cast<int>(all.size());
+    if (!all.empty()) {
+        g.median = median(all);
+    }
+    return g;
+}
+
 ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window) {
     std::vector<double> e;
     for (std::size_t i = first; i < updates.size(); ++i) {
@@ -363,6 +422,7 @@ public:
 private:
     [[nodiscard]] core::Status evaluateFrame(const drivers::source::Frame& frame, EvalResult& r);
     void recordTruth(const drivers::source::Frame& frame, FrameRow& row, EvalResult& r);
+    void recordDepthUnit(const drivers::source::Frame& frame, FrameRow& row);
     [[nodiscard]] core::Status detectAndUpdate(const drivers::source::Frame& frame,
                                                const FrameRow& row, EvalResult& r);
     [[nodiscard]] core::FrameSnapshot snapshotOf(const drivers::source::Frame& frame);
@@ -385,7 +445,9 @@ private:
     daemon::FrameStep step_;
 
     core::slam::SlamSnapshot snapshot_;
-    std::vector<core::MapFeature> truth_features_;  // --truth-geometry's map
+    std::vector<core::MapFeature> truth_features_;    // --truth-geometry's map
+    std::vector<core::slam::MapPoint> depth_points_;  // --depth-unit's scratch
+    std::vector<double> depth_ratios_;
     std::vector<core::Detection> dets_;
     std::vector<core::ObservationRecord> records_;
     std::vector<Scalar> log_l_;
@@ -500,6 +562,9 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
     if (step.ok && frame.T_CtoW_gt) {
         recordTruth(frame, row, r);
     }
+    if (options_.depth_unit && row.tracked) {
+        recordDepthUnit(frame, row);
+    }
     // Synchronous detection on the frames the daemon would hand over.
     if (step_.detectionDue(step, config_.detection, frame.t_ns)) {
         if (auto s = detectAndUpdate(frame, row, r); !s) {
@@ -521,6 +586,43 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
 }
 
 // Ground truth over this epoch's tracked frames.
+void EvalRun::recordDepthUnit(const drivers::source::Frame& frame, FrameRow& row) {
+    const auto& info = source_.info();
+    if (!frame.depth_path || info.depth_scale_m <= 0) {
+        return;
+    }
+    const auto depth = drivers::dataset::loadDepthMetres(frame, info);
+    if (!depth) {
+        return;
+    }
+    // Depths in the map scale_true is for: the estimator's map is the
+    // filter's times a similarity, whose scale multiplies every depth.
+    const auto unit = static_cast<double>(step_.estimatorFromFilter(config_.estimator_map).scale);
+    const core::slam::EkfSlam& slam = tracker_.filter();
+    const core::CameraPose& pose = slam.pose();
+    slam.mapPoints(depth_points_);
+    depth_ratios_.clear();
+    for (const core::slam::MapPoint& m : depth_points_) {
+        if (!m.in_view || !m.measured) {
+            continue;
+        }
+        const double z_map =
+            unit * static_cast<double>((pose.R_CtoW.transpose() * (m.p_FinW - pose.p_CinW)).z());
+        const int u = static_cast<int>(std::lround(m.px.x()));
+        const int v = static_cast<int>(std::lround(m.px.y()));
+        if (!(z_map > 0) || u < 0 || v < 0 || u >= depth->cols || v >= depth->rows) {
+            continue;
+        }
+        const double z_true = static_cast<double>(depth->at<float>(v, u));
+        if (z_true > 0.1 && std::isfinite(z_true)) {
+            depth_ratios_.push_back(z_true / z_map);
+        }
+    }
+    if (!depth_ratios_.empty()) {
+        row.map_unit_depth = median(depth_ratios_);
+    }
+}
+
 void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, EvalResult& r) {
     r.has_ground_truth = true;
     // The trajectory in the map the scale is estimated in (estimator.map):

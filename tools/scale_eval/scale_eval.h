@@ -50,6 +50,9 @@ struct EvalOptions {
     // the true scale is then 1) instead of the tracker's: what the evidence
     // can do when the map is right. Frames without ground truth give no update.
     bool truth_geometry = false;
+    // --depth-unit: on every tracked frame with a depth image, the map's
+    // metres per unit by that image (FrameRow::map_unit_depth).
+    bool depth_unit = false;
     // The served estimate's accuracy is taken over the updates at least this
     // long after their map started.
     double settle_seconds = 5.0;
@@ -79,6 +82,11 @@ struct FrameRow {
     core::Vec3 p_gt = core::Vec3::Zero();
     std::optional<double> baseline_constant;  // this epoch's constant-scale baseline
     std::optional<double> baseline_single;    // this epoch's single-early-detection scale
+    // --depth-unit: the median over the features measured in this frame of
+    // their depth in the depth image over their depth in the map (the one
+    // scale_true is for): metres per unit of the map's geometry, against
+    // scale_true's of its motion.
+    std::optional<double> map_unit_depth;
 };
 
 struct UpdateRow {
@@ -234,6 +242,20 @@ struct MapScaleDrift {
     std::optional<double> window_max_dev;
 };
 MapScaleDrift mapScaleDrift(std::span<const FrameRow> frames, std::span<const UpdateRow> updates);
+
+// --depth-unit: the map's geometry against its motion. Over each frame whose
+// truth window is full, the median of map_unit_depth over the same window of
+// frames (its epoch's) is the geometry's metres per unit there, and
+// scale_true_window the motion's.
+struct GeometryUnit {
+    int frames = 0;  // frames with a map_unit_depth
+    std::optional<double> median;
+    // max/min over the frames of the geometry's window unit, and of the
+    // motion's over the geometry's (the largest over the epochs).
+    std::optional<double> window_range;
+    std::optional<double> motion_over_geometry_range;
+};
+GeometryUnit geometryUnit(std::span<const FrameRow> frames, int window_frames);
 
 // |estimate / truth - 1| of every update from `first` on that has a truth.
 ErrorStats relativeErrors(std::span<const UpdateRow> updates, std::size_t first, bool window);

@@ -89,6 +89,39 @@ TEST(ScaleEvalMetrics, MapScaleDriftPerEpochAndAgainstTheAverage) {
     EXPECT_FALSE(none.window_max_dev.has_value());
 }
 
+TEST(ScaleEvalMetrics, GeometryUnitOverTheTruthsWindowAndAgainstTheMotion) {
+    // Window of 4 frames. Epoch 0: the depth images say 1.0 per unit on
+    // frames 0-3 and 1.2 from frame 4 on, while the motion's window truth is
+    // 1.0 throughout: the geometry's window medians go 1.0, 1.1 (frames 2-5:
+    // 1.0, 1.0, 1.2, 1.2), 1.2 (range 1.2) and the motion over them 1.0 to
+    // 1/1.2 (range 1.2). A frame without a depth reading counts for nothing;
+    // a window with fewer than half its frames read is skipped. Epoch 1 is a
+    // new map: its windows do not reach back into epoch 0.
+    std::vector<FrameRow> f;
+    const double geo[] = {1.0, 1.0, 1.0, 1.0, 1.2, 1.2, 1.2, 1.2};
+    for (int k = 0; k < 8; ++k) {
+        FrameRow r = frameRow(0, 1.0, k >= 3);
+        r.map_unit_depth = geo[k];
+        f.push_back(r);
+    }
+    f[6].map_unit_depth.reset();
+    for (int k = 0; k < 4; ++k) {
+        FrameRow r = frameRow(1, 2.0, true);  // full at once: only its own frames count
+        r.map_unit_depth = k < 1 ? std::optional<double>(4.0) : std::nullopt;
+        f.push_back(r);
+    }
+    const GeometryUnit g = geometryUnit(f, 4);
+    EXPECT_EQ(g.frames, 8);
+    ASSERT_TRUE(g.median && g.window_range && g.motion_over_geometry_range);
+    EXPECT_NEAR(*g.median, 1.1, 1e-12);  // 1.0 x4, 1.2 x3 and 4.0: between 1.0 and 1.2
+    EXPECT_NEAR(*g.window_range, 1.2, 1e-12);
+    EXPECT_NEAR(*g.motion_over_geometry_range, 1.2, 1e-12);
+    // Without depth readings nothing is reported.
+    const GeometryUnit none = geometryUnit(std::vector<FrameRow>{frameRow(0, 1.0, true)}, 4);
+    EXPECT_EQ(none.frames, 0);
+    EXPECT_FALSE(none.median || none.window_range || none.motion_over_geometry_range);
+}
+
 // A straight-ish walk at 0.5 m/s (30 frames a second) seen by a map at half
 // the scale; the estimate served at each frame is `served` (0: none yet).
 std::vector<FrameRow> walk(int frames, double served, int epoch_break = -1,
