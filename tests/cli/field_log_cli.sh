@@ -8,7 +8,8 @@ set -euo pipefail
 fl=$1
 source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
-"$fl" --help | grep -q '^usage: field-log' || fail "--help does not print usage"
+"$fl" --help > "$tmp/help.txt" || fail "--help failed"  # a file: no SIGPIPE from grep -q
+grep -q '^usage: field-log' "$tmp/help.txt" || fail "--help does not print usage"
 expect 64 "a log directory or file is required" -- "$fl"
 expect 64 "unknown option --bogus" -- "$fl" x --bogus
 expect 64 "--out needs a value" -- "$fl" x --out

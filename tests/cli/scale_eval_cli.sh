@@ -9,7 +9,9 @@ ev=$1
 shared=${SCALED_SHARED_DIR:-$2}
 source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
-"$ev" --help | grep -q '^usage: scale-eval' || fail "--help does not print usage"
+# Into a file: grep -q would close the pipe before a long help ends (SIGPIPE).
+"$ev" --help > "$tmp/help.txt" || fail "--help failed"
+grep -q '^usage: scale-eval' "$tmp/help.txt" || fail "--help does not print usage"
 expect 64 "--dataset is required" -- "$ev"
 expect 64 "unknown option --bogus" -- "$ev" --bogus 1
 expect 64 "bad value for --frames: '9:3'" -- "$ev" --dataset x --frames 9:3

@@ -21,7 +21,8 @@ for e in exps:
     assert 0 <= e["median_rel_error"] <= 0.01, e
 PY
 
-"$sim" --help | grep -q '^usage: scale-sim' || fail "--help does not print usage"
+help=$("$sim" --help) || fail "--help failed"  # whole: grep -q on a pipe may SIGPIPE it
+grep -q '^usage: scale-sim' <<< "$help" || fail "--help does not print usage"
 
 set +e
 err=$("$sim" --seed x 2>&1 >/dev/null); rc=$?

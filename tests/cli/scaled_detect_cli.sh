@@ -8,7 +8,8 @@ det=$1
 shared=${SCALED_SHARED_DIR:-$2}
 source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
-"$det" --help | grep -q '^usage: scaled-detect' || fail "--help does not print usage"
+"$det" --help > "$tmp/help.txt" || fail "--help failed"  # a file: no SIGPIPE from grep -q
+grep -q '^usage: scaled-detect' "$tmp/help.txt" || fail "--help does not print usage"
 expect 64 "--image FILE is required" -- "$det"
 expect 64 "unknown option --bogus" -- "$det" --bogus 1
 expect 64 "--size needs a value" -- "$det" --image x.png --size
