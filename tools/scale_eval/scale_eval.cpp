@@ -55,11 +55,12 @@ std::vector<float> decimate(std::span<const Scalar> values, std::size_t step) {
     return out;
 }
 
-// Relative errors between the MAP times the camera-frame depth of each
-// measured feature of the detection snapshot (in the estimator's map) and the
-// depth image at its pixel.
-void depthErrors(const core::slam::SlamSnapshot& snapshot, const cv::Mat& depth_m, double scale,
-                 std::vector<double>& rel, std::vector<double>& abs_m) {
+// Each measured feature of a snapshot in front of the camera whose pixel has
+// a depth reading: visit(its camera-frame depth in the snapshot's map, the
+// depth image's metres there).
+template <typename Visit>
+void forEachMeasuredDepth(const core::slam::SlamSnapshot& snapshot, const cv::Mat& depth_m,
+                          Visit visit) {
     const core::CameraPose& pose = snapshot.pose();
     const auto features = snapshot.features();
     const auto info = snapshot.featureInfo();
@@ -77,10 +78,20 @@ void depthErrors(const core::slam::SlamSnapshot& snapshot, const cv::Mat& depth_
         if (!(truth > 0.1) || !std::isfinite(truth)) {
             continue;
         }
-        const double est = scale * static_cast<double>(p_C.z());
+        visit(static_cast<double>(p_C.z()), truth);
+    }
+}
+
+// Relative errors between the MAP times the camera-frame depth of each
+// measured feature of the detection snapshot (in the estimator's map) and the
+// depth image at its pixel.
+void depthErrors(const core::slam::SlamSnapshot& snapshot, const cv::Mat& depth_m, double scale,
+                 std::vector<double>& rel, std::vector<double>& abs_m) {
+    forEachMeasuredDepth(snapshot, depth_m, [&](double z_map, double truth) {
+        const double est = scale * z_map;
         rel.push_back(std::abs(est / truth - 1));
         abs_m.push_back(std::abs(est - truth));
-    }
+    });
 }
 
 }  // namespace
@@ -247,29 +258,42 @@ MetricTrajectory metricTrajectory(std::span<const FrameRow> rows, double min_dis
     return m;
 }
 
+namespace {
+
+// max / min of positive values within an epoch; close() folds it into the
+// largest over the epochs so far and starts the next.
+struct EpochRange {
+    double lo = 0;
+    double hi = 0;
+    void add(double v) {
+        lo = lo > 0 ? std::min(lo, v) : v;
+        hi = std::max(hi, v);
+    }
+    void close(std::optional<double>& largest) {
+        if (lo > 0) {
+            largest = std::max(largest.value_or(1.0), hi / lo);
+        }
+        *this = {};
+    }
+};
+
+}  // namespace
+
 MapScaleDrift mapScaleDrift(std::span<const FrameRow> frames, std::span<const UpdateRow> updates) {
     MapScaleDrift d;
     std::optional<int> epoch;
-    double lo = 0;
-    double hi = 0;
-    const auto close = [&] {
-        if (epoch && lo > 0) {
-            d.window_range = std::max(d.window_range.value_or(1.0), hi / lo);
-        }
-    };
+    EpochRange range;
     for (const FrameRow& f : frames) {
         if (!f.window_full || !f.scale_true_window || !(*f.scale_true_window > 0)) {
             continue;
         }
-        if (!epoch || *epoch != f.epoch) {
-            close();
-            epoch = f.epoch;
-            lo = hi = *f.scale_true_window;
+        if (epoch && *epoch != f.epoch) {
+            range.close(d.window_range);
         }
-        lo = std::min(lo, *f.scale_true_window);
-        hi = std::max(hi, *f.scale_true_window);
+        epoch = f.epoch;
+        range.add(*f.scale_true_window);
     }
-    close();
+    range.close(d.window_range);
     for (const UpdateRow& u : updates) {
         if (u.scale_true && u.scale_true_window && *u.scale_true > 0) {
             const double dev = std::abs(*u.scale_true_window / *u.scale_true - 1);
@@ -283,22 +307,8 @@ GeometryUnit geometryUnit(std::span<const FrameRow> frames, int window_frames) {
     GeometryUnit g;
     std::vector<double> all;
     std::vector<double> w;
-    struct Range {
-        double lo = 0;
-        double hi = 0;
-        void add(double v) {
-            lo = lo > 0 ? std::min(lo, v) : v;
-            hi = std::max(hi, v);
-        }
-        void close(std::optional<double>& out) {
-            if (lo > 0) {
-                out = std::max(out.value_or(1.0), hi / lo);
-            }
-            *this = {};
-        }
-    };
-    Range geometry;
-    Range motion;
+    EpochRange geometry;
+    EpochRange motion;
     std::optional<int> epoch;
     for (std::size_t i = 0; i < frames.size(); ++i) {
         const FrameRow& f = frames[i];
@@ -445,8 +455,8 @@ private:
     daemon::FrameStep step_;
 
     core::slam::SlamSnapshot snapshot_;
-    std::vector<core::MapFeature> truth_features_;    // --truth-geometry's map
-    std::vector<core::slam::MapPoint> depth_points_;  // --depth-unit's scratch
+    std::vector<core::MapFeature> truth_features_;  // --truth-geometry's map
+    core::slam::SlamSnapshot depth_snapshot_;       // --depth-unit's, every tracked frame
     std::vector<double> depth_ratios_;
     std::vector<core::Detection> dets_;
     std::vector<core::ObservationRecord> records_;
@@ -476,6 +486,11 @@ private:
 core::Status EvalRun::run(std::size_t end, EvalResult& r) {
     if (auto reserved = snapshot_.reserve(config_.tracker.slam.max_features); !reserved) {
         return reserved.error();
+    }
+    if (options_.depth_unit) {
+        if (auto reserved = depth_snapshot_.reserve(config_.tracker.slam.max_features); !reserved) {
+            return reserved.error();
+        }
     }
     const auto& grid = estimator_.posterior().grid();
     curve_step_ =
@@ -585,7 +600,6 @@ core::Status EvalRun::evaluateFrame(const drivers::source::Frame& frame, EvalRes
     return {};
 }
 
-// Ground truth over this epoch's tracked frames.
 void EvalRun::recordDepthUnit(const drivers::source::Frame& frame, FrameRow& row) {
     const auto& info = source_.info();
     if (!frame.depth_path || info.depth_scale_m <= 0) {
@@ -595,34 +609,20 @@ void EvalRun::recordDepthUnit(const drivers::source::Frame& frame, FrameRow& row
     if (!depth) {
         return;
     }
-    // Depths in the map scale_true is for: the estimator's map is the
-    // filter's times a similarity, whose scale multiplies every depth.
-    const auto unit = static_cast<double>(step_.estimatorFromFilter(config_.estimator_map).scale);
-    const core::slam::EkfSlam& slam = tracker_.filter();
-    const core::CameraPose& pose = slam.pose();
-    slam.mapPoints(depth_points_);
+    // The filter carried into the map scale_true is for, as the detection
+    // snapshot is (snapshotOf).
+    (void)depth_snapshot_.capture(tracker_.filter(), frame.id, 0,
+                                  step_.estimatorFromFilter(config_.estimator_map));
     depth_ratios_.clear();
-    for (const core::slam::MapPoint& m : depth_points_) {
-        if (!m.in_view || !m.measured) {
-            continue;
-        }
-        const double z_map =
-            unit * static_cast<double>((pose.R_CtoW.transpose() * (m.p_FinW - pose.p_CinW)).z());
-        const int u = static_cast<int>(std::lround(m.px.x()));
-        const int v = static_cast<int>(std::lround(m.px.y()));
-        if (!(z_map > 0) || u < 0 || v < 0 || u >= depth->cols || v >= depth->rows) {
-            continue;
-        }
-        const double z_true = static_cast<double>(depth->at<float>(v, u));
-        if (z_true > 0.1 && std::isfinite(z_true)) {
-            depth_ratios_.push_back(z_true / z_map);
-        }
-    }
+    forEachMeasuredDepth(depth_snapshot_, *depth, [&](double z_map, double z_true) {
+        depth_ratios_.push_back(z_true / z_map);
+    });
     if (!depth_ratios_.empty()) {
         row.map_unit_depth = median(depth_ratios_);
     }
 }
 
+// Ground truth over this epoch's tracked frames.
 void EvalRun::recordTruth(const drivers::source::Frame& frame, FrameRow& row, EvalResult& r) {
     r.has_ground_truth = true;
     // The trajectory in the map the scale is estimated in (estimator.map):
