@@ -52,12 +52,13 @@ constexpr double kTumDepthPerMetre = 5000.0;
 constexpr const char* kFooter =
     "usage: synth-render --out DIR [--frames N] [--seed S] [--width W] [--height H]\n"
     "                    [--fx F] [--k1 K1] [--k2 K2] [--fps HZ] [--speed SCALE]\n"
-    "                    [--noise SIGMA] [--no-aa] [--depth]\n"
+    "                    [--shake RAD] [--noise SIGMA] [--no-aa] [--depth]\n"
     "Renders N frames (default 300) of a textured 6 x 5 x 3 m room along a smooth\n"
     "handheld-like loop, W x H pixels (default 640 x 480), focal length F pixels\n"
     "(default 525, principal point at the image centre, radial distortion K1 K2,\n"
     "default 0), at HZ frames per second (default 30), with Gaussian pixel noise\n"
-    "SIGMA grey levels (default 1), and writes rgb/, rgb.txt, groundtruth.txt (TUM,\n"
+    "SIGMA grey levels (default 1), the camera shaken by RAD radians RMS per axis at\n"
+    "2-8 Hz when --shake is given, and writes rgb/, rgb.txt, groundtruth.txt (TUM,\n"
     "camera-to-world), camera.txt and gravity.txt into DIR; with --depth also\n"
     "depth/ and depth.txt (16-bit PNG, 5000 per metre).\n"
     "Exit codes (sysexits.h): 0 success; 64 usage; 73 an output could not be created.";
@@ -93,6 +94,7 @@ struct Options {
     double fx = 525.0;
     double fps = 30.0;
     double speed = 1.0;
+    double shake_rad = 0.0;
     double noise = 1.0;
     double k1 = 0.0;
     double k2 = 0.0;
@@ -129,6 +131,8 @@ constexpr OptionSpec<Options> kOptions[] = {
      [](std::string_view v, Options& o) { return parseDouble(v, 0.1, 1000.0, &o.fps); }, kInvalid},
     {"--speed", "SCALE", "the trajectory's speed factor, 0.01 to 4 (default 1)",
      [](std::string_view v, Options& o) { return parseDouble(v, 0.01, 4.0, &o.speed); }, kInvalid},
+    {"--shake", "RAD", "hand shake: RMS rotation about each camera axis, 0 to 0.1 rad, 2-8 Hz (default 0)",
+     [](std::string_view v, Options& o) { return parseDouble(v, 0.0, 0.1, &o.shake_rad); }, kInvalid},
     {"--noise", "SIGMA", "Gaussian pixel noise, 0 to 100 grey levels (default 1)",
      [](std::string_view v, Options& o) { return parseDouble(v, 0.0, 100.0, &o.noise); }, kInvalid},
     {"--no-aa", nullptr, "no antialiasing",
@@ -320,6 +324,7 @@ int render(const Options& opts) {
     scaled::drivers::synth::TrajectoryConfig traj_config;
     traj_config.seed = static_cast<std::uint64_t>(opts.seed);
     traj_config.speed_scale = opts.speed;
+    traj_config.shake_rms_rad = opts.shake_rad;
     auto traj = scaled::drivers::synth::Trajectory::create(traj_config);
     if (!scene || !traj) {
         std::cerr << "synth-render: " << (!scene ? scene.error().message : traj.error().message)

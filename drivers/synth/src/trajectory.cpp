@@ -13,6 +13,9 @@ namespace {
 
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 constexpr double kMaxSpeedScale = 4.0;
+constexpr double kMaxShakeRad = 0.1;
+constexpr double kShakeMinHz = 2.0;
+constexpr double kShakeMaxHz = 8.0;
 
 // Loop shape.
 constexpr double kSemiAxisX = 1.2;
@@ -46,6 +49,11 @@ core::Result<Trajectory> Trajectory::create(const TrajectoryConfig& config) {
         return core::makeError(core::ErrorCode::kInvalidArgument,
                                "synth trajectory: duration_s must be positive");
     }
+    if (!std::isfinite(config.shake_rms_rad) || config.shake_rms_rad < 0.0 ||
+        config.shake_rms_rad > kMaxShakeRad) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "synth trajectory: shake_rms_rad must be in [0, 0.1]");
+    }
     if (!config.centre_W.allFinite()) {
         return core::makeError(core::ErrorCode::kInvalidArgument,
                                "synth trajectory: centre_W must be finite");
@@ -62,6 +70,14 @@ Trajectory::Trajectory(const TrajectoryConfig& config) : config_(config) {
     yaw_phase_ = rng.uniform(0.0, kTwoPi);
     pitch_phase_ = rng.uniform(0.0, kTwoPi);
     roll_phase_ = rng.uniform(0.0, kTwoPi);
+    // The shake's own stream: the loop above is the same with or without it.
+    SplitMix64 shake_rng(combineSeed(config.seed, 0x7368616bULL));
+    for (int a = 0; a < 3; ++a) {
+        for (int k = 0; k < kShakeTerms; ++k) {
+            shake_omega_[a][k] = kTwoPi * shake_rng.uniform(kShakeMinHz, kShakeMaxHz);
+            shake_phase_[a][k] = shake_rng.uniform(0.0, kTwoPi);
+        }
+    }
 }
 
 core::CameraPose Trajectory::poseAt(double t_s) const {
@@ -85,8 +101,23 @@ core::CameraPose Trajectory::poseAt(double t_s) const {
     const Mat3d R = AngleAxis(yaw, Vec3d::UnitZ()).toRotationMatrix() * level *
                     AngleAxis(pitch, Vec3d::UnitX()).toRotationMatrix() *
                     AngleAxis(roll, Vec3d::UnitZ()).toRotationMatrix();
+    Mat3d R_shaken = R;
+    if (config_.shake_rms_rad > 0.0) {
+        // Per camera axis three equal sinusoids whose sum has the configured RMS.
+        const double amp = config_.shake_rms_rad * std::sqrt(2.0 / double(kShakeTerms));
+        Vec3d angle = Vec3d::Zero();
+        for (int a = 0; a < 3; ++a) {
+            for (int k = 0; k < kShakeTerms; ++k) {
+                angle(a) += amp * std::sin(shake_omega_[a][k] * t_s + shake_phase_[a][k]);
+            }
+        }
+        const double norm = angle.norm();
+        if (norm > 0.0) {
+            R_shaken = R * AngleAxis(norm, angle / norm).toRotationMatrix();
+        }
+    }
     core::CameraPose pose;
-    pose.R_CtoW = R.cast<core::Scalar>();
+    pose.R_CtoW = R_shaken.cast<core::Scalar>();
     pose.p_CinW = p.cast<core::Scalar>();
     return pose;
 }

@@ -36,6 +36,51 @@ TEST(SynthTrajectory, RejectsBadConfig) {
     c = TrajectoryConfig{};
     c.duration_s = std::nan("");
     EXPECT_FALSE(Trajectory::create(c).ok());
+    c = TrajectoryConfig{};
+    c.shake_rms_rad = -0.001;
+    EXPECT_FALSE(Trajectory::create(c).ok());
+    c.shake_rms_rad = 0.2;
+    EXPECT_FALSE(Trajectory::create(c).ok());
+    c.shake_rms_rad = std::nan("");
+    EXPECT_FALSE(Trajectory::create(c).ok());
+}
+
+// The shake turns the camera about its own axes by the configured RMS, at
+// 2-8 Hz, and leaves the path and the unshaken attitude alone.
+TEST(SynthTrajectory, ShakeTurnsTheCameraByItsRmsAtHandFrequencies) {
+    TrajectoryConfig c;
+    const auto calm = Trajectory::create(c).value();
+    c.shake_rms_rad = 0.004;
+    const auto shaken = Trajectory::create(c).value();
+    Eigen::Vector3d sum_sq = Eigen::Vector3d::Zero();
+    double max_step = 0;  // largest change of the shake between 1 ms samples
+    Eigen::Vector3d previous = Eigen::Vector3d::Zero();
+    constexpr int kSamples = 60000;  // 60 s at 1 kHz
+    for (int i = 0; i < kSamples; ++i) {
+        const double t = i * 1e-3;
+        const auto a = calm.poseAt(t);
+        const auto b = shaken.poseAt(t);
+        ASSERT_EQ(a.p_CinW, b.p_CinW);
+        const Eigen::AngleAxisd aa((a.R_CtoW.transpose() * b.R_CtoW).cast<double>());
+        const Eigen::Vector3d angle = aa.axis() * aa.angle();  // in the camera frame
+        sum_sq += angle.cwiseProduct(angle);
+        if (i > 0) {
+            max_step = std::max(max_step, (angle - previous).norm());
+        }
+        previous = angle;
+    }
+    for (int a = 0; a < 3; ++a) {
+        EXPECT_NEAR(std::sqrt(sum_sq(a) / kSamples), 0.004, 0.0008) << "axis " << a;
+    }
+    // At most 8 Hz: three terms of amplitude 0.004 sqrt(2/3) per axis change
+    // by at most 3 * 2 pi 8 * 0.0033 rad/s = 0.49 rad/s, 0.5 mrad per ms on
+    // one axis (0.85 mrad on three).
+    EXPECT_LT(max_step, 0.00085);
+    EXPECT_GT(max_step, 0.0001);
+    // The shake draws from its own stream: with it off, the seed's loop is
+    // the one it always was.
+    c.shake_rms_rad = 0;
+    EXPECT_EQ(Trajectory::create(c).value().poseAt(2.5).R_CtoW, calm.poseAt(2.5).R_CtoW);
 }
 
 TEST(SynthTrajectory, GravityPointsDown) {

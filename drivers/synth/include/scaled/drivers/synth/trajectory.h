@@ -26,6 +26,11 @@ struct TrajectoryConfig {
     double speed_scale = 1.0;                  // time scaling of the whole motion, in (0, 4]
     double duration_s = 60.0;                  // length of the sequence frameCount() describes
     core::Vec3 centre_W = core::Vec3::Zero();  // loop centre (z ignored), the room's by default
+    // Hand shake: a rotation about each camera axis of this RMS (radians),
+    // the sum of three sinusoids of 2-8 Hz (real time, not scaled by
+    // speed_scale) with phases and frequencies from the seed. 0: none, and the
+    // trajectory is the one without the option. In [0, 0.1].
+    double shake_rms_rad = 0.0;
 };
 
 struct Frame {
@@ -62,6 +67,10 @@ private:
     double yaw_phase_ = 0;
     double pitch_phase_ = 0;
     double roll_phase_ = 0;
+    // Shake: per camera axis, three (frequency rad/s, phase) pairs.
+    static constexpr int kShakeTerms = 3;
+    double shake_omega_[3][kShakeTerms] = {};
+    double shake_phase_[3][kShakeTerms] = {};
 };
 
 // Unit gravity ("down") direction in the world frame: (0, 0, -1).
