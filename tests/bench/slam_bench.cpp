@@ -21,6 +21,7 @@
 #include <scaled/drivers/synth/trajectory.h>
 #include <scaled/drivers/vision/corner_detector.h>
 #include <scaled/drivers/vision/mono_tracker.h>
+#include <scaled/drivers/vision/small_image_rotation.h>
 
 #include "shared_dir.h"
 
@@ -222,7 +223,35 @@ void BM_CornersRedkitchen(benchmark::State& state) {
     runCorners(state, seq->gray[kFrames / 2]);
 }
 
+// The rotation check's small-image alignment (tracker.rotation_check_radps),
+// as the tracker runs it on every frame: one push, aligned with the previous
+// frame from the identity. Two consecutive redkitchen frames, alternated.
+void BM_SmallImageRotationRedkitchen(benchmark::State& state) {
+    const Sequence* seq = redkitchenSequence();
+    if (seq == nullptr) {
+        state.SkipWithError("data/redkitchen not found in ../shared (set SCALED_SHARED_DIR)");
+        return;
+    }
+    const cv::Mat& a = seq->gray[kFrames / 2];
+    const cv::Mat& b = seq->gray[kFrames / 2 + 1];
+    const auto camera =
+        core::PinholeRadialCamera::create({585, 585, 320, 240, 0, 0, 640, 480}).value();
+    drivers::vision::SmallImageRotation sir;
+    sir.create(a.cols, a.rows);
+    bool flip = false;
+    int iterations = 0;
+    for (auto _ : state) {  // NOLINT(clang-analyzer-deadcode.DeadStores): benchmark idiom
+        const auto r = sir.push(flip ? a : b, camera, core::Mat3::Identity(), core::Vec3::Zero());
+        iterations += r ? r->iterations : 0;
+        benchmark::DoNotOptimize(r);
+        flip = !flip;
+    }
+    state.counters["iterations"] =
+        benchmark::Counter(static_cast<double>(iterations), benchmark::Counter::kAvgIterations);
+}
+
 BENCHMARK(BM_CornersSynthetic)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_SmallImageRotationRedkitchen)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_CornersRedkitchen)->Arg(10)->Arg(100)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_TrackerSynthetic)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_TrackerRedkitchen)->Arg(25)->Arg(30)->Arg(50)->Arg(100)->Unit(benchmark::kMillisecond);

@@ -172,11 +172,15 @@ TEST(SlamRedkitchen, ANearLossIsRelocalisedBeforeTheMapFollowsIt) {
 // to relocalise against (far features, their depth still open). No pose can
 // have the 10 inliers relocalisation asks for, so the map is given up at once
 // and a new one started: 158 of 160 frames tracked (129 when it looked for 3 s).
+// (The rotation check, tracker.rotation_check_radps, fires on one frame of this
+// run and the loss does not happen: 160 tracked, ATE 7.60% against 7.11%; it is
+// off here, for the loss this test is about.)
 TEST(SlamKitti, AMapWithTooFewKnownFeaturesIsGivenUpAtOnce) {
     SCALED_REQUIRE_DATASET(dir, "kitti00");
     SlamRunOptions opt;
     opt.tracker.slam.seed = 2;
     opt.tracker.slam.motion.reference_hz = 0;
+    opt.tracker.rotation_check_radps = 0;
     const auto r = runDataset(dir, opt);
     ASSERT_TRUE(r.ok()) << r.error().message;
     std::printf("kitti00 seed 2: %zu/%zu tracked, %d re-init, %d relocalising frames\n",

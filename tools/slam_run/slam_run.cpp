@@ -138,6 +138,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
     result.ms_per_frame_max = std::max(result.ms_per_frame_max, r.track_ms);
     ++result.frames;
     result.near_loss_frames += stats.near_loss ? 1 : 0;
+    result.rotation_check_frames += stats.rotation_check ? 1 : 0;
     result.start_restarts += stats.start_redone ? 1 : 0;
     if (r.ok) {
         // A frame that starts a replacement map was not tracked.
@@ -329,6 +330,7 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     s += ",\"relocalise_dropped_features\":" + std::to_string(r.relocalise_dropped_features);
     s += ",\"relocalising_frames\":" + std::to_string(r.relocalising_frames);
     s += ",\"near_loss_frames\":" + std::to_string(r.near_loss_frames);
+    s += ",\"rotation_check_frames\":" + std::to_string(r.rotation_check_frames);
     s += ",\"start_restarts\":" + std::to_string(r.start_restarts);
     if (r.window_ba_optimisations > 0) {
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +

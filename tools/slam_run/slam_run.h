@@ -56,8 +56,9 @@ struct SlamRunResult {
     // while lost that they removed
     int relocalisations_verified = 0;
     int relocalise_dropped_features = 0;
-    int relocalising_frames = 0;  // frames spent looking for the camera in a lost map
-    int near_loss_frames = 0;     // near-loss frames (tracker.near_loss_ratio)
+    int relocalising_frames = 0;    // frames spent looking for the camera in a lost map
+    int near_loss_frames = 0;       // near-loss frames (tracker.near_loss_ratio)
+    int rotation_check_frames = 0;  // predicted with the small images' rotation
     // Maps the start check began again (TrackerConfig::start_check_s): the
     // same map's frame and unit, new features (not a reinitialisation, not a
     // loss, not a new segment).

@@ -98,6 +98,9 @@ core::Status validate(const TrackerConfig& c) {
         {"near_loss_frames", d(c.near_loss_frames), L::near_loss_frames},
         {"pyramid_levels", d(c.pyramid_levels), L::pyramid_levels},
         {"coarse_min_ncc", d(c.coarse_min_ncc), L::coarse_min_ncc},
+        {"rotation_check_radps", d(c.rotation_check_radps), L::rotation_check_radps},
+        {"rotation_check_sigma_radps", d(c.rotation_check_sigma_radps),
+         L::rotation_check_sigma_radps},
         {"gyro_noise_density", d(c.gyro_noise_density), L::gyro_noise_density},
         {"gyro_bias_sigma_radps", d(c.gyro_bias_sigma_radps), L::gyro_bias_sigma_radps},
         {"gyro_bias_time_s", d(c.gyro_bias_time_s), L::gyro_bias_time_s},
@@ -190,6 +193,7 @@ MonoTracker::MonoTracker(slam::EkfSlam slam, std::optional<slam::WindowBa> ba,
     reloc_points_W_.reserve(static_cast<size_t>(config.slam.max_features));
     reloc_points_n_.reserve(static_cast<size_t>(config.slam.max_features));
     depth_scratch_.reserve(static_cast<size_t>(config.slam.max_features));
+    small_rotation_.create(slam_.camera().width(), slam_.camera().height());
 }
 
 void MonoTracker::reset() {
@@ -804,6 +808,63 @@ bool MonoTracker::relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackS
     return true;
 }
 
+Scalar MonoTracker::medianMeasuredDepth() {
+    depth_scratch_.clear();
+    const core::CameraPose T = slam_.pose();
+    slam::MapPoint point;
+    const auto features = slam_.features();
+    for (int slot = 0; slot < static_cast<int>(features.size()); ++slot) {
+        if (!features[static_cast<size_t>(slot)].measured || !slam_.mapPoint(slot, point)) {
+            continue;
+        }
+        const Scalar z = (T.R_CtoW.transpose() * (point.p_FinW - T.p_CinW)).z();
+        if (z > 0) {
+            depth_scratch_.push_back(z);
+        }
+    }
+    constexpr std::size_t kMinDepths = 5;
+    return depth_scratch_.size() < kMinDepths ? Scalar(0) : upperMedianInPlace(depth_scratch_);
+}
+
+const slam::GyroRate* MonoTracker::checkRotation(std::int64_t t_ns, const cv::Mat& gray,
+                                                 TrackStats& stats) {
+    if (config_.rotation_check_radps <= 0) {
+        return nullptr;
+    }
+    const bool predicting = has_map_ && !relocalising_ && slam_.health() == slam::SlamHealth::kOk &&
+                            t_ns > slam_.timestampNs();
+    core::Mat3 R0_CinP = core::Mat3::Identity();
+    Vec3 t_CinP_per_depth = Vec3::Zero();
+    Vec3 w_model = Vec3::Zero();
+    Scalar dt = 0;
+    if (predicting) {
+        // Start from the motion model's rotation; the scene moved by its
+        // velocity at the depth of the features the last frame measured.
+        dt = Scalar(t_ns - slam_.timestampNs()) * Scalar(1e-9);
+        w_model = slam_.state().segment<3>(slam::kAngVel);
+        R0_CinP = slam::rotationFromQuat(slam::quatFromRotationVector(w_model * dt));
+        const Scalar depth = medianMeasuredDepth();
+        if (depth > 0) {
+            t_CinP_per_depth = slam_.pose().R_CtoW.transpose() * slam_.velocityW() * (dt / depth);
+        }
+    }
+    const auto found = small_rotation_.push(gray, slam_.camera(), R0_CinP, t_CinP_per_depth);
+    if (!predicting || !found) {
+        return nullptr;
+    }
+    const Eigen::AngleAxis<Scalar> aa(found->R_CinP);
+    const Vec3 w_images = aa.axis() * (aa.angle() / dt);
+    if (!w_images.allFinite() ||
+        (w_images - w_model).norm() <= Scalar(config_.rotation_check_radps)) {
+        return nullptr;
+    }
+    checked_rate_.w_C_radps = w_images;
+    checked_rate_.sigma_radps = Scalar(config_.rotation_check_sigma_radps);
+    checked_rate_.samples = 0;
+    stats.rotation_check = true;
+    return &checked_rate_;
+}
+
 const slam::GyroRate* MonoTracker::integrateGyroForFrame(std::int64_t t_ns,
                                                          const slam::ImuWindow* imu,
                                                          slam::GyroIntegration& gyro,
@@ -924,6 +985,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         return stats;
     }
     StageLap lap;
+    const slam::GyroRate* checked = checkRotation(t_ns, gray, stats);
     if (!has_map_) {
         startNewMap(t_ns, gray, stats);
         stats.stage_us.map = lap.next();
@@ -942,6 +1004,11 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         }
     } else {
         rate = integrateGyroForFrame(t_ns, imu, gyro, stats);
+        if (rate == nullptr) {
+            rate = checked;  // the small images' rotation, when it says the model is off
+        } else {
+            stats.rotation_check = false;  // the gyro's rotation is the better one
+        }
         const slam::SlamHealth predicted = slam_.predict(t_ns, rate);
         stats.stage_us.predict = lap.next();
         if (predicted != slam::SlamHealth::kOk) {
@@ -960,7 +1027,8 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         if (config_.relocalise_s > 0) {
             refreshDescriptors(gray, preds);
         }
-        if (rate != nullptr && bias_reference && config_.gyro_bias_time_s > 0) {
+        if (rate != nullptr && !stats.rotation_check && bias_reference &&
+            config_.gyro_bias_time_s > 0) {
             updateGyroBias(*rate, R_prev_CtoW, t_prev_ns, t_ns);
         }
     }

@@ -25,6 +25,7 @@
 #include <scaled/drivers/vision/corner_detector.h>
 #include <scaled/drivers/vision/matcher.h>
 #include <scaled/drivers/vision/patch.h>
+#include <scaled/drivers/vision/small_image_rotation.h>
 #include <scaled/drivers/vision/two_view.h>
 
 namespace scaled::drivers::vision {
@@ -116,6 +117,15 @@ struct TrackerConfig {
     // with the gyro's rotation; otherwise (no gyro, a gap, another clock) the
     // constant-velocity model runs. false: never.
     bool use_gyro = true;
+    // The rotation check (docs/slam.md "The rotation check"): on a frame
+    // predicted without a gyro, the rotation since the previous frame is
+    // found from the two frames' small images (small_image_rotation.h). When
+    // its rate differs from the motion model's angular velocity by more than
+    // rotation_check_radps (a jolt the constant-velocity model cannot follow:
+    // 0.6 rad/s is 10 px in a 30 Hz frame at f 525), the frame is predicted
+    // with it as a gyro reading of rotation_check_sigma_radps. 0: off.
+    double rotation_check_radps = 0.6;
+    double rotation_check_sigma_radps = 0.2;
     double gyro_noise_density = 2e-4;     // rad/s/sqrt(Hz), white rate noise
     double gyro_bias_sigma_radps = 0.02;  // what is left of the bias (1 sigma)
     double gyro_max_gap_s = 0.05;         // a longer silence gives no gyro rate
@@ -192,6 +202,8 @@ struct TrackerLimits {
     static constexpr core::ParamLimits relocalise_search_px = core::closed(0, 10000);
     static constexpr core::ParamLimits relocalise_verify_px = core::closed(0, 1000);
     static constexpr core::ParamLimits relocalise_max_rel_sigma = core::openClosed(0, 10);
+    static constexpr core::ParamLimits rotation_check_radps = core::closed(0, 100);
+    static constexpr core::ParamLimits rotation_check_sigma_radps = core::openClosed(0, 100);
     static constexpr core::ParamLimits gyro_noise_density = core::closed(0, 1);  // rad/s/sqrt(Hz)
     static constexpr core::ParamLimits gyro_bias_sigma_radps = core::closed(0, 10);
     static constexpr core::ParamLimits gyro_bias_time_s = core::closed(0, 3600);
@@ -253,6 +265,8 @@ struct TrackStats {
     int coarse_matches = 0;      // of which matched at full resolution
     bool relocalised = false;    // this frame put the camera back into the lost map
     bool near_loss = false;      // a near-loss frame (near_loss_ratio)
+    // Predicted with the small images' rotation (rotation_check_radps).
+    bool rotation_check = false;
     // The window bundle adjustment on this frame (window_ba.enabled): whether
     // it optimised, and the scale it gave the map.
     core::slam::WindowBaReport window_ba;
@@ -368,6 +382,15 @@ private:
                                                       const core::slam::ImuWindow* imu,
                                                       core::slam::GyroIntegration& gyro,
                                                       TrackStats& stats) const;
+    // The rotation check: pushes the frame's small image (every frame, so
+    // the previous one is always the last frame's) and, on a frame the
+    // filter will predict, returns the small images' rate when it differs
+    // from the motion model's by more than rotation_check_radps; else nullptr.
+    const core::slam::GyroRate* checkRotation(std::int64_t t_ns, const cv::Mat& gray,
+                                              TrackStats& stats);
+    // Median depth (camera z) of the features the last update accepted; 0
+    // with fewer than 5.
+    core::Scalar medianMeasuredDepth();
     // Enough ellipses outgrow the pixel budget for the pyramid to be used
     // (coarse_min_fraction).
     [[nodiscard]] bool isCoarseFrame(std::span<const core::slam::FeaturePrediction> preds) const;
@@ -458,6 +481,8 @@ private:
     std::vector<cv::Point3f> reloc_points_W_;
     std::vector<cv::Point2f> reloc_points_n_;  // normalised image coordinates
     std::vector<core::Scalar> depth_scratch_;
+    SmallImageRotation small_rotation_;  // the rotation check's images
+    core::slam::GyroRate checked_rate_;  // its rate on a frame where it fired
     struct RelocCandidate {
         int slot = -1;
         int corner = -1;
