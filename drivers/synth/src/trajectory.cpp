@@ -103,7 +103,9 @@ core::CameraPose Trajectory::poseAt(double t_s) const {
                     AngleAxis(roll, Vec3d::UnitZ()).toRotationMatrix();
     Mat3d R_shaken = R;
     if (config_.shake_rms_rad > 0.0) {
-        // Per camera axis three equal sinusoids whose sum has the configured RMS.
+        // Per camera axis three equal sinusoids whose sum has the configured
+        // RMS (over a long run; two near frequencies beat, and a short one
+        // can be off by tens of percent).
         const double amp = config_.shake_rms_rad * std::sqrt(2.0 / double(kShakeTerms));
         Vec3d angle = Vec3d::Zero();
         for (int a = 0; a < 3; ++a) {

@@ -827,12 +827,12 @@ Scalar MonoTracker::medianMeasuredDepth() {
 }
 
 const slam::GyroRate* MonoTracker::checkRotation(std::int64_t t_ns, const cv::Mat& gray,
-                                                 TrackStats& stats) {
+                                                 bool gyro_given, TrackStats& stats) {
     if (config_.rotation_check_radps <= 0) {
         return nullptr;
     }
-    const bool predicting = has_map_ && !relocalising_ && slam_.health() == slam::SlamHealth::kOk &&
-                            t_ns > slam_.timestampNs();
+    const bool predicting = has_map_ && !relocalising_ && !gyro_given &&
+                            slam_.health() == slam::SlamHealth::kOk && t_ns > slam_.timestampNs();
     core::Mat3 R0_CinP = core::Mat3::Identity();
     Vec3 t_CinP_per_depth = Vec3::Zero();
     Vec3 w_model = Vec3::Zero();
@@ -848,7 +848,8 @@ const slam::GyroRate* MonoTracker::checkRotation(std::int64_t t_ns, const cv::Ma
             t_CinP_per_depth = slam_.pose().R_CtoW.transpose() * slam_.velocityW() * (dt / depth);
         }
     }
-    const auto found = small_rotation_.push(gray, slam_.camera(), R0_CinP, t_CinP_per_depth);
+    const auto found =
+        small_rotation_.push(gray, slam_.camera(), R0_CinP, t_CinP_per_depth, predicting);
     if (!predicting || !found) {
         return nullptr;
     }
@@ -985,7 +986,8 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         return stats;
     }
     StageLap lap;
-    const slam::GyroRate* checked = checkRotation(t_ns, gray, stats);
+    const slam::GyroRate* checked =
+        checkRotation(t_ns, gray, imu != nullptr && config_.use_gyro, stats);
     if (!has_map_) {
         startNewMap(t_ns, gray, stats);
         stats.stage_us.map = lap.next();
@@ -1014,6 +1016,7 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
         if (predicted != slam::SlamHealth::kOk) {
             stats.health = predicted;
             stats.gyro.reset();  // nothing was predicted, with the gyro or without
+            stats.rotation_check = false;
             return stats;
         }
     }

@@ -4,6 +4,7 @@
 #include <cstdint>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 #include <scaled/drivers/vision/small_image_rotation.h>
@@ -45,6 +46,11 @@ constexpr int kPixelStep = 2;      // every second small pixel of every second r
 constexpr float kHuber = 0.5F;     // in normalised intensity
 constexpr float kMinStep = 1e-4F;  // rad (0.007 small pixels): converged
 constexpr float kMinDepthRatio = 0.1F;
+constexpr int kMinPixels = 50;             // compared, at the least
+constexpr float kMaxStep = 0.05F;          // rad (3 small pixels at f 65) per step
+constexpr float kSettledStep = 2e-3F;      // rad (0.13 small pixels): a last step this small
+constexpr float kMinConditioning = 1e-4F;  // smallest over largest eigenvalue of H
+constexpr float kMaxRms = 0.5F;            // two unrelated images give about 1.4
 
 }  // namespace
 
@@ -196,30 +202,45 @@ std::optional<SmallImageRotation::Result> SmallImageRotation::align(
     k.cx = (static_cast<float>(intr.cx) + 0.5F) * kS - 0.5F;
     k.cy = (static_cast<float>(intr.cy) + 0.5F) * kS - 0.5F;
     const Vec3f t = t_CinP_per_depth.cast<float>();
-    const int min_used = (current_.cols * current_.rows) / (4 * kPixelStep * kPixelStep);
+    const int min_used =
+        std::max(kMinPixels, (current_.cols * current_.rows) / (4 * kPixelStep * kPixelStep));
     Mat3f R = R0_CinP.cast<float>();
     Result res;
-    for (int it = 0; it < kMaxIterations; ++it) {
+    bool converged = false;
+    bool settled = false;  // the last step small enough to trust its R
+    for (int it = 0; it < kMaxIterations && !converged; ++it) {
         const Normal n = normalEquations(k, R, t);
         if (n.used < min_used) {
-            break;
+            return std::nullopt;  // too little overlap where the last step took it
         }
-        const Vec3f d = -n.H.ldlt().solve(n.b);
+        // A direction the image cannot see (texture along one line): no answer.
+        const Eigen::SelfAdjointEigenSolver<Mat3f> eig(n.H, Eigen::EigenvaluesOnly);
+        if (!(eig.eigenvalues()(0) > kMinConditioning * eig.eigenvalues()(2))) {
+            return std::nullopt;
+        }
+        Vec3f d = -n.H.ldlt().solve(n.b);
         if (!d.allFinite()) {
-            break;
+            return std::nullopt;
         }
         res.rms = std::sqrt(n.sq / static_cast<float>(n.used));
         res.pixels = n.used;
         res.iterations = it + 1;
         const float angle = d.norm();
+        if (angle > kMaxStep) {
+            d *= kMaxStep / angle;  // Gauss-Newton far from the minimum: a bounded step
+        }
         if (angle > 0) {
-            R = R * Eigen::AngleAxisf(angle, d / angle).toRotationMatrix();
+            R = R * Eigen::AngleAxisf(d.norm(), d.normalized()).toRotationMatrix();
         }
-        if (angle < kMinStep) {
-            break;
-        }
+        // A step this small leaves the residual where it was measured: the
+        // overlap and rms above are the answer's.
+        converged = angle < kMinStep;
+        settled = angle < kSettledStep;
     }
-    if (res.iterations == 0 || !R.allFinite()) {
+    // Still moving after kMaxIterations (its last step above kSettledStep), or
+    // the images do not agree under any rotation (a scene that moved, a blank
+    // frame): no answer.
+    if (!settled || !R.allFinite() || res.rms > kMaxRms) {
         return std::nullopt;
     }
     res.R_CinP = R.cast<core::Scalar>();
@@ -228,10 +249,10 @@ std::optional<SmallImageRotation::Result> SmallImageRotation::align(
 
 std::optional<SmallImageRotation::Result> SmallImageRotation::push(
     const cv::Mat& gray, const core::PinholeRadialCamera& camera, const core::Mat3& R0_CinP,
-    const core::Vec3& t_CinP_per_depth) {
+    const core::Vec3& t_CinP_per_depth, bool align_now) {
     makeSmall(gray, current_);
     std::optional<Result> out;
-    if (has_previous_ && previous_.size() == current_.size()) {
+    if (align_now && has_previous_ && previous_.size() == current_.size()) {
         out = align(camera, R0_CinP, t_CinP_per_depth);
     }
     std::swap(previous_, current_);

@@ -1,7 +1,7 @@
 // The rotation check's alignment (small_image_rotation.h) on rendered views of
 // the synthetic room: a known rotation between two frames is found from the
 // identity, a translation given is taken out, none given is partly taken for
-// a rotation, and no previous frame means no answer.
+// a rotation, and no previous frame or no one scene means no answer.
 
 #include <algorithm>
 #include <cmath>
@@ -117,6 +117,25 @@ TEST(SmallImageRotation, TakesOutTheTranslationItIsGiven) {
         depth, err_blind, err_told);
     EXPECT_GT(err_blind, 0.004);  // 2 cm at 2-4 m: 0.005-0.01 rad of false turn
     EXPECT_LT(err_told, 0.5 * err_blind);
+}
+
+// Two views of different walls (a quarter turn apart, started from the
+// identity) show no one scene under any small rotation: no answer rather than
+// whatever the last step reached. A blank frame after a textured one neither.
+TEST(SmallImageRotation, ImagesThatDoNotShowOneSceneGiveNoAnswer) {
+    const Mat3 quarter = AngleAxis(Scalar(1.5708), Vec3::UnitY()).toRotationMatrix();
+    const cv::Mat a = render(poseAfter(Mat3::Identity(), Vec3::Zero()));
+    const cv::Mat b = render(poseAfter(quarter, Vec3::Zero()));
+    SmallImageRotation sir;
+    sir.create(640, 480);
+    (void)sir.push(a, camera525(), Mat3::Identity(), Vec3::Zero());
+    EXPECT_FALSE(sir.push(b, camera525(), Mat3::Identity(), Vec3::Zero()));
+    const cv::Mat blank(480, 640, CV_8UC1, cv::Scalar(0));
+    EXPECT_FALSE(sir.push(blank, camera525(), Mat3::Identity(), Vec3::Zero()));
+    // And no alignment when it is not asked for (a frame the gyro predicts).
+    (void)sir.push(a, camera525(), Mat3::Identity(), Vec3::Zero());
+    EXPECT_FALSE(sir.push(a, camera525(), Mat3::Identity(), Vec3::Zero(), false));
+    EXPECT_TRUE(sir.push(a, camera525(), Mat3::Identity(), Vec3::Zero()));
 }
 
 TEST(SmallImageRotation, ImagesOfAnotherSizeAreTakenToo) {

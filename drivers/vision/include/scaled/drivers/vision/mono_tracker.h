@@ -384,10 +384,11 @@ private:
                                                       TrackStats& stats) const;
     // The rotation check: pushes the frame's small image (every frame, so
     // the previous one is always the last frame's) and, on a frame the
-    // filter will predict, returns the small images' rate when it differs
-    // from the motion model's by more than rotation_check_radps; else nullptr.
+    // filter will predict without a gyro (gyro_given: IMU samples came with
+    // it), returns the small images' rate when it differs from the motion
+    // model's by more than rotation_check_radps; else nullptr.
     const core::slam::GyroRate* checkRotation(std::int64_t t_ns, const cv::Mat& gray,
-                                              TrackStats& stats);
+                                              bool gyro_given, TrackStats& stats);
     // Median depth (camera z) of the features the last update accepted; 0
     // with fewer than 5.
     core::Scalar medianMeasuredDepth();

@@ -43,13 +43,18 @@ struct SmallImageRotation {
     void reset() { has_previous_ = false; }
 
     // Makes gray's small image the current one and, when a previous one
-    // exists, aligns the two starting from R0_CinP, the scene translated by
-    // t_CinP_per_depth (the current camera's position in the previous
-    // camera's frame over the scene's depth; zero: a distant scene). nullopt
-    // without a previous frame or when fewer than a quarter of the pixels
-    // overlap. The current frame becomes the previous one either way.
+    // exists and align_now, aligns the two starting from R0_CinP, the scene
+    // translated by t_CinP_per_depth (the current camera's position in the
+    // previous camera's frame over the scene's depth; zero: a distant scene).
+    // nullopt without a previous frame, without align_now, or when the
+    // alignment has no trustworthy answer: fewer than a quarter of the pixels
+    // overlap, a rotation the texture cannot see (H near singular), no
+    // convergence in kMaxIterations (steps of at most 0.05 rad), or a
+    // residual too large for the two images to show one scene. The current
+    // frame becomes the previous one either way.
     std::optional<Result> push(const cv::Mat& gray, const core::PinholeRadialCamera& camera,
-                               const core::Mat3& R0_CinP, const core::Vec3& t_CinP_per_depth);
+                               const core::Mat3& R0_CinP, const core::Vec3& t_CinP_per_depth,
+                               bool align_now = true);
 
 private:
     struct Intrinsics {  // of the small image (one focal length)
