@@ -1007,9 +1007,9 @@ TrackStats MonoTracker::processFrame(std::int64_t t_ns, const cv::Mat& gray,
     } else {
         rate = integrateGyroForFrame(t_ns, imu, gyro, stats);
         if (rate == nullptr) {
-            rate = checked;  // the small images' rotation, when it says the model is off
-        } else {
-            stats.rotation_check = false;  // the gyro's rotation is the better one
+            // The small images' rotation, when it says the model is off (never
+            // beside IMU samples: checkRotation is told of them).
+            rate = checked;
         }
         const slam::SlamHealth predicted = slam_.predict(t_ns, rate);
         stats.stage_us.predict = lap.next();
