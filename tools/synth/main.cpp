@@ -12,9 +12,11 @@
 //                        axis, 16-bit PNG at 5000 units per metre (as TUM RGB-D)
 //
 // Timestamps are written with nine decimals, so they are the exact nanoseconds.
-// Exit codes (sysexits): 0 ok, 64 bad usage, 73 an output could not be created.
+// Exit codes (sysexits): 0 ok, 64 bad usage, 65 a bad --trajectory file (66
+// missing), 73 an output could not be created.
 // The options are on CLI11 (tools/common/cli.h).
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -25,9 +27,11 @@
 #include <iostream>
 #include <opencv2/imgcodecs.hpp>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -44,6 +48,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using scaled::tools::kExCantCreat;
+using scaled::tools::kExDataErr;
+using scaled::tools::kExNoInput;
 using scaled::tools::kExUsage;
 using scaled::tools::OptionSpec;
 
@@ -53,6 +59,7 @@ constexpr const char* kFooter =
     "usage: synth-render --out DIR [--frames N] [--seed S] [--width W] [--height H]\n"
     "                    [--fx F] [--k1 K1] [--k2 K2] [--fps HZ] [--speed SCALE]\n"
     "                    [--shake RAD] [--noise SIGMA] [--no-aa] [--depth]\n"
+    "                    [--rolling-shutter S] [--exposure S] [--trajectory DIR]\n"
     "Renders N frames (default 300) of a textured 6 x 5 x 3 m room along a smooth\n"
     "handheld-like loop, W x H pixels (default 640 x 480), focal length F pixels\n"
     "(default 525, principal point at the image centre, radial distortion K1 K2,\n"
@@ -60,8 +67,15 @@ constexpr const char* kFooter =
     "SIGMA grey levels (default 1), the camera shaken by RAD radians RMS per axis at\n"
     "2-8 Hz when --shake is given, and writes rgb/, rgb.txt, groundtruth.txt (TUM,\n"
     "camera-to-world), camera.txt and gravity.txt into DIR; with --depth also\n"
-    "depth/ and depth.txt (16-bit PNG, 5000 per metre).\n"
-    "Exit codes (sysexits.h): 0 success; 64 usage; 73 an output could not be created.";
+    "depth/ and depth.txt (16-bit PNG, 5000 per metre). With --trajectory DIR the camera\n"
+    "follows the first N poses of DIR/groundtruth.txt (TUM: t tx ty tz qx qy qz qw,\n"
+    "camera-to-world) at their own times, turned so that DIR/gravity.txt's down is the\n"
+    "room's and centred in the room at 1.45 m: the same motion with exact ground truth.\n"
+    "A frame's time stamp and ground-truth pose are those of its first row's exposure\n"
+    "centre; with --rolling-shutter S row r is seen S r / (H - 1) seconds later, and\n"
+    "--exposure E averages 8 views spread over E seconds around each row's time.\n"
+    "Exit codes (sysexits.h): 0 success; 64 usage; 65 a bad --trajectory file; 73 an\n"
+    "output could not be created.";
 
 bool parseInt(std::string_view s, long lo, long hi, long* out) {
     const std::string str(s);
@@ -100,6 +114,9 @@ struct Options {
     double k2 = 0.0;
     bool antialias = true;
     bool depth = false;
+    std::string trajectory_dir;      // --trajectory: a dataset's ground truth instead of the loop
+    double rolling_shutter_s = 0.0;  // readout time from the first row to the last
+    double exposure_s = 0.0;         // motion blur: the exposure time of each row
 };
 
 constexpr const char* kInvalid = "invalid value '{}'";
@@ -147,6 +164,22 @@ constexpr OptionSpec<Options> kOptions[] = {
          o.depth = true;
          return true;
      }},
+    {"--rolling-shutter", "S",
+     "rolling shutter: seconds from the first row's exposure to the last's, 0 to 0.1 "
+     "(default 0)",
+     [](std::string_view v, Options& o) { return parseDouble(v, 0.0, 0.1, &o.rolling_shutter_s); },
+     kInvalid},
+    {"--exposure", "S", "motion blur: each row exposed for S seconds, 0 to 0.1 (default 0: none)",
+     [](std::string_view v, Options& o) { return parseDouble(v, 0.0, 0.1, &o.exposure_s); },
+     kInvalid},
+    {"--trajectory", "DIR",
+     "follow the ground truth of the dataset in DIR (groundtruth.txt, gravity.txt) instead "
+     "of the loop",
+     [](std::string_view v, Options& o) {
+         o.trajectory_dir = std::string(v);
+         return !v.empty();
+     },
+     kInvalid},
 };
 
 // The command line into `o`; nullopt to go on, else the exit code (--help
@@ -161,6 +194,10 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
     }
     if (o.out_dir.empty()) {
         return scaled::tools::usageError(app, "--out DIR is required");
+    }
+    if (!o.trajectory_dir.empty() && (o.speed != 1.0 || o.shake_rad != 0.0)) {
+        return scaled::tools::usageError(
+            app, "--trajectory follows a recorded motion: --speed and --shake do not apply");
     }
     return std::nullopt;
 }
@@ -279,17 +316,101 @@ void writeHeaders(const Options& opts, const scaled::core::CameraIntrinsics& k, 
     files.gt.precision(9);
 }
 
+// The camera's pose at any time: the loop's, or the recording's interpolated
+// between its poses (held at its ends).
+class PoseAtTime {
+public:
+    PoseAtTime(const scaled::drivers::synth::Trajectory& traj, bool recorded,
+               const std::vector<scaled::drivers::synth::Frame>& frames)
+        : traj_(&traj), recorded_(recorded), frames_(&frames) {}
+
+    [[nodiscard]] scaled::core::CameraPose operator()(double t_s) const {
+        if (!recorded_) {
+            return traj_->poseAt(t_s);
+        }
+        const auto& f = *frames_;
+        const auto t_ns = static_cast<std::int64_t>(std::llround(t_s * 1e9));
+        if (t_ns <= f.front().t_ns) {
+            return f.front().pose_CtoW;
+        }
+        if (t_ns >= f.back().t_ns) {
+            return f.back().pose_CtoW;
+        }
+        const auto next = std::upper_bound(
+            f.begin(), f.end(), t_ns,
+            [](std::int64_t t, const scaled::drivers::synth::Frame& x) { return t < x.t_ns; });
+        const auto& b = *next;
+        const auto& a = *(next - 1);
+        const double u = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+        scaled::core::CameraPose p;
+        p.p_CinW =
+            (a.pose_CtoW.p_CinW.cast<double>() * (1.0 - u) + b.pose_CtoW.p_CinW.cast<double>() * u)
+                .cast<scaled::core::Scalar>();
+        const Eigen::Quaterniond qa(a.pose_CtoW.R_CtoW.cast<double>());
+        const Eigen::Quaterniond qb(b.pose_CtoW.R_CtoW.cast<double>());
+        p.R_CtoW = qa.slerp(u, qb).toRotationMatrix().cast<scaled::core::Scalar>();
+        return p;
+    }
+
+private:
+    const scaled::drivers::synth::Trajectory* traj_;
+    bool recorded_;
+    const std::vector<scaled::drivers::synth::Frame>* frames_;
+};
+
+// One frame's image: a single view, or with --rolling-shutter / --exposure the
+// rows' own views averaged over the exposure, then the pixel noise.
+void renderImage(const Options& opts, const scaled::core::PinholeRadialCamera& cam,
+                 scaled::drivers::synth::Renderer& renderer, const PoseAtTime& poseAt,
+                 const scaled::drivers::synth::Frame& frame, std::size_t index, cv::Mat& image,
+                 cv::Mat* depth) {
+    if (opts.rolling_shutter_s <= 0.0 && opts.exposure_s <= 0.0) {
+        renderer.render(cam, frame.pose_CtoW, image, depth, index);
+        return;
+    }
+    if (depth != nullptr) {  // the depth of the frame's pose, its first row's
+        cv::Mat unused;
+        renderer.render(cam, frame.pose_CtoW, unused, depth, index);
+    }
+    constexpr int kExposureSamples = 8;
+    const int samples = opts.exposure_s > 0.0 ? kExposureSamples : 1;
+    const double t0 = static_cast<double>(frame.t_ns) * 1e-9;
+    const int h = cam.height();
+    std::vector<scaled::core::CameraPose> row_poses(static_cast<std::size_t>(h));
+    cv::Mat sum = cv::Mat::zeros(h, cam.width(), CV_32FC1);
+    cv::Mat view;
+    cv::Mat view_f;
+    for (int k = 0; k < samples; ++k) {
+        const double offset = samples > 1 ? opts.exposure_s * ((k + 0.5) / samples - 0.5) : 0.0;
+        for (int r = 0; r < h; ++r) {
+            const double row_s = h > 1 ? opts.rolling_shutter_s * r / (h - 1) : 0.0;
+            row_poses[static_cast<std::size_t>(r)] = poseAt(t0 + row_s + offset);
+        }
+        (void)renderer.renderRows(cam, row_poses, view, 0);
+        view.convertTo(view_f, CV_32FC1);
+        sum += view_f;
+    }
+    sum /= static_cast<double>(samples);
+    if (opts.noise > 0.0) {
+        cv::Mat noise(sum.size(), CV_32FC1);
+        cv::RNG rng(static_cast<std::uint64_t>(opts.seed) * 1000003ULL + index);
+        rng.fill(noise, cv::RNG::NORMAL, 0.0, opts.noise);
+        sum += noise;
+    }
+    sum.convertTo(image, CV_8UC1);  // rounds and saturates
+}
+
 // Every frame: its image (and depth) file and its text lines; 0, or
 // kExCantCreat (said).
 int renderFrames(const Options& opts, const scaled::core::PinholeRadialCamera& cam,
-                 scaled::drivers::synth::Renderer& renderer,
+                 scaled::drivers::synth::Renderer& renderer, const PoseAtTime& poseAt,
                  const std::vector<scaled::drivers::synth::Frame>& frames, const fs::path& dir,
                  TextFiles& files) {
     cv::Mat image;
     cv::Mat depth;
     for (std::size_t i = 0; i < frames.size(); ++i) {
         const auto& f = frames[i];
-        renderer.render(cam, f.pose_CtoW, image, opts.depth ? &depth : nullptr, i);
+        renderImage(opts, cam, renderer, poseAt, f, i, image, opts.depth ? &depth : nullptr);
         const std::string name = frameName("rgb", i);
         if (!cv::imwrite((dir / name).string(), image)) {
             std::cerr << "synth-render: cannot write " << (dir / name).string() << "\n";
@@ -313,6 +434,115 @@ int renderFrames(const Options& opts, const scaled::core::PinholeRadialCamera& c
     return 0;
 }
 
+// The data lines (not blank, not '#') of a text file, with their line numbers;
+// nullopt (said) when it cannot be read.
+std::optional<std::vector<std::pair<int, std::string>>> dataLines(const fs::path& path) {
+    std::ifstream in(path);
+    if (!in) {
+        std::cerr << "synth-render: cannot read " << path.string() << "\n";
+        return std::nullopt;
+    }
+    std::vector<std::pair<int, std::string>> lines;
+    std::string line;
+    for (int number = 1; std::getline(in, line); ++number) {
+        const auto first = line.find_first_not_of(" \t\r");
+        if (first != std::string::npos && line[first] != '#') {
+            lines.emplace_back(number, line);
+        }
+    }
+    return lines;
+}
+
+// DIR/groundtruth.txt (its first max_poses poses) and DIR/gravity.txt; 0, or an
+// exit code (said, with the file and line).
+int readRecording(const fs::path& dir, long max_poses,
+                  std::vector<scaled::drivers::synth::RecordedPose>& poses,
+                  scaled::core::Vec3& down_W) {
+    using scaled::core::Scalar;
+    const fs::path gt_path = dir / "groundtruth.txt";
+    const fs::path gravity_path = dir / "gravity.txt";
+    const auto gt = dataLines(gt_path);
+    const auto gravity = dataLines(gravity_path);
+    if (!gt || !gravity) {
+        return kExNoInput;
+    }
+    for (const auto& [number, line] : *gt) {
+        if (static_cast<long>(poses.size()) >= max_poses) {
+            break;
+        }
+        std::istringstream fields(line);
+        double v[8] = {};
+        for (double& x : v) {
+            fields >> x;
+        }
+        if (!fields || !std::isfinite(v[0]) || v[0] < 0) {
+            std::cerr << "synth-render: " << gt_path.string() << ":" << number
+                      << ": expected 't tx ty tz qx qy qz qw' with t >= 0\n";
+            return kExDataErr;
+        }
+        const Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
+        if (!(q.norm() > 0.5 && q.norm() < 1.5)) {
+            std::cerr << "synth-render: " << gt_path.string() << ":" << number
+                      << ": the quaternion is not a rotation\n";
+            return kExDataErr;
+        }
+        scaled::drivers::synth::RecordedPose p;
+        p.t_ns = std::llround(v[0] * 1e9);
+        p.pose_CtoW.p_CinW = Eigen::Vector3d(v[1], v[2], v[3]).cast<Scalar>();
+        p.pose_CtoW.R_CtoW = q.normalized().toRotationMatrix().cast<Scalar>();
+        if (!poses.empty() && p.t_ns <= poses.back().t_ns) {
+            std::cerr << "synth-render: " << gt_path.string() << ":" << number
+                      << ": timestamps must increase\n";
+            return kExDataErr;
+        }
+        poses.push_back(p);
+    }
+    if (poses.empty()) {
+        std::cerr << "synth-render: " << gt_path.string() << ": no poses\n";
+        return kExDataErr;
+    }
+    double g[3] = {};
+    std::istringstream fields(gravity->empty() ? std::string() : gravity->front().second);
+    fields >> g[0] >> g[1] >> g[2];
+    if (gravity->empty() || !fields || !std::isfinite(g[0] + g[1] + g[2]) ||
+        std::hypot(g[0], g[1], g[2]) < 0.5) {
+        std::cerr << "synth-render: " << gravity_path.string() << ":"
+                  << (gravity->empty() ? 0 : gravity->front().first)
+                  << ": expected a unit down vector 'gx gy gz'\n";
+        return kExDataErr;
+    }
+    down_W = Eigen::Vector3d(g[0], g[1], g[2]).cast<Scalar>();
+    return 0;
+}
+
+// The frames to render: the loop, or the recording placed in the room; 0 or an
+// exit code (said).
+int makeFrames(const Options& opts, const scaled::drivers::synth::SceneConfig& scene_config,
+               const scaled::drivers::synth::Trajectory& traj,
+               std::vector<scaled::drivers::synth::Frame>& frames) {
+    if (opts.trajectory_dir.empty()) {
+        frames = traj.makeSequence(static_cast<int>(opts.frames), opts.fps);
+        return 0;
+    }
+    std::vector<scaled::drivers::synth::RecordedPose> poses;
+    scaled::core::Vec3 down_W;
+    if (const int rc = readRecording(opts.trajectory_dir, opts.frames, poses, down_W); rc != 0) {
+        return rc;
+    }
+    constexpr double kHeightM = 1.45;
+    constexpr double kMarginM = 0.3;
+    auto placed = scaled::drivers::synth::placeRecordedTrajectory(
+        poses, down_W, scene_config.room, scene_config.furniture, scaled::core::Vec3::Zero(),
+        kHeightM, kMarginM);
+    if (!placed) {
+        std::cerr << "synth-render: " << opts.trajectory_dir << ": " << placed.error().message
+                  << "\n";
+        return kExDataErr;
+    }
+    frames = std::move(*placed);
+    return 0;
+}
+
 int render(const Options& opts) {
     const scaled::core::CameraIntrinsics k = intrinsicsOf(opts);
     auto cam = scaled::core::PinholeRadialCamera::create(k);
@@ -333,6 +563,10 @@ int render(const Options& opts) {
                   << "\n";
         return kExUsage;
     }
+    std::vector<scaled::drivers::synth::Frame> frames;
+    if (const int rc = makeFrames(opts, scene_config, *traj, frames); rc != 0) {
+        return rc;
+    }
     const fs::path dir(opts.out_dir);
     TextFiles files;
     if (const int rc = openOutputs(opts, dir, files); rc != 0) {
@@ -344,8 +578,8 @@ int render(const Options& opts) {
     render_options.noise_sigma = opts.noise;
     render_options.noise_seed = static_cast<std::uint64_t>(opts.seed);
     scaled::drivers::synth::Renderer renderer(*scene, render_options);
-    const auto frames = traj->makeSequence(static_cast<int>(opts.frames), opts.fps);
-    if (const int rc = renderFrames(opts, *cam, renderer, frames, dir, files); rc != 0) {
+    const PoseAtTime poseAt(*traj, !opts.trajectory_dir.empty(), frames);
+    if (const int rc = renderFrames(opts, *cam, renderer, poseAt, frames, dir, files); rc != 0) {
         return rc;
     }
     for (std::ofstream* file :

@@ -311,11 +311,39 @@ void Renderer::prepareRays(const core::PinholeRadialCamera& cam) {
 
 void Renderer::render(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
                       cv::Mat& out_gray, cv::Mat* out_depth_m, std::uint64_t noise_stream) {
+    renderImage(cam, pose, nullptr, out_gray, noise_stream);
+    if (out_depth_m != nullptr) {
+        renderDepth(cam, pose, *out_depth_m);
+    }
+}
+
+bool Renderer::renderRows(const core::PinholeRadialCamera& cam,
+                          const std::vector<core::CameraPose>& row_poses, cv::Mat& out_gray,
+                          std::uint64_t noise_stream) {
+    if (row_poses.size() != static_cast<std::size_t>(cam.height())) {
+        return false;
+    }
+    renderImage(cam, row_poses.front(), row_poses.data(), out_gray, noise_stream);
+    return true;
+}
+
+void Renderer::renderImage(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
+                           const core::CameraPose* row_poses, cv::Mat& out_gray,
+                           std::uint64_t noise_stream) {
     prepareRays(cam);
     const int w = cam.width();
     const int h = cam.height();
     out_gray.create(h, w, CV_8UC1);
-    const FrameData frame = makeFrame(*scene_, pose, ray_bounds_);
+    FrameData frame = makeFrame(*scene_, pose, ray_bounds_);
+    int frame_row = 0;
+    // With a pose per row (a rolling shutter), the row's own view.
+    const auto frameForRow = [&](int row) -> const FrameData& {
+        if (row_poses != nullptr && row != frame_row) {
+            frame = makeFrame(*scene_, row_poses[row], ray_bounds_);
+            frame_row = row;
+        }
+        return frame;
+    };
     const bool noisy = options_.noise_sigma > 0.0;
     SplitMix64 rng(combineSeed(options_.noise_seed, noise_stream));
     const auto noisyGrey = [&](float v) {
@@ -333,19 +361,22 @@ void Renderer::render(const core::PinholeRadialCamera& cam, const core::CameraPo
     if (options_.antialias) {
         for (int row = 0; row < h; ++row) {
             auto* out = out_gray.ptr<std::uint8_t>(row);
+            const FrameData& f = frameForRow(row);
             for (int col = 0; col < w; ++col, rays += 2 * kGroup) {
-                castGroup(frame, Eigen::Map<const Arr>(rays), Eigen::Map<const Arr>(rays + kGroup),
-                          d, &t, &face);
-                out[col] = noisyGrey(0.25f * shadeGroup(frame, d, t, face).sum());
+                castGroup(f, Eigen::Map<const Arr>(rays), Eigen::Map<const Arr>(rays + kGroup), d,
+                          &t, &face);
+                out[col] = noisyGrey(0.25f * shadeGroup(f, d, t, face).sum());
             }
         }
     } else {
         const std::size_t n_px = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
         const auto uw = static_cast<std::size_t>(w);
         for (std::size_t i = 0; i < n_px; i += kGroup, rays += 2 * kGroup) {
-            castGroup(frame, Eigen::Map<const Arr>(rays), Eigen::Map<const Arr>(rays + kGroup), d,
-                      &t, &face);
-            const Arr values = shadeGroup(frame, d, t, face);
+            // A group of four may end a row and begin the next: its first pixel's row.
+            const FrameData& f = frameForRow(static_cast<int>(i / uw));
+            castGroup(f, Eigen::Map<const Arr>(rays), Eigen::Map<const Arr>(rays + kGroup), d, &t,
+                      &face);
+            const Arr values = shadeGroup(f, d, t, face);
             for (std::size_t s = 0; s < kGroup && i + s < n_px; ++s) {
                 const float v = values[static_cast<Eigen::Index>(s)];
                 out_gray.ptr<std::uint8_t>(static_cast<int>((i + s) / uw))[(i + s) % uw] =
@@ -353,26 +384,29 @@ void Renderer::render(const core::PinholeRadialCamera& cam, const core::CameraPo
             }
         }
     }
+}
 
-    if (out_depth_m != nullptr) {
-        // Exact depths, in double precision, at the pixel centres.
-        out_depth_m->create(h, w, CV_32FC1);
-        const detail::GeometryD g = detail::toGeometryD(*scene_);
-        const double o[3] = {static_cast<double>(pose.p_CinW.x()),
-                             static_cast<double>(pose.p_CinW.y()),
-                             static_cast<double>(pose.p_CinW.z())};
-        const Eigen::Matrix3d R = pose.R_CtoW.cast<double>();
-        std::size_t i = 0;
-        for (int row = 0; row < h; ++row) {
-            auto* depth = out_depth_m->ptr<float>(row);
-            for (int col = 0; col < w; ++col, ++i) {
-                const auto x = static_cast<double>(centre_rays_[2 * i]);
-                const auto y = static_cast<double>(centre_rays_[2 * i + 1]);
-                const Eigen::Vector3d dir = R * Eigen::Vector3d(x, y, 1.0);
-                double t_hit = 0;
-                const int f = std::isnan(x) ? -1 : detail::intersectScene(g, o, dir.data(), &t_hit);
-                depth[col] = f >= 0 ? static_cast<float>(t_hit) : kNan;
-            }
+void Renderer::renderDepth(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
+                           cv::Mat& out_depth_m) {
+    // Exact depths, in double precision, at the pixel centres.
+    prepareRays(cam);
+    const int w = cam.width();
+    const int h = cam.height();
+    out_depth_m.create(h, w, CV_32FC1);
+    const detail::GeometryD g = detail::toGeometryD(*scene_);
+    const double o[3] = {static_cast<double>(pose.p_CinW.x()), static_cast<double>(pose.p_CinW.y()),
+                         static_cast<double>(pose.p_CinW.z())};
+    const Eigen::Matrix3d R = pose.R_CtoW.cast<double>();
+    std::size_t i = 0;
+    for (int row = 0; row < h; ++row) {
+        auto* depth = out_depth_m.ptr<float>(row);
+        for (int col = 0; col < w; ++col, ++i) {
+            const auto x = static_cast<double>(centre_rays_[2 * i]);
+            const auto y = static_cast<double>(centre_rays_[2 * i + 1]);
+            const Eigen::Vector3d dir = R * Eigen::Vector3d(x, y, 1.0);
+            double t_hit = 0;
+            const int f = std::isnan(x) ? -1 : detail::intersectScene(g, o, dir.data(), &t_hit);
+            depth[col] = f >= 0 ? static_cast<float>(t_hit) : kNan;
         }
     }
 }

@@ -146,6 +146,68 @@ int Trajectory::frameCount(double fps) const {
     return static_cast<int>(std::lround(config_.duration_s * fps));
 }
 
+core::Result<std::vector<Frame>> placeRecordedTrajectory(const std::vector<RecordedPose>& poses,
+                                                         const core::Vec3& down_W, const Aabb& room,
+                                                         const std::vector<Aabb>& obstacles,
+                                                         const core::Vec3& centre_W,
+                                                         double height_m, double margin_m) {
+    using core::ErrorCode;
+    using core::makeError;
+    if (poses.empty()) {
+        return makeError(ErrorCode::kInvalidArgument, "recorded trajectory: no poses");
+    }
+    const Vec3d& down = down_W.cast<double>();
+    if (!down.allFinite() || down.norm() < 1e-6 || !std::isfinite(height_m) ||
+        !std::isfinite(margin_m) || margin_m < 0) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "recorded trajectory: the down direction, height and margin must be "
+                         "finite (down non-zero, margin >= 0)");
+    }
+    // The smallest rotation taking the recording's down to the room's.
+    const Mat3d R_RfromW =
+        Eigen::Quaterniond::FromTwoVectors(down.normalized(), Vec3d(0, 0, -1)).toRotationMatrix();
+    Vec3d mean = Vec3d::Zero();
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        const Vec3d p = poses[i].pose_CtoW.p_CinW.cast<double>();
+        const Mat3d R = poses[i].pose_CtoW.R_CtoW.cast<double>();
+        if (!p.allFinite() || !R.allFinite() ||
+            std::abs((R.transpose() * R - Mat3d::Identity()).norm()) > 1e-3) {
+            return makeError(ErrorCode::kInvalidArgument, "recorded trajectory: pose " +
+                                                              std::to_string(i) +
+                                                              " is not finite or not a rotation");
+        }
+        mean += R_RfromW * p;
+    }
+    mean /= static_cast<double>(poses.size());
+    const Vec3d shift = Vec3d(centre_W.x(), centre_W.y(), height_m) - mean;
+    const auto margin = static_cast<core::Scalar>(margin_m);
+    std::vector<Frame> frames;
+    frames.reserve(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        Frame f;
+        f.t_ns = poses[i].t_ns - poses.front().t_ns;
+        const Vec3d p = R_RfromW * poses[i].pose_CtoW.p_CinW.cast<double>() + shift;
+        f.pose_CtoW.p_CinW = p.cast<core::Scalar>();
+        Mat3d R = R_RfromW * poses[i].pose_CtoW.R_CtoW.cast<double>();
+        f.pose_CtoW.R_CtoW =
+            Eigen::Quaterniond(R).normalized().toRotationMatrix().cast<core::Scalar>();
+        bool inside_obstacle = false;
+        for (const Aabb& box : obstacles) {
+            const Aabb grown{box.min_m - core::Vec3::Constant(margin),
+                             box.max_m + core::Vec3::Constant(margin)};
+            inside_obstacle = inside_obstacle || grown.contains(f.pose_CtoW.p_CinW);
+        }
+        if (!room.contains(f.pose_CtoW.p_CinW, margin) || inside_obstacle) {
+            return makeError(ErrorCode::kInvalidArgument,
+                             "recorded trajectory: the camera of pose " + std::to_string(i) +
+                                 " comes within " + std::to_string(margin_m) +
+                                 " m of the room's walls or inside a box");
+        }
+        frames.push_back(f);
+    }
+    return frames;
+}
+
 core::Vec3 gravityDirectionW() {
     return {core::Scalar(0), core::Scalar(0), core::Scalar(-1)};
 }

@@ -211,6 +211,42 @@ TEST(SynthRender, AntialiasingOnlySmoothes) {
     EXPECT_LT(cv::norm(la), cv::norm(lp));
 }
 
+// A rolling shutter: every row is seen from its own pose. Rows given one pose
+// are the plain render's, and the first and last rows of an image whose rows
+// move are those of the views from the first and the last pose.
+TEST(SynthRender, RowsAreSeenFromTheirOwnPoses) {
+    const auto cam = makeCamera(160, 120, Scalar(131));
+    RenderOptions opts;
+    opts.noise_sigma = 0.0;
+    Renderer renderer(defaultScene(), opts);
+    const core::CameraPose a = someView();
+    core::CameraPose b = a;
+    b.p_CinW += a.R_CtoW * Vec3(Scalar(0.05), 0, 0);  // 5 cm to the right
+    cv::Mat plain_a;
+    cv::Mat plain_b;
+    renderer.render(cam, a, plain_a);
+    renderer.render(cam, b, plain_b);
+    ASSERT_GT(cv::norm(plain_a, plain_b, cv::NORM_L1), 0.0);
+
+    std::vector<core::CameraPose> rows(120, a);
+    cv::Mat still;
+    ASSERT_TRUE(renderer.renderRows(cam, rows, still));
+    EXPECT_EQ(cv::norm(still, plain_a, cv::NORM_INF), 0.0);
+
+    for (std::size_t r = 0; r < rows.size(); ++r) {
+        const Scalar u = Scalar(r) / Scalar(rows.size() - 1);
+        rows[r].p_CinW = a.p_CinW * (1 - u) + b.p_CinW * u;
+    }
+    cv::Mat sheared;
+    ASSERT_TRUE(renderer.renderRows(cam, rows, sheared));
+    EXPECT_EQ(cv::norm(sheared.row(0), plain_a.row(0), cv::NORM_INF), 0.0);
+    EXPECT_EQ(cv::norm(sheared.row(119), plain_b.row(119), cv::NORM_INF), 0.0);
+    EXPECT_GT(cv::norm(sheared.row(119), plain_a.row(119), cv::NORM_L1), 0.0);
+
+    rows.pop_back();
+    EXPECT_FALSE(renderer.renderRows(cam, rows, sheared));
+}
+
 TEST(SynthRender, TimePerFrame) {
     // Reports the time per 640x480 frame (no bound: debug and sanitizer builds are slow).
     const auto cam = makeCamera();

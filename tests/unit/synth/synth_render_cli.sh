@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# synth-render: writes a TUM-like sequence; bad usage exits 64, an unwritable
-# output directory exits 73.
+# synth-render: writes a TUM-like sequence, also along a recorded trajectory;
+# bad usage exits 64, a malformed recording 65 (66 missing), an unwritable
+# output directory 73.
 #   synth_render_cli.sh PATH/TO/synth-render
 set -euo pipefail
 bin=$1
@@ -31,6 +32,28 @@ grep -q '^0.033333333 ' "$tmp/seq/groundtruth.txt" || fail "groundtruth.txt time
 "$bin" --out "$tmp/again" --frames 2 --seed 3 --width 160 --height 120 --fx 131 >/dev/null
 cmp -s "$tmp/seq/rgb/000001.png" "$tmp/again/rgb/000001.png" || fail "not deterministic"
 
+# A recorded trajectory (the sequence above as the recording): the same motion,
+# upright and centred in the room, at the recording's times.
+"$bin" --out "$tmp/rec" --frames 3 --width 64 --height 48 --fx 50 --trajectory "$tmp/seq" \
+  --rolling-shutter 0.03 --exposure 0.01 >/dev/null
+[[ $(grep -vc '^#' "$tmp/rec/groundtruth.txt") == 3 ]] || fail "--trajectory: 3 poses"
+grep -q '^0.066666667 rgb/000002.png$' "$tmp/rec/rgb.txt" || fail "--trajectory: the recording's times"
+python3 - "$tmp/seq/groundtruth.txt" "$tmp/rec/groundtruth.txt" <<'PY' || fail "--trajectory: motion"
+import math, sys
+def poses(path):
+    return [list(map(float, l.split())) for l in open(path) if l.strip() and not l.startswith("#")]
+a, b = poses(sys.argv[1])[:3], poses(sys.argv[2])
+for i in (1, 2):
+    da = math.dist(a[i][1:4], a[i - 1][1:4]); db = math.dist(b[i][1:4], b[i - 1][1:4])
+    assert abs(da - db) < 1e-6, (i, da, db)
+assert abs(sum(p[3] for p in b) / 3 - 1.45) < 1e-6   # mean height
+PY
+printf '# t tx ty tz qx qy qz qw\n0 0 0 0 0 0 0 1\n0.1 0 0 oops 0 0 0 1\n' > "$tmp/seq/groundtruth.txt"
+got=0; "$bin" --out "$tmp/bad" --frames 3 --trajectory "$tmp/seq" 2>"$tmp/err" >/dev/null || got=$?
+[[ $got == 65 ]] || fail "a malformed groundtruth.txt exited $got, expected 65"
+grep -q 'groundtruth.txt:3' "$tmp/err" || fail "the bad line is not named: $(cat "$tmp/err")"
+[[ ! -e $tmp/bad ]] || fail "a refused trajectory created its output"
+
 expect() {  # expect CODE ARGS...
   local want=$1; shift
   local got=0
@@ -45,6 +68,9 @@ expect 64 --out "$tmp/x" --width
 expect 64 --out "$tmp/x" --fx -5
 expect 64 --out "$tmp/x" --bogus 1
 expect 0 --help
+expect 64 --out "$tmp/x" --trajectory "$tmp/seq" --shake 0.01
+expect 64 --out "$tmp/x" --rolling-shutter 0.5
+expect 66 --out "$tmp/x" --trajectory "$tmp/nowhere"
 touch "$tmp/file"
 expect 73 --out "$tmp/file/sub" --frames 1 --width 32 --height 32 --fx 30
 echo "synth-render CLI: ok"

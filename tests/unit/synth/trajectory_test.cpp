@@ -1,7 +1,9 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <opencv2/imgproc.hpp>
+#include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -215,6 +217,89 @@ TEST(SynthTrajectory, EveryFrameSeesTexturedSurfacesAtUsableDepth) {
         cv::goodFeaturesToTrack(img, corners, 500, 0.01, 6);
         EXPECT_GT(corners.size(), 150U) << "frame " << i;
     }
+}
+
+// A recording in a tilted world frame is turned upright and centred in the
+// room: its down becomes the room's, its mean position the room's axis at the
+// given height, its relative motion and times are kept.
+TEST(SynthTrajectory, ARecordedTrajectoryIsPlacedUprightInTheRoom) {
+    const Eigen::Quaterniond tilt(Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 0).normalized()));
+    const Vec3 down_W = (tilt * Eigen::Vector3d(0, 0, -1)).cast<Scalar>();
+    std::vector<RecordedPose> poses;
+    for (int i = 0; i < 50; ++i) {
+        RecordedPose p;
+        p.t_ns = 5'000'000'000LL + i * 33'333'333LL;
+        // A camera whose y axis (image down) points along the recording's down.
+        const Eigen::Matrix3d R_level =
+            Eigen::AngleAxisd(0.02 * i, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+            (Eigen::Matrix3d() << 1, 0, 0, 0, 0, 1, 0, -1, 0).finished();
+        p.pose_CtoW.R_CtoW = (tilt.toRotationMatrix() * R_level).cast<Scalar>();
+        p.pose_CtoW.p_CinW =
+            (tilt * Eigen::Vector3d(0.01 * i, 0.005 * i, 0.002 * i) + Eigen::Vector3d(7, -3, 2))
+                .cast<Scalar>();
+        poses.push_back(p);
+    }
+    const SceneConfig room;
+    const auto placed =
+        placeRecordedTrajectory(poses, down_W, room.room, room.furniture, Vec3::Zero(), 1.45, 0.3);
+    ASSERT_TRUE(placed.ok()) << placed.error().message;
+    ASSERT_EQ(placed->size(), poses.size());
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        const Frame& f = (*placed)[i];
+        EXPECT_EQ(f.t_ns, poses[i].t_ns - poses.front().t_ns);
+        // Image down is the room's down.
+        const Vec3 y_W = f.pose_CtoW.R_CtoW * Vec3::UnitY();
+        EXPECT_NEAR(y_W.z(), -1, 1e-5) << i;
+        mean += f.pose_CtoW.p_CinW.cast<double>();
+        if (i > 0) {
+            const Frame& g = (*placed)[i - 1];
+            const double moved = (f.pose_CtoW.p_CinW - g.pose_CtoW.p_CinW).norm();
+            const double recorded =
+                (poses[i].pose_CtoW.p_CinW - poses[i - 1].pose_CtoW.p_CinW).norm();
+            EXPECT_NEAR(moved, recorded, 1e-5) << i;
+            EXPECT_NEAR(angleBetween(g.pose_CtoW.R_CtoW, f.pose_CtoW.R_CtoW),
+                        angleBetween(poses[i - 1].pose_CtoW.R_CtoW, poses[i].pose_CtoW.R_CtoW),
+                        1e-5)
+                << i;
+        }
+    }
+    mean /= static_cast<double>(poses.size());
+    EXPECT_NEAR(mean.x(), 0, 1e-5);
+    EXPECT_NEAR(mean.y(), 0, 1e-5);
+    EXPECT_NEAR(mean.z(), 1.45, 1e-5);
+}
+
+// A recording that does not fit the room, or is not a trajectory, is refused
+// with the pose named.
+TEST(SynthTrajectory, ARecordingThatDoesNotFitIsRefused) {
+    const SceneConfig room;
+    std::vector<RecordedPose> poses(3);
+    poses[1].t_ns = 33'333'333;
+    poses[2].t_ns = 66'666'667;
+    poses[2].pose_CtoW.p_CinW = Vec3(Scalar(8.4), 0, 0);  // 5.6 m either side of the centre
+    const auto wide =
+        placeRecordedTrajectory(poses, Vec3(0, 0, -1), room.room, {}, Vec3::Zero(), 1.45, 0.3);
+    ASSERT_FALSE(wide.ok());
+    EXPECT_NE(wide.error().message.find("pose 0"), std::string::npos) << wide.error().message;
+    // Pose 2 lands in the table (x 1.9-2.9, y -2.4 to -1.5, up to 0.75 m), the
+    // others at (-1.2, 1, 0.5), in the open.
+    poses[2].pose_CtoW.p_CinW = Vec3(Scalar(3.6), Scalar(-3), 0);
+    const auto table = placeRecordedTrajectory(poses, Vec3(0, 0, -1), room.room, room.furniture,
+                                               Vec3::Zero(), 0.5, 0.1);
+    ASSERT_FALSE(table.ok());
+    EXPECT_NE(table.error().message.find("pose 2"), std::string::npos) << table.error().message;
+    EXPECT_TRUE(
+        placeRecordedTrajectory(poses, Vec3(0, 0, -1), room.room, {}, Vec3::Zero(), 0.5, 0.1).ok());
+    EXPECT_FALSE(
+        placeRecordedTrajectory({}, Vec3(0, 0, -1), room.room, {}, Vec3::Zero(), 1.45, 0).ok());
+    EXPECT_FALSE(
+        placeRecordedTrajectory(poses, Vec3::Zero(), room.room, {}, Vec3::Zero(), 1.45, 0).ok());
+    poses[1].pose_CtoW.p_CinW.x() = std::numeric_limits<Scalar>::quiet_NaN();
+    const auto nan =
+        placeRecordedTrajectory(poses, Vec3(0, 0, -1), room.room, {}, Vec3::Zero(), 1.45, 0);
+    ASSERT_FALSE(nan.ok());
+    EXPECT_NE(nan.error().message.find("pose 1"), std::string::npos) << nan.error().message;
 }
 
 }  // namespace

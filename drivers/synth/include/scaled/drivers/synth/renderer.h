@@ -40,8 +40,20 @@ public:
     void render(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
                 cv::Mat& out_gray, cv::Mat* out_depth_m = nullptr, std::uint64_t noise_stream = 0);
 
+    // A rolling shutter: image row r seen from row_poses[r] (one pose per row of
+    // the camera's image), the rest as render() without depth. False (nothing
+    // rendered) when row_poses does not have one pose per row.
+    bool renderRows(const core::PinholeRadialCamera& cam,
+                    const std::vector<core::CameraPose>& row_poses, cv::Mat& out_gray,
+                    std::uint64_t noise_stream = 0);
+
 private:
     void prepareRays(const core::PinholeRadialCamera& cam);
+    void renderImage(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
+                     const core::CameraPose* row_poses, cv::Mat& out_gray,
+                     std::uint64_t noise_stream);
+    void renderDepth(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
+                     cv::Mat& out_depth_m);
 
     const Scene* scene_;
     RenderOptions options_;

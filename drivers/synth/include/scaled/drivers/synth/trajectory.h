@@ -16,6 +16,7 @@
 #include <scaled/core/result.h>
 #include <scaled/core/scale/vertical_extent.h>
 #include <scaled/core/types.h>
+#include <scaled/drivers/synth/scene.h>
 
 namespace scaled::drivers::synth {
 
@@ -72,6 +73,25 @@ private:
     double shake_omega_[3][kShakeTerms] = {};
     double shake_phase_[3][kShakeTerms] = {};
 };
+
+// A recorded trajectory (a dataset's ground truth: camera-to-world poses in a
+// world frame whose "down" is down_W) put into the room: turned by the
+// smallest rotation that takes down_W to (0, 0, -1), shifted so that the
+// mean camera position lies on the room's vertical axis through centre_W at
+// height_m, timestamps made relative to the first. The same motion, so a
+// tracker can meet it with exact ground truth and an exact camera. Fails
+// (kInvalidArgument, naming the frame) on an empty list, a non-finite pose or
+// down_W, or a camera that comes within margin_m of the room's walls, floor
+// or ceiling, or inside a box of `obstacles` grown by margin_m.
+struct RecordedPose {
+    std::int64_t t_ns = 0;
+    core::CameraPose pose_CtoW;
+};
+core::Result<std::vector<Frame>> placeRecordedTrajectory(const std::vector<RecordedPose>& poses,
+                                                         const core::Vec3& down_W, const Aabb& room,
+                                                         const std::vector<Aabb>& obstacles,
+                                                         const core::Vec3& centre_W,
+                                                         double height_m, double margin_m);
 
 // Unit gravity ("down") direction in the world frame: (0, 0, -1).
 core::Vec3 gravityDirectionW();
