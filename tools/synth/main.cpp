@@ -59,7 +59,8 @@ constexpr const char* kFooter =
     "usage: synth-render --out DIR [--frames N] [--seed S] [--width W] [--height H]\n"
     "                    [--fx F] [--k1 K1] [--k2 K2] [--fps HZ] [--speed SCALE]\n"
     "                    [--shake RAD] [--noise SIGMA] [--no-aa] [--depth]\n"
-    "                    [--rolling-shutter S] [--exposure S] [--trajectory DIR]\n"
+    "                    [--rolling-shutter S] [--exposure S] [--texture R]\n"
+    "                    [--trajectory DIR]\n"
     "Renders N frames (default 300) of a textured 6 x 5 x 3 m room along a smooth\n"
     "handheld-like loop, W x H pixels (default 640 x 480), focal length F pixels\n"
     "(default 525, principal point at the image centre, radial distortion K1 K2,\n"
@@ -117,6 +118,7 @@ struct Options {
     std::string trajectory_dir;      // --trajectory: a dataset's ground truth instead of the loop
     double rolling_shutter_s = 0.0;  // readout time from the first row to the last
     double exposure_s = 0.0;         // motion blur: the exposure time of each row
+    double texture_richness = 1.0;   // shapes and noise contrast of the textures
 };
 
 constexpr const char* kInvalid = "invalid value '{}'";
@@ -171,6 +173,11 @@ constexpr OptionSpec<Options> kOptions[] = {
      kInvalid},
     {"--exposure", "S", "motion blur: each row exposed for S seconds, 0 to 0.1 (default 0: none)",
      [](std::string_view v, Options& o) { return parseDouble(v, 0.0, 0.1, &o.exposure_s); },
+     kInvalid},
+    {"--texture", "R",
+     "texture richness: shapes per square metre and noise contrast relative to the default, "
+     "0.01 to 1 (default 1)",
+     [](std::string_view v, Options& o) { return parseDouble(v, 0.01, 1.0, &o.texture_richness); },
      kInvalid},
     {"--trajectory", "DIR",
      "follow the ground truth of the dataset in DIR (groundtruth.txt, gravity.txt) instead "
@@ -552,6 +559,7 @@ int render(const Options& opts) {
     }
     scaled::drivers::synth::SceneConfig scene_config;
     scene_config.seed = static_cast<std::uint64_t>(opts.seed);
+    scene_config.texture_richness = static_cast<scaled::core::Scalar>(opts.texture_richness);
     auto scene = scaled::drivers::synth::Scene::create(scene_config);
     scaled::drivers::synth::TrajectoryConfig traj_config;
     traj_config.seed = static_cast<std::uint64_t>(opts.seed);

@@ -25,7 +25,8 @@ void inPlaneAxes(int a, int* axis_col, int* axis_row) {
     *axis_row = a == 2 ? 1 : 2;
 }
 
-Scene::Face makeFace(const Aabb& box, int axis, double texel_m, std::uint64_t seed) {
+Scene::Face makeFace(const Aabb& box, int axis, double texel_m, std::uint64_t seed,
+                     double richness) {
     Scene::Face f;
     f.axis = axis;
     inPlaneAxes(axis, &f.axis_col, &f.axis_row);
@@ -39,7 +40,7 @@ Scene::Face makeFace(const Aabb& box, int axis, double texel_m, std::uint64_t se
     f.col0_m = static_cast<double>(box.min_m[ac]) - texel_m;
     f.row0_m = static_cast<double>(box.max_m[ar]) + texel_m;
     f.inv_texel = 1.0 / texel_m;
-    f.texture = detail::makeTexture(cols, rows, texel_m, seed);
+    f.texture = detail::makeTexture(cols, rows, texel_m, seed, richness);
     return f;
 }
 
@@ -76,6 +77,13 @@ core::Result<Scene> Scene::create(const SceneConfig& config) {
                                "synth scene: texel_m must be in [0.001, 0.05] m (got " +
                                    std::to_string(static_cast<double>(config.texel_m)) + ")");
     }
+    if (!std::isfinite(config.texture_richness) || config.texture_richness <= 0 ||
+        config.texture_richness > 1) {
+        return core::makeError(core::ErrorCode::kInvalidArgument,
+                               "synth scene: texture_richness must be in (0, 1] (got " +
+                                   std::to_string(static_cast<double>(config.texture_richness)) +
+                                   ")");
+    }
     for (std::size_t k = 0; k < config.furniture.size(); ++k) {
         const Aabb& b = config.furniture[k];
         if (!validBox(b) || !config.room.contains(b.min_m) || !config.room.contains(b.max_m)) {
@@ -90,8 +98,9 @@ core::Result<Scene> Scene::create(const SceneConfig& config) {
     const auto addBox = [&](const Aabb& box) {
         for (int a = 0; a < 3; ++a) {
             for (int side = 0; side < 2; ++side) {
-                scene.faces_.push_back(
-                    makeFace(box, a, texel_m, combineSeed(config.seed, face_index)));
+                scene.faces_.push_back(makeFace(box, a, texel_m,
+                                                combineSeed(config.seed, face_index),
+                                                static_cast<double>(config.texture_richness)));
                 ++face_index;
             }
         }

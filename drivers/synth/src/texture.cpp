@@ -119,7 +119,7 @@ void drawShape(cv::Mat& layer, double size_px, SplitMix64& rng) {
 
 }  // namespace
 
-cv::Mat makeTexture(int cols, int rows, double texel_m, std::uint64_t seed) {
+cv::Mat makeTexture(int cols, int rows, double texel_m, std::uint64_t seed, double richness) {
     SplitMix64 rng(seed);
     const auto n_texels = static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows);
 
@@ -134,14 +134,15 @@ cv::Mat makeTexture(int cols, int rows, double texel_m, std::uint64_t seed) {
         power += kAmplitudes[o] * kAmplitudes[o];
     }
     // The interpolated lattice has a standard deviation of roughly 0.45.
-    const float noise_gain = 32.0f / (0.45f * std::sqrt(power));
+    const float noise_gain = static_cast<float>(richness) * 32.0f / (0.45f * std::sqrt(power));
     // Each surface gets its own brightness, as if lit differently.
     const auto brightness = static_cast<float>(rng.uniform(-25.0, 25.0));
 
     // Shapes, largest first so small ones stay on top.
     cv::Mat layer(rows, cols, CV_8UC1, cv::Scalar(128));
     const double area_m2 = static_cast<double>(n_texels) * texel_m * texel_m;
-    const auto n_shapes = static_cast<std::size_t>(std::lround(kShapesPerSquareMetre * area_m2));
+    const auto n_shapes =
+        static_cast<std::size_t>(std::lround(richness * kShapesPerSquareMetre * area_m2));
     std::vector<double> sizes_px(n_shapes);
     // Inverse CDF of p(s) ~ 1 / s^2: 1 / s uniform between 1 / max and 1 / min.
     for (auto& s : sizes_px) {

@@ -1,5 +1,7 @@
 #include <cmath>
 #include <numbers>
+#include <opencv2/imgproc.hpp>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -27,6 +29,39 @@ TEST(SynthScene, RejectsBadConfig) {
     const auto r = Scene::create(c);
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message.find("furniture"), std::string::npos);
+    for (const Scalar richness : {Scalar(0), Scalar(-0.1), Scalar(1.5), Scalar(NAN)}) {
+        c = SceneConfig{};
+        c.texture_richness = richness;
+        const auto bad = Scene::create(c);
+        ASSERT_FALSE(bad.ok()) << richness;
+        EXPECT_NE(bad.error().message.find("texture_richness"), std::string::npos);
+    }
+}
+
+// A poorer texture: mostly plain, far fewer corners and less contrast, but
+// still some marks to track.
+TEST(SynthScene, TextureRichnessThinsTheMarks) {
+    SceneConfig c;
+    c.furniture.clear();
+    c.texel_m = Scalar(0.01);
+    const Scene rich = Scene::create(c).value();
+    c.texture_richness = Scalar(0.1);
+    const Scene poor = Scene::create(c).value();
+    const auto corners = [](const cv::Mat& t) {
+        std::vector<cv::Point2f> pts;
+        cv::goodFeaturesToTrack(t, pts, 5000, 0.05, 5);
+        return pts.size();
+    };
+    const cv::Mat& wall_rich = rich.texture(0);
+    const cv::Mat& wall_poor = poor.texture(0);
+    cv::Scalar mean;
+    cv::Scalar sd_rich;
+    cv::Scalar sd_poor;
+    cv::meanStdDev(wall_rich, mean, sd_rich);
+    cv::meanStdDev(wall_poor, mean, sd_poor);
+    EXPECT_LT(sd_poor[0], 0.5 * sd_rich[0]);
+    EXPECT_LT(corners(wall_poor), corners(wall_rich) / 3);
+    EXPECT_GT(corners(wall_poor), 20U);
 }
 
 TEST(SynthScene, HasOneTexturedSurfacePerFace) {

@@ -70,6 +70,7 @@ expect 64 --out "$tmp/x" --bogus 1
 expect 0 --help
 expect 64 --out "$tmp/x" --trajectory "$tmp/seq" --shake 0.01
 expect 64 --out "$tmp/x" --rolling-shutter 0.5
+expect 64 --out "$tmp/x" --texture 0
 expect 66 --out "$tmp/x" --trajectory "$tmp/nowhere"
 touch "$tmp/file"
 expect 73 --out "$tmp/file/sub" --frames 1 --width 32 --height 32 --fx 30

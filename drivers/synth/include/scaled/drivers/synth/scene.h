@@ -46,6 +46,10 @@ struct SceneConfig {
     std::vector<Aabb> furniture = defaultFurniture();  // clear it for an empty room
     Scalar texel_m = Scalar(0.005);                    // texture resolution, in [1 mm, 5 cm]
     std::uint64_t seed = 1;                            // textures
+    // Shapes per square metre and noise contrast of every texture, relative to
+    // the rich default, in (0, 1]: 0.1 leaves mostly plain surfaces with a few
+    // marks, closer to a kitchen's cabinet fronts than the default.
+    Scalar texture_richness = 1;
 };
 
 // Surface index: the room's faces are 0..5, box k's faces 6 + 6k .. 11 + 6k.
