@@ -873,6 +873,20 @@ bool EkfSlam::mapPoint(int slot, MapPoint& out) const {
     return true;
 }
 
+bool EkfSlam::pointInWorld(int slot, Vec3& p_FinW) const {
+    const FeatureInfo& f = features_[static_cast<std::size_t>(slot)];
+    if (f.kind == FeatureKind::kXyz) {
+        p_FinW = x_.segment<3>(f.offset);
+        return true;
+    }
+    const Vec6 y = x_.segment<6>(f.offset);
+    if (!(y(5) > 0)) {
+        return false;
+    }
+    p_FinW = inverseDepthToXyz(y, nullptr);
+    return true;
+}
+
 void EkfSlam::mapPoints(std::vector<MapPoint>& out) const {
     out.clear();
     MapPoint m;

@@ -811,13 +811,13 @@ bool MonoTracker::relocaliseFrame(std::int64_t t_ns, const cv::Mat& gray, TrackS
 Scalar MonoTracker::medianMeasuredDepth() {
     depth_scratch_.clear();
     const core::CameraPose T = slam_.pose();
-    slam::MapPoint point;
+    Vec3 p_FinW;
     const auto features = slam_.features();
     for (int slot = 0; slot < static_cast<int>(features.size()); ++slot) {
-        if (!features[static_cast<size_t>(slot)].measured || !slam_.mapPoint(slot, point)) {
+        if (!features[static_cast<size_t>(slot)].measured || !slam_.pointInWorld(slot, p_FinW)) {
             continue;
         }
-        const Scalar z = (T.R_CtoW.transpose() * (point.p_FinW - T.p_CinW)).z();
+        const Scalar z = (T.R_CtoW.transpose() * (p_FinW - T.p_CinW)).z();
         if (z > 0) {
             depth_scratch_.push_back(z);
         }

@@ -326,6 +326,22 @@ TEST(SlamSnapshot, CarriesTheFrameIdEpochAndTheFiltersState) {
     EXPECT_EQ(snap->slamFrameIndex(), 45);
     EXPECT_GT(snap->size(), 15);
     expectSameAsFilter(*snap, rig.slam);
+    // The position-only accessor agrees with the map point, feature by feature.
+    int inverse_depth = 0;
+    for (int slot = 0; slot < static_cast<int>(rig.slam.features().size()); ++slot) {
+        MapPoint m;
+        Vec3 p = Vec3::Constant(Scalar(-7));
+        const bool finite = rig.slam.mapPoint(slot, m);
+        EXPECT_EQ(rig.slam.pointInWorld(slot, p), finite) << slot;
+        if (finite) {
+            EXPECT_EQ(p, m.p_FinW) << slot;
+        }
+        inverse_depth +=
+            rig.slam.features()[static_cast<std::size_t>(slot)].kind == FeatureKind::kInverseDepth
+                ? 1
+                : 0;
+    }
+    EXPECT_GE(inverse_depth, 2);
     const auto info = snap->featureInfo();
     const auto has = [&](std::uint64_t id) {
         return std::any_of(info.begin(), info.end(),

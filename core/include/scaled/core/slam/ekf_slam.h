@@ -275,6 +275,10 @@ public:
     // The map point of features()[slot]; false (out holds only id, kind and
     // measured) for an inverse-depth feature with rho <= 0.
     bool mapPoint(int slot, MapPoint& out) const;
+    // Only the position of features()[slot] (mapPoint's p_FinW, without its
+    // covariance and projection); false for an inverse-depth feature with
+    // rho <= 0.
+    bool pointInWorld(int slot, Vec3& p_FinW) const;
 
     [[nodiscard]] const SlamConfig& config() const { return config_; }
     [[nodiscard]] const PinholeRadialCamera& camera() const { return camera_; }
