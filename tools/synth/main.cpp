@@ -70,13 +70,15 @@ constexpr const char* kFooter =
     "camera-to-world), camera.txt and gravity.txt into DIR; with --depth also\n"
     "depth/ and depth.txt (16-bit PNG, 5000 per metre). With --trajectory DIR the camera\n"
     "follows the first N poses of DIR/groundtruth.txt (TUM: t tx ty tz qx qy qz qw,\n"
-    "camera-to-world) at their own times, turned so that DIR/gravity.txt's down is the\n"
-    "room's and centred in the room at 1.45 m: the same motion with exact ground truth.\n"
+    "camera-to-world), a frame at each pose's time (made relative to the first),\n"
+    "turned so that DIR/gravity.txt's down is the room's, and with the mean of the poses\n"
+    "read (N and the next) on the room's axis at 1.45 m: the same motion with exact\n"
+    "ground truth. Depth images are the first row's view.\n"
     "A frame's time stamp and ground-truth pose are those of its first row's exposure\n"
     "centre; with --rolling-shutter S row r is seen S r / (H - 1) seconds later, and\n"
     "--exposure E averages 8 views spread over E seconds around each row's time.\n"
-    "Exit codes (sysexits.h): 0 success; 64 usage; 65 a bad --trajectory file; 73 an\n"
-    "output could not be created.";
+    "Exit codes (sysexits.h): 0 success; 64 usage; 65 a bad --trajectory file; 66 its\n"
+    "files missing; 73 an output could not be created.";
 
 bool parseInt(std::string_view s, long lo, long hi, long* out) {
     const std::string str(s);
@@ -119,6 +121,7 @@ struct Options {
     double rolling_shutter_s = 0.0;  // readout time from the first row to the last
     double exposure_s = 0.0;         // motion blur: the exposure time of each row
     double texture_richness = 1.0;   // shapes and noise contrast of the textures
+    bool fps_given = false;
 };
 
 constexpr const char* kInvalid = "invalid value '{}'";
@@ -147,7 +150,11 @@ constexpr OptionSpec<Options> kOptions[] = {
     {"--k2", "K2", "radial distortion, -2 to 2 (default 0)",
      [](std::string_view v, Options& o) { return parseDouble(v, -2.0, 2.0, &o.k2); }, kInvalid},
     {"--fps", "HZ", "frames per second, 0.1 to 1000 (default 30)",
-     [](std::string_view v, Options& o) { return parseDouble(v, 0.1, 1000.0, &o.fps); }, kInvalid},
+     [](std::string_view v, Options& o) {
+         o.fps_given = true;
+         return parseDouble(v, 0.1, 1000.0, &o.fps);
+     },
+     kInvalid},
     {"--speed", "SCALE", "the trajectory's speed factor, 0.01 to 4 (default 1)",
      [](std::string_view v, Options& o) { return parseDouble(v, 0.01, 4.0, &o.speed); }, kInvalid},
     {"--shake", "RAD",
@@ -202,9 +209,10 @@ std::optional<int> parseOptions(int argc, char** argv, Options& o) {
     if (o.out_dir.empty()) {
         return scaled::tools::usageError(app, "--out DIR is required");
     }
-    if (!o.trajectory_dir.empty() && (o.speed != 1.0 || o.shake_rad != 0.0)) {
-        return scaled::tools::usageError(
-            app, "--trajectory follows a recorded motion: --speed and --shake do not apply");
+    if (!o.trajectory_dir.empty() && (o.speed != 1.0 || o.shake_rad != 0.0 || o.fps_given)) {
+        return scaled::tools::usageError(app,
+                                         "--trajectory follows a recorded motion at its own "
+                                         "times: --fps, --speed and --shake do not apply");
     }
     return std::nullopt;
 }
@@ -376,9 +384,13 @@ void renderImage(const Options& opts, const scaled::core::PinholeRadialCamera& c
         return;
     }
     if (depth != nullptr) {  // the depth of the frame's pose, its first row's
-        cv::Mat unused;
-        renderer.render(cam, frame.pose_CtoW, unused, depth, index);
+        renderer.renderDepth(cam, frame.pose_CtoW, *depth);
     }
+    // The views without noise: the frame's noise is added once, below.
+    const scaled::drivers::synth::RenderOptions with_noise = renderer.options();
+    scaled::drivers::synth::RenderOptions noise_free = with_noise;
+    noise_free.noise_sigma = 0.0;
+    renderer.setOptions(noise_free);
     constexpr int kExposureSamples = 8;
     const int samples = opts.exposure_s > 0.0 ? kExposureSamples : 1;
     const double t0 = static_cast<double>(frame.t_ns) * 1e-9;
@@ -393,10 +405,13 @@ void renderImage(const Options& opts, const scaled::core::PinholeRadialCamera& c
             const double row_s = h > 1 ? opts.rolling_shutter_s * r / (h - 1) : 0.0;
             row_poses[static_cast<std::size_t>(r)] = poseAt(t0 + row_s + offset);
         }
-        (void)renderer.renderRows(cam, row_poses, view, 0);
+        if (!renderer.renderRows(cam, row_poses, view, 0)) {
+            break;  // cannot happen: one pose per row
+        }
         view.convertTo(view_f, CV_32FC1);
         sum += view_f;
     }
+    renderer.setOptions(with_noise);
     sum /= static_cast<double>(samples);
     if (opts.noise > 0.0) {
         cv::Mat noise(sum.size(), CV_32FC1);
@@ -460,8 +475,9 @@ std::optional<std::vector<std::pair<int, std::string>>> dataLines(const fs::path
     return lines;
 }
 
-// DIR/groundtruth.txt (its first max_poses poses) and DIR/gravity.txt; 0, or an
-// exit code (said, with the file and line).
+// DIR/groundtruth.txt (its first max_poses poses, and one more when there is one
+// so that a frame's last rows and exposure have a pose to move towards) and
+// DIR/gravity.txt; 0, or an exit code (said, with the file and line).
 int readRecording(const fs::path& dir, long max_poses,
                   std::vector<scaled::drivers::synth::RecordedPose>& poses,
                   scaled::core::Vec3& down_W) {
@@ -474,7 +490,7 @@ int readRecording(const fs::path& dir, long max_poses,
         return kExNoInput;
     }
     for (const auto& [number, line] : *gt) {
-        if (static_cast<long>(poses.size()) >= max_poses) {
+        if (static_cast<long>(poses.size()) > max_poses) {
             break;
         }
         std::istringstream fields(line);
@@ -482,9 +498,10 @@ int readRecording(const fs::path& dir, long max_poses,
         for (double& x : v) {
             fields >> x;
         }
-        if (!fields || !std::isfinite(v[0]) || v[0] < 0) {
+        constexpr double kMaxSeconds = 9e9;  // nanoseconds fit an int64
+        if (!fields || !std::isfinite(v[0]) || v[0] < 0 || v[0] >= kMaxSeconds) {
             std::cerr << "synth-render: " << gt_path.string() << ":" << number
-                      << ": expected 't tx ty tz qx qy qz qw' with t >= 0\n";
+                      << ": expected 't tx ty tz qx qy qz qw' with t in seconds, in [0, 9e9)\n";
             return kExDataErr;
         }
         const Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
@@ -495,6 +512,7 @@ int readRecording(const fs::path& dir, long max_poses,
         }
         scaled::drivers::synth::RecordedPose p;
         p.t_ns = std::llround(v[0] * 1e9);
+        p.line = number;
         p.pose_CtoW.p_CinW = Eigen::Vector3d(v[1], v[2], v[3]).cast<Scalar>();
         p.pose_CtoW.R_CtoW = q.normalized().toRotationMatrix().cast<Scalar>();
         if (!poses.empty() && p.t_ns <= poses.back().t_ns) {
@@ -522,11 +540,13 @@ int readRecording(const fs::path& dir, long max_poses,
     return 0;
 }
 
-// The frames to render: the loop, or the recording placed in the room; 0 or an
+// The frames to render: the loop, or the recording placed in the room (placed:
+// every pose read, one more than the frames when the recording has it); 0 or an
 // exit code (said).
 int makeFrames(const Options& opts, const scaled::drivers::synth::SceneConfig& scene_config,
                const scaled::drivers::synth::Trajectory& traj,
-               std::vector<scaled::drivers::synth::Frame>& frames) {
+               std::vector<scaled::drivers::synth::Frame>& frames,
+               std::vector<scaled::drivers::synth::Frame>& placed) {
     if (opts.trajectory_dir.empty()) {
         frames = traj.makeSequence(static_cast<int>(opts.frames), opts.fps);
         return 0;
@@ -538,15 +558,19 @@ int makeFrames(const Options& opts, const scaled::drivers::synth::SceneConfig& s
     }
     constexpr double kHeightM = 1.45;
     constexpr double kMarginM = 0.3;
-    auto placed = scaled::drivers::synth::placeRecordedTrajectory(
+    auto placed_poses = scaled::drivers::synth::placeRecordedTrajectory(
         poses, down_W, scene_config.room, scene_config.furniture, scaled::core::Vec3::Zero(),
         kHeightM, kMarginM);
-    if (!placed) {
-        std::cerr << "synth-render: " << opts.trajectory_dir << ": " << placed.error().message
-                  << "\n";
+    if (!placed_poses) {
+        std::cerr << "synth-render: "
+                  << (fs::path(opts.trajectory_dir) / "groundtruth.txt").string() << ": "
+                  << placed_poses.error().message << "\n";
         return kExDataErr;
     }
-    frames = std::move(*placed);
+    placed = std::move(*placed_poses);
+    frames.assign(placed.begin(), placed.begin() + std::min<std::ptrdiff_t>(
+                                                       static_cast<std::ptrdiff_t>(opts.frames),
+                                                       static_cast<std::ptrdiff_t>(placed.size())));
     return 0;
 }
 
@@ -572,7 +596,8 @@ int render(const Options& opts) {
         return kExUsage;
     }
     std::vector<scaled::drivers::synth::Frame> frames;
-    if (const int rc = makeFrames(opts, scene_config, *traj, frames); rc != 0) {
+    std::vector<scaled::drivers::synth::Frame> placed;
+    if (const int rc = makeFrames(opts, scene_config, *traj, frames, placed); rc != 0) {
         return rc;
     }
     const fs::path dir(opts.out_dir);
@@ -586,7 +611,7 @@ int render(const Options& opts) {
     render_options.noise_sigma = opts.noise;
     render_options.noise_seed = static_cast<std::uint64_t>(opts.seed);
     scaled::drivers::synth::Renderer renderer(*scene, render_options);
-    const PoseAtTime poseAt(*traj, !opts.trajectory_dir.empty(), frames);
+    const PoseAtTime poseAt(*traj, !opts.trajectory_dir.empty(), placed);
     if (const int rc = renderFrames(opts, *cam, renderer, poseAt, frames, dir, files); rc != 0) {
         return rc;
     }

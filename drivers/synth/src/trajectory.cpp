@@ -1,6 +1,7 @@
 #include <cmath>
 #include <cstddef>
 #include <numbers>
+#include <string>
 
 #include <Eigen/Geometry>
 
@@ -156,7 +157,7 @@ core::Result<std::vector<Frame>> placeRecordedTrajectory(const std::vector<Recor
     if (poses.empty()) {
         return makeError(ErrorCode::kInvalidArgument, "recorded trajectory: no poses");
     }
-    const Vec3d& down = down_W.cast<double>();
+    const Vec3d& down = down_W.cast<double>();  // a reference for double, a temporary for float
     if (!down.allFinite() || down.norm() < 1e-6 || !std::isfinite(height_m) ||
         !std::isfinite(margin_m) || margin_m < 0) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -171,7 +172,7 @@ core::Result<std::vector<Frame>> placeRecordedTrajectory(const std::vector<Recor
         const Vec3d p = poses[i].pose_CtoW.p_CinW.cast<double>();
         const Mat3d R = poses[i].pose_CtoW.R_CtoW.cast<double>();
         if (!p.allFinite() || !R.allFinite() ||
-            std::abs((R.transpose() * R - Mat3d::Identity()).norm()) > 1e-3) {
+            (R.transpose() * R - Mat3d::Identity()).norm() > 1e-3) {
             return makeError(ErrorCode::kInvalidArgument, "recorded trajectory: pose " +
                                                               std::to_string(i) +
                                                               " is not finite or not a rotation");
@@ -188,20 +189,30 @@ core::Result<std::vector<Frame>> placeRecordedTrajectory(const std::vector<Recor
         f.t_ns = poses[i].t_ns - poses.front().t_ns;
         const Vec3d p = R_RfromW * poses[i].pose_CtoW.p_CinW.cast<double>() + shift;
         f.pose_CtoW.p_CinW = p.cast<core::Scalar>();
-        Mat3d R = R_RfromW * poses[i].pose_CtoW.R_CtoW.cast<double>();
+        const Mat3d R = R_RfromW * poses[i].pose_CtoW.R_CtoW.cast<double>();
         f.pose_CtoW.R_CtoW =
             Eigen::Quaterniond(R).normalized().toRotationMatrix().cast<core::Scalar>();
-        bool inside_obstacle = false;
-        for (const Aabb& box : obstacles) {
-            const Aabb grown{box.min_m - core::Vec3::Constant(margin),
-                             box.max_m + core::Vec3::Constant(margin)};
-            inside_obstacle = inside_obstacle || grown.contains(f.pose_CtoW.p_CinW);
+        const auto where = [&](const std::string& what) {
+            const core::Vec3& p_W = f.pose_CtoW.p_CinW;
+            return makeError(
+                ErrorCode::kInvalidArgument,
+                "recorded trajectory: the camera of pose " + std::to_string(i) +
+                    (poses[i].line > 0 ? " (line " + std::to_string(poses[i].line) + ")" : "") +
+                    " lands at (" + std::to_string(static_cast<double>(p_W.x())) + ", " +
+                    std::to_string(static_cast<double>(p_W.y())) + ", " +
+                    std::to_string(static_cast<double>(p_W.z())) + ") m, " + what);
+        };
+        if (!room.contains(f.pose_CtoW.p_CinW, margin)) {
+            return where("within " + std::to_string(margin_m) +
+                         " m of the room's walls, floor or ceiling");
         }
-        if (!room.contains(f.pose_CtoW.p_CinW, margin) || inside_obstacle) {
-            return makeError(ErrorCode::kInvalidArgument,
-                             "recorded trajectory: the camera of pose " + std::to_string(i) +
-                                 " comes within " + std::to_string(margin_m) +
-                                 " m of the room's walls or inside a box");
+        for (std::size_t k = 0; k < obstacles.size(); ++k) {
+            const Aabb grown{obstacles[k].min_m - core::Vec3::Constant(margin),
+                             obstacles[k].max_m + core::Vec3::Constant(margin)};
+            if (grown.contains(f.pose_CtoW.p_CinW)) {
+                return where("within " + std::to_string(margin_m) + " m of box " +
+                             std::to_string(k));
+            }
         }
         frames.push_back(f);
     }

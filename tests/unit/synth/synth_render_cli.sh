@@ -34,25 +34,71 @@ cmp -s "$tmp/seq/rgb/000001.png" "$tmp/again/rgb/000001.png" || fail "not determ
 
 # A recorded trajectory (the sequence above as the recording): the same motion,
 # upright and centred in the room, at the recording's times.
-"$bin" --out "$tmp/rec" --frames 3 --width 64 --height 48 --fx 50 --trajectory "$tmp/seq" \
+"$bin" --out "$tmp/rec" --frames 4 --width 64 --height 48 --fx 50 --trajectory "$tmp/seq" \
   --rolling-shutter 0.03 --exposure 0.01 >/dev/null
-[[ $(grep -vc '^#' "$tmp/rec/groundtruth.txt") == 3 ]] || fail "--trajectory: 3 poses"
+[[ $(grep -vc '^#' "$tmp/rec/groundtruth.txt") == 4 ]] || fail "--trajectory: 4 poses"
 grep -q '^0.066666667 rgb/000002.png$' "$tmp/rec/rgb.txt" || fail "--trajectory: the recording's times"
 python3 - "$tmp/seq/groundtruth.txt" "$tmp/rec/groundtruth.txt" <<'PY' || fail "--trajectory: motion"
 import math, sys
 def poses(path):
     return [list(map(float, l.split())) for l in open(path) if l.strip() and not l.startswith("#")]
-a, b = poses(sys.argv[1])[:3], poses(sys.argv[2])
-for i in (1, 2):
+a, b = poses(sys.argv[1]), poses(sys.argv[2])
+for i in (1, 2, 3):
     da = math.dist(a[i][1:4], a[i - 1][1:4]); db = math.dist(b[i][1:4], b[i - 1][1:4])
     assert abs(da - db) < 1e-6, (i, da, db)
-assert abs(sum(p[3] for p in b) / 3 - 1.45) < 1e-6   # mean height
+assert abs(sum(p[3] for p in b) / 4 - 1.45) < 1e-6   # mean height
+PY
+# Still frames (every pose the same) with a shutter and an exposure: the noise
+# is added once per frame, fresh (frame-to-frame differences of sigma sqrt(2)).
+printf '# t tx ty tz qx qy qz qw\n0 0 0 0 0 0 0 1\n0.033 0 0 0 0 0 0 1\n0.067 0 0 0 0 0 0 1\n' \
+  > "$tmp/seq/groundtruth.txt"
+"$bin" --out "$tmp/still" --frames 3 --width 64 --height 48 --fx 50 --trajectory "$tmp/seq" \
+  --rolling-shutter 0.03 --exposure 0.01 --noise 4 >/dev/null
+"$bin" --out "$tmp/still0" --frames 3 --width 64 --height 48 --fx 50 --trajectory "$tmp/seq" \
+  --rolling-shutter 0.03 --noise 0 >/dev/null
+python3 - "$tmp/still" "$tmp/still0" <<'PY' || fail "--rolling-shutter: the noise is not one fresh draw a frame"
+import struct, sys, zlib
+def grey(path):  # an 8-bit grey PNG without interlacing, as cv::imwrite writes it
+    data = open(path, "rb").read()
+    w, h = struct.unpack(">II", data[16:24])
+    idat, pos = b"", 8
+    while pos < len(data):
+        n = struct.unpack(">I", data[pos:pos + 4])[0]
+        if data[pos + 4:pos + 8] == b"IDAT":
+            idat += data[pos + 8:pos + 8 + n]
+        pos += 12 + n
+    raw, rows, prev = zlib.decompress(idat), [], [0] * w
+    for r in range(h):
+        f, line = raw[r * (w + 1)], list(raw[r * (w + 1) + 1:(r + 1) * (w + 1)])
+        for c in range(w):
+            a = line[c - 1] if c else 0
+            b, cc = prev[c], (prev[c - 1] if c else 0)
+            if f == 1: line[c] = (line[c] + a) & 255
+            elif f == 2: line[c] = (line[c] + b) & 255
+            elif f == 3: line[c] = (line[c] + (a + b) // 2) & 255
+            elif f == 4:
+                p = a + b - cc; pa, pb, pc = abs(p - a), abs(p - b), abs(p - cc)
+                line[c] = (line[c] + (a if pa <= pb and pa <= pc else b if pb <= pc else cc)) & 255
+        rows.append(line); prev = line
+    return [v for row in rows for v in row]
+def sd(x): m = sum(x) / len(x); return (sum((v - m) ** 2 for v in x) / len(x)) ** 0.5
+f0, f1 = grey(sys.argv[1] + "/rgb/000000.png"), grey(sys.argv[1] + "/rgb/000001.png")
+c0 = grey(sys.argv[2] + "/rgb/000000.png")
+between = sd([a - b for a, b in zip(f0, f1)])      # fresh noise each frame: 4 sqrt(2)
+against = sd([a - b for a, b in zip(f0, c0)])      # one frame's noise: 4
+assert 4.6 < between < 6.8, between
+assert 3.3 < against < 4.8, against
 PY
 printf '# t tx ty tz qx qy qz qw\n0 0 0 0 0 0 0 1\n0.1 0 0 oops 0 0 0 1\n' > "$tmp/seq/groundtruth.txt"
 got=0; "$bin" --out "$tmp/bad" --frames 3 --trajectory "$tmp/seq" 2>"$tmp/err" >/dev/null || got=$?
 [[ $got == 65 ]] || fail "a malformed groundtruth.txt exited $got, expected 65"
 grep -q 'groundtruth.txt:3' "$tmp/err" || fail "the bad line is not named: $(cat "$tmp/err")"
 [[ ! -e $tmp/bad ]] || fail "a refused trajectory created its output"
+# A recording that leaves the room: the pose and its line named.
+printf '# t tx ty tz qx qy qz qw\n0 0 0 0 0 0 0 1\n0.1 9 0 0 0 0 0 1\n' > "$tmp/seq/groundtruth.txt"
+got=0; "$bin" --out "$tmp/bad" --frames 2 --trajectory "$tmp/seq" 2>"$tmp/err" >/dev/null || got=$?
+[[ $got == 65 ]] || fail "a recording that leaves the room exited $got, expected 65"
+grep -q 'groundtruth.txt: .*pose 0 (line 2)' "$tmp/err" || fail "the pose's line is not named: $(cat "$tmp/err")"
 
 expect() {  # expect CODE ARGS...
   local want=$1; shift
@@ -69,6 +115,7 @@ expect 64 --out "$tmp/x" --fx -5
 expect 64 --out "$tmp/x" --bogus 1
 expect 0 --help
 expect 64 --out "$tmp/x" --trajectory "$tmp/seq" --shake 0.01
+expect 64 --out "$tmp/x" --trajectory "$tmp/seq" --fps 10
 expect 64 --out "$tmp/x" --rolling-shutter 0.5
 expect 64 --out "$tmp/x" --texture 0
 expect 66 --out "$tmp/x" --trajectory "$tmp/nowhere"

@@ -47,13 +47,16 @@ public:
                     const std::vector<core::CameraPose>& row_poses, cv::Mat& out_gray,
                     std::uint64_t noise_stream = 0);
 
+    // Only the depth render() gives (CV_32FC1, metres along the optical axis,
+    // NaN without a surface), without the image.
+    void renderDepth(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
+                     cv::Mat& out_depth_m);
+
 private:
     void prepareRays(const core::PinholeRadialCamera& cam);
     void renderImage(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
                      const core::CameraPose* row_poses, cv::Mat& out_gray,
                      std::uint64_t noise_stream);
-    void renderDepth(const core::PinholeRadialCamera& cam, const core::CameraPose& pose,
-                     cv::Mat& out_depth_m);
 
     const Scene* scene_;
     RenderOptions options_;

@@ -82,10 +82,12 @@ private:
 // tracker can meet it with exact ground truth and an exact camera. Fails
 // (kInvalidArgument, naming the frame) on an empty list, a non-finite pose or
 // down_W, or a camera that comes within margin_m of the room's walls, floor
-// or ceiling, or inside a box of `obstacles` grown by margin_m.
+// or ceiling, or inside a box of `obstacles` grown by margin_m (naming the
+// pose, its line when known, where it lands and what it meets).
 struct RecordedPose {
     std::int64_t t_ns = 0;
     core::CameraPose pose_CtoW;
+    int line = 0;  // where it was read, for messages (0: not from a file)
 };
 core::Result<std::vector<Frame>> placeRecordedTrajectory(const std::vector<RecordedPose>& poses,
                                                          const core::Vec3& down_W, const Aabb& room,
