@@ -11,3 +11,14 @@ expect() {
     [[ $rc -eq $want ]] || fail "$*: exit $rc, expected $want ($err)"
     [[ $err == *"$text"* ]] || fail "$*: message '$err' does not mention '$text'"
 }
+# need_redkitchen SHARED_DIR: $rk (the redkitchen dataset) and $py (python3),
+# or exit 77 (skip) when SHARED_DIR has no redkitchen.
+need_redkitchen() {
+    rk="$1/data/redkitchen"
+    if [[ ! -d "$rk" ]]; then
+        echo "SKIP: $rk not found (set SCALED_SHARED_DIR)"
+        exit 77
+    fi
+    py=/usr/bin/python3
+    [[ -x $py ]] || py=python3
+}

@@ -15,13 +15,7 @@ render=$2
 shared=${SCALED_SHARED_DIR:-$3}
 source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
-rk="$shared/data/redkitchen"
-if [[ ! -d "$rk" ]]; then
-    echo "SKIP: $rk not found (set SCALED_SHARED_DIR)"
-    exit 77
-fi
-py=/usr/bin/python3
-[[ -x $py ]] || py=python3
+need_redkitchen "$shared"
 
 "$render" --out "$tmp/room" --frames 600 --fx 523 --k1 -0.098 --k2 0.032 \
     --trajectory "$rk" --rolling-shutter 0.03 >/dev/null

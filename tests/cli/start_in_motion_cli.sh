@@ -21,13 +21,7 @@ shared=${SCALED_SHARED_DIR:-$3}
 daemon=$4
 source "$(dirname "${BASH_SOURCE[0]}")/cli_lib.sh"
 
-rk="$shared/data/redkitchen"
-if [[ ! -d "$rk" ]]; then
-    echo "SKIP: $rk not found (set SCALED_SHARED_DIR)"
-    exit 77
-fi
-py=/usr/bin/python3
-[[ -x $py ]] || py=python3
+need_redkitchen "$shared"
 
 "$py" "$src/tools/reverse_sequence.py" "$rk" "$tmp/rev" >/dev/null
 "$py" - "$rk" "$tmp/rev" <<'PY' || fail "the reversed lists do not mirror the source's"
