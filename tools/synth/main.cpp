@@ -37,6 +37,7 @@
 #include <Eigen/Geometry>
 
 #include <scaled/core/camera/pinhole_radial.h>
+#include <scaled/drivers/dataset/dataset_tum.h>
 #include <scaled/drivers/synth/renderer.h>
 #include <scaled/drivers/synth/scene.h>
 #include <scaled/drivers/synth/trajectory.h>
@@ -485,8 +486,11 @@ int readRecording(const fs::path& dir, long max_poses,
     const fs::path gt_path = dir / "groundtruth.txt";
     const fs::path gravity_path = dir / "gravity.txt";
     const auto gt = dataLines(gt_path);
-    const auto gravity = dataLines(gravity_path);
-    if (!gt || !gravity) {
+    if (!gt) {
+        return kExNoInput;
+    }
+    if (!fs::exists(gravity_path)) {
+        std::cerr << "synth-render: cannot read " << gravity_path.string() << "\n";
         return kExNoInput;
     }
     for (const auto& [number, line] : *gt) {
@@ -526,17 +530,13 @@ int readRecording(const fs::path& dir, long max_poses,
         std::cerr << "synth-render: " << gt_path.string() << ": no poses\n";
         return kExDataErr;
     }
-    double g[3] = {};
-    std::istringstream fields(gravity->empty() ? std::string() : gravity->front().second);
-    fields >> g[0] >> g[1] >> g[2];
-    if (gravity->empty() || !fields || !std::isfinite(g[0] + g[1] + g[2]) ||
-        std::hypot(g[0], g[1], g[2]) < 0.5) {
-        std::cerr << "synth-render: " << gravity_path.string() << ":"
-                  << (gravity->empty() ? 0 : gravity->front().first)
-                  << ": expected a unit down vector 'gx gy gz'\n";
+    // The dataset reader's own check of gravity.txt (a unit vector, file and line named).
+    const auto down = scaled::drivers::dataset::readGravityFile(gravity_path);
+    if (!down) {
+        std::cerr << "synth-render: " << down.error().message << "\n";
         return kExDataErr;
     }
-    down_W = Eigen::Vector3d(g[0], g[1], g[2]).cast<Scalar>();
+    down_W = *down;
     return 0;
 }
 
