@@ -30,8 +30,8 @@ packages=(
   # libFuzzer targets (preset fuzz, tests/fuzz): clang and its runtimes
   # (libclang-rt-dev: libFuzzer and the sanitizers, Debian 12 and 13)
   clang libclang-rt-dev
-  # plotting scripts in tools/
-  python3 python3-matplotlib
+  # scripts in tools/: plots, the depth-model render (tools/render_depth_model.py)
+  python3 python3-matplotlib python3-numpy python3-opencv
   # real-kernel driver tests (tests/vm, ctest label vm): QEMU, a busybox initramfs,
   # the kernel source for vimc/gpio-sim/gpio-mockup/irq-sim, libcamera's IPA and
   # tools, V4L2 and GPIO command-line tools. No kernel is installed on the host:
