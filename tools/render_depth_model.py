@@ -21,8 +21,9 @@ row r seen S r / (H - 1) s after row 0, the pose moved by the ground truth's vel
 small gaps filled, each pixel's 3-D point textured (value noise of 6 and 3 cm cells), holes
 inpainted, pixel noise sigma 2. Writes OUT/rgb/*.png, rgb.txt, camera.txt (the render's
 camera), groundtruth.txt and gravity.txt (the source's); with --depth-out also the rendered
-depth (depth/, depth.txt), so that the render is an RGB-D sequence of its own. Needs python3-numpy and
-python3-opencv; about 4 minutes for 600 frames on 2 cores (15 with a rolling shutter).
+depth (depth/, depth.txt), so that the render is an RGB-D sequence of its own. Needs
+python3-numpy and python3-opencv; about 4 minutes for 600 frames on 2 cores (15 with a
+rolling shutter).
 """
 import argparse
 import os
@@ -47,6 +48,18 @@ def read_camera(path):
         sys.exit(f"{path}: expected 'width height fx fy cx cy [k1 k2]'")
     v = [float(x) for x in r[0]] + ([0.0, 0.0] if len(r[0]) == 6 else [])
     return int(v[0]), int(v[1]), v[2], v[3], v[4], v[5], v[6], v[7]
+
+
+def undistorted_rays(w, h, fx, fy, cx, cy, k1=0.0, k2=0.0):
+    """Each pixel's ray (x, y, 1) through a camera with radial distortion k1, k2 (h x w x 3)."""
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    xd, yd = (u - cx) / fx, (v - cy) / fy
+    xu, yu = xd.copy(), yd.copy()
+    for _ in range(30 if k1 or k2 else 0):  # x_d = x_u (1 + k1 r_u^2 + k2 r_u^4), by fixed point
+        r2 = xu * xu + yu * yu
+        d = 1 + k1 * r2 + k2 * r2 * r2
+        xu, yu = xd / d, yd / d
+    return np.stack([xu, yu, np.ones_like(u)], -1)
 
 
 def quat_to_r(x, y, z, w):
@@ -258,19 +271,11 @@ def main():
     if sk1 or sk2:
         sys.exit(f"{src}/camera.txt: the depth images are taken as undistorted pinhole images")
     G["src_cam"] = (sw, sh, sfx, sfy, scx, scy)
-    u, v = np.meshgrid(np.arange(sw, dtype=np.float64), np.arange(sh, dtype=np.float64))
-    G["src_ray"] = np.stack([(u - scx) / sfx, (v - scy) / sfy, np.ones_like(u)], -1)
+    G["src_ray"] = undistorted_rays(sw, sh, sfx, sfy, scx, scy)
     cam = read_camera(a.camera) if a.camera else (sw, sh, sfx, sfy, scx, scy, 0.0, 0.0)
     G["cam"] = cam
     w, h, f, _, cx, cy, k1, k2 = cam
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    xd, yd = (u - cx) / f, (v - cy) / f
-    xu, yu = xd.copy(), yd.copy()
-    for _ in range(30):  # undistorted rays of the render's pixels
-        r2 = xu * xu + yu * yu
-        d = 1 + k1 * r2 + k2 * r2 * r2
-        xu, yu = xd / d, yd / d
-    G["ray"] = np.stack([xu, yu, np.ones_like(u)], -1)
+    G["ray"] = undistorted_rays(w, h, f, f, cx, cy, k1, k2)
     G["rolling_shutter_s"] = a.rolling_shutter
     n = min(a.frames, len(G["depth"])) if a.frames > 0 else len(G["depth"])
     if a.model and os.path.exists(a.model):

@@ -39,33 +39,23 @@ expect 1 "depth.txt" -- "$py" "$tool" "$tmp/empty" "$tmp/none"
 grep -q '^640 480 523.3 523.3 320.9 240.5 -0.098 0.032$' "$tmp/fit/camera.txt" ||
     fail "the render's camera.txt is not the camera it was rendered through"
 
-"$py" - "$rk" "$tmp" <<'PY' || fail "the render's geometry or texture is not the scene's"
+"$py" - "$rk" "$tmp" "$src/tools" <<'PY' || fail "the render's geometry or texture is not the scene's"
 import sys
 import cv2
 import numpy as np
 
 rk, tmp = sys.argv[1], sys.argv[2]
-def rows(path):
-    return [l.split() for l in open(path) if l.strip() and not l.startswith("#")]
+sys.path.insert(0, sys.argv[3])
+from render_depth_model import quat_to_r, rows, undistorted_rays
+
 gt = rows(rk + "/groundtruth.txt")
 src_depth = rows(rk + "/depth.txt")
 def pose(k):
-    x, y, z, w = [float(v) for v in gt[k][4:8]]
-    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-    return r, np.array([float(v) for v in gt[k][1:4]])
+    return quat_to_r(*[float(v) for v in gt[k][4:8]]), np.array([float(v) for v in gt[k][1:4]])
 def depth(path):
     return cv2.imread(path, cv2.IMREAD_UNCHANGED).astype(np.float64) / 1000
 def rays(f, cx, cy, k1, k2):
-    u, v = np.meshgrid(np.arange(640.0), np.arange(480.0))
-    xd, yd = (u - cx) / f, (v - cy) / f
-    xu, yu = xd.copy(), yd.copy()
-    for _ in range(30):
-        r2 = xu * xu + yu * yu
-        d = 1 + k1 * r2 + k2 * r2 * r2
-        xu, yu = xd / d, yd / d
-    return np.stack([xu, yu, np.ones_like(u)], -1)
+    return undistorted_rays(640, 480, f, f, cx, cy, k1, k2)
 def surface_error(name, k, ray):
     """Median |depth| difference of frame k's rendered points seen by the depth camera."""
     z = depth(f"{tmp}/{name}/depth/{k:06d}.png")
