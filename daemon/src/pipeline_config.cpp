@@ -238,6 +238,7 @@ std::vector<Field> frontEndFields(drivers::vision::TrackerConfig& t) {
         boolean("tracker", "window_ba_scale_feedback", &t.window_ba.scale_feedback),
         real("tracker", "window_ba_max_scale_step", &t.window_ba.max_scale_step, B::max_scale_step),
         integer("tracker", "window_ba_defer_frames", &t.window_ba.defer_frames, B::defer_frames),
+        real("tracker", "rolling_shutter_s", &t.window_ba.rolling_shutter_s, B::rolling_shutter_s),
     };
 }
 

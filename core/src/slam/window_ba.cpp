@@ -76,6 +76,7 @@ Status validate(const WindowBaConfig& c) {
         {"iterations", static_cast<double>(c.iterations), L::iterations},
         {"max_scale_step", static_cast<double>(c.max_scale_step), L::max_scale_step},
         {"defer_frames", static_cast<double>(c.defer_frames), L::defer_frames},
+        {"rolling_shutter_s", static_cast<double>(c.rolling_shutter_s), L::rolling_shutter_s},
     };
     if (const LimitCheck* bad = firstOutside(checks)) {
         return makeError(ErrorCode::kInvalidArgument, std::string("window_ba.") + bad->name +
@@ -165,7 +166,8 @@ size_t WindowBa::obsIndex(int i, int j) const {
            static_cast<size_t>(j);
 }
 
-void WindowBa::pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs) {
+void WindowBa::pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs,
+                            const Vec3& v_W, const Vec3& w_C) {
     if (capacity_ < 1) {  // validate() keeps window_keyframes >= 4
         return;
     }
@@ -180,6 +182,8 @@ void WindowBa::pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObs
     Keyframe& kf = keyframe(count_ - 1);
     kf.filter = T_CtoW;
     kf.adjusted = adjusted;
+    kf.v_C = T_CtoW.R_CtoW.transpose() * v_W;
+    kf.w_C = w_C;
     const int n = std::min(static_cast<int>(obs.size()), config_.max_observations_per_keyframe);
     kf.obs_count = n;
     for (int j = 0; j < n; ++j) {
@@ -187,8 +191,8 @@ void WindowBa::pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObs
     }
 }
 
-WindowBaReport WindowBa::addFrame(const CameraPose& T_CtoW,
-                                  std::span<const FeatureObservation> obs) {
+WindowBaReport WindowBa::addFrame(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs,
+                                  const Vec3& v_W, const Vec3& w_C) {
     WindowBaReport report;
     if (!config_.enabled) {
         return report;
@@ -198,7 +202,7 @@ WindowBaReport WindowBa::addFrame(const CameraPose& T_CtoW,
     if (!is_keyframe) {
         return report;
     }
-    pushKeyframe(T_CtoW, obs);
+    pushKeyframe(T_CtoW, obs, v_W, w_C);
     ++since_opt_;
     const int wanted = first_optimisation_ ? config_.fixed_keyframes + config_.step_keyframes
                                            : config_.step_keyframes;
@@ -219,7 +223,19 @@ void WindowBa::notifyRescaled(Scalar s, const Vec3& centre_W) {
     for (int i = 0; i < count_; ++i) {
         Keyframe& kf = keyframe(i);
         kf.filter.p_CinW = centre_W + s * (kf.filter.p_CinW - centre_W);
+        kf.v_C *= s;
     }
+}
+
+WindowBa::RowMotion WindowBa::rowMotion(const Keyframe& kf, const Vec2& z_px) const {
+    RowMotion m;
+    if (config_.rolling_shutter_s > 0) {
+        const Scalar d =
+            config_.rolling_shutter_s * z_px.y() / Scalar(std::max(1, camera_.height() - 1));
+        m.E = rotationFromQuat(quatFromRotationVector(-d * kf.w_C));
+        m.shift_C = (unit_ratio_ * d) * kf.v_C;
+    }
+    return m;
 }
 
 CameraPose WindowBa::adjustedPose(const CameraPose& filter_T_CtoW) const {
@@ -378,7 +394,9 @@ bool WindowBa::triangulate(Point& pt) {
         if (!ray_C) {
             return false;
         }
-        const Vec3 ray = (kf.adjusted.R_CtoW * *ray_C).normalized();
+        const RowMotion m = rowMotion(kf, obs_[obsIndex(v.kf, v.j)].z_px);
+        const Vec3 ray = (kf.adjusted.R_CtoW * (m.E.transpose() * *ray_C)).normalized();
+        const Vec3 origin = kf.adjusted.p_CinW + kf.adjusted.R_CtoW * m.shift_C;
         if (v.kf == pt.first_kf) {
             first_ray = ray;
         }
@@ -386,7 +404,7 @@ bool WindowBa::triangulate(Point& pt) {
         const Mat3 M = Mat3::Identity() - ray * ray.transpose();
         Eigen::Matrix<Scalar, 3, 4> Ai;
         Ai.leftCols<3>() = M;
-        Ai.col(3) = -M * kf.adjusted.p_CinW;
+        Ai.col(3) = -M * origin;
         A.noalias() += Ai.transpose() * Ai;
     }
     const Scalar parallax = std::acos(std::clamp(first_ray.dot(last_ray), Scalar(-1), Scalar(1)));
@@ -417,14 +435,17 @@ Scalar WindowBa::cost() const {
             if (k < 0 || !points_[static_cast<size_t>(k)].usable) {
                 continue;
             }
-            const Vec3 p_C = kf.adjusted.R_CtoW.transpose() *
-                             (points_[static_cast<size_t>(k)].p_W - kf.adjusted.p_CinW);
+            const Vec2& z = obs_[obsIndex(i, j)].z_px;
+            const RowMotion m = rowMotion(kf, z);
+            const Vec3 p_C = m.E * (kf.adjusted.R_CtoW.transpose() *
+                                        (points_[static_cast<size_t>(k)].p_W - kf.adjusted.p_CinW) -
+                                    m.shift_C);
             const auto px = camera_.project(p_C);
             if (!px) {
                 c += 100 * config_.huber_px * config_.huber_px;
                 continue;
             }
-            c += huberCost((*px - obs_[obsIndex(i, j)].z_px).norm(), config_.huber_px);
+            c += huberCost((*px - z).norm(), config_.huber_px);
         }
     }
     return c;
@@ -434,13 +455,17 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     const Keyframe& kf = keyframe(i);
     const int k = obs_point_[obsIndex(i, j)];
     const auto pk = static_cast<size_t>(k);
+    const Vec2& z = obs_[obsIndex(i, j)].z_px;
+    const RowMotion m = rowMotion(kf, z);
+    // p_C in the keyframe's camera; the row's camera sees E (p_C - shift_C).
     const Vec3 p_C = kf.adjusted.R_CtoW.transpose() * (points_[pk].p_W - kf.adjusted.p_CinW);
     Mat23 J_px;
-    const auto px = camera_.project(p_C, &J_px);
+    const auto px = camera_.project(m.E * (p_C - m.shift_C), &J_px);
     if (!px) {
         return;
     }
-    const Vec2 r = *px - obs_[obsIndex(i, j)].z_px;
+    J_px = J_px * m.E;  // d pixel / d p_C
+    const Vec2 r = *px - z;
     const Scalar e = r.norm();
     const Scalar w = e < config_.huber_px ? Scalar(1) : config_.huber_px / e;
     const Mat23 J_X = J_px * kf.adjusted.R_CtoW.transpose();

@@ -743,7 +743,8 @@ void MonoTracker::adjustWindow(TrackStats& stats) {
     if (!tracked) {
         return;
     }
-    const slam::WindowBaReport report = ba_->addFrame(slam_.pose(), slam_.observations());
+    const slam::WindowBaReport report = ba_->addFrame(slam_.pose(), slam_.observations(),
+                                                      slam_.velocityW(), slam_.angularVelocityC());
     if (report.due) {
         ba_served_ = ba_->adjustedFromFilter();
         ba_due_ = true;

@@ -239,6 +239,7 @@ TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
         {"objects.association_gate", O::association_gate, false},
         {"objects.view_band", O::view_band, false},
         {"objects.max_gap_updates", O::max_gap_updates, true},
+        {"tracker.rolling_shutter_s", core::slam::WindowBaLimits::rolling_shutter_s, false},
     };
     const auto text = [](double v, bool integer) {
         std::ostringstream out;

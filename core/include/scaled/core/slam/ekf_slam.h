@@ -260,6 +260,7 @@ public:
     [[nodiscard]] std::int64_t timestampNs() const { return t_ns_; }
     [[nodiscard]] CameraPose pose() const;
     [[nodiscard]] Vec3 velocityW() const { return x_.segment<3>(kVel); }
+    [[nodiscard]] Vec3 angularVelocityC() const { return x_.segment<3>(kAngVel); }
     // Covariance of (position, rotation error delta) with R_true = R_est Exp(delta).
     [[nodiscard]] Mat6x6 poseCovariance() const;
     [[nodiscard]] Vec3 upW() const { return up_W_; }

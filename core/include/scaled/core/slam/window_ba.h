@@ -17,8 +17,9 @@
 // Keyframe poses are camera-to-world (R_CtoW, p_CinW) in the filter's world
 // frame; points are world positions; the residual is the camera model's
 // projection minus the measured pixel, Huber-weighted. Levenberg-Marquardt
-// with the points eliminated (Schur complement). Every buffer is sized at
-// create(): adding frames and optimising do not allocate.
+// with the points eliminated (Schur complement). With a rolling shutter each
+// observation is projected through the camera of its row's time. Every buffer
+// is sized at create(): adding frames and optimising do not allocate.
 
 #include <cstddef>
 #include <cstdint>
@@ -60,6 +61,12 @@ struct WindowBaConfig {
     // the frame that starts an optimisation does not wait for it. Less than
     // keyframe_every: no keyframe comes while one runs.
     int defer_frames = 0;
+    // Rolling shutter (tracker.rolling_shutter_s): seconds from the first
+    // row's exposure to the last's, the frame's timestamp being the first
+    // row's. Each observation is seen from the keyframe's camera at its row's
+    // time, moved there by the filter's velocities at the keyframe (the
+    // velocity times the unit ratio; neither is adjusted). 0: a global shutter.
+    Scalar rolling_shutter_s = 0;
 };
 
 struct WindowBaLimits {
@@ -75,6 +82,7 @@ struct WindowBaLimits {
     static constexpr ParamLimits iterations = closed(1, 100);
     static constexpr ParamLimits max_scale_step = closed(0, 10);
     static constexpr ParamLimits defer_frames = closed(0, 999);  // < keyframe_every
+    static constexpr ParamLimits rolling_shutter_s = closed(0, 1);
 };
 
 Status validate(const WindowBaConfig& config);
@@ -140,7 +148,10 @@ public:
     // step_keyframes keyframes the window is optimised and the report says
     // by how much the caller should rescale the filter's map (about the
     // camera's position). Call notifyRescaled() after applying it.
-    WindowBaReport addFrame(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs);
+    // v_W (filter units/s, world) and w_C (rad/s, camera frame) are the
+    // filter's velocities, used with a rolling shutter.
+    WindowBaReport addFrame(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs,
+                            const Vec3& v_W = Vec3::Zero(), const Vec3& w_C = Vec3::Zero());
 
     // With defer_frames > 0, after addFrame() said due: the optimisation
     // itself. Between addFrame() and finishDue() nothing else may touch this
@@ -170,9 +181,17 @@ public:
 
 private:
     struct Keyframe {
-        CameraPose filter;    // the filter's pose when the keyframe was taken
-        CameraPose adjusted;  // the window's estimate
+        CameraPose filter;        // the filter's pose when the keyframe was taken
+        CameraPose adjusted;      // the window's estimate
+        Vec3 v_C = Vec3::Zero();  // the filter's velocity in the camera frame, filter units/s
+        Vec3 w_C = Vec3::Zero();  // its angular velocity, rad/s
         int obs_count = 0;
+    };
+    // The camera of the row a pixel was seen in, relative to the keyframe's:
+    // a point at p_C in the keyframe camera is at E (p_C - shift_C) in it.
+    struct RowMotion {
+        Mat3 E = Mat3::Identity();
+        Vec3 shift_C = Vec3::Zero();
     };
     struct Point {
         std::uint64_t id = 0;
@@ -193,7 +212,9 @@ private:
     [[nodiscard]] const Keyframe& keyframe(int i) const;
     [[nodiscard]] size_t obsIndex(int i, int j) const;
     [[nodiscard]] std::span<const View> viewsOf(const Point& pt) const;
-    void pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs);
+    void pushKeyframe(const CameraPose& T_CtoW, std::span<const FeatureObservation> obs,
+                      const Vec3& v_W, const Vec3& w_C);
+    [[nodiscard]] RowMotion rowMotion(const Keyframe& kf, const Vec2& z_px) const;
     WindowBaReport optimise();
     // The first optimisation's result moved into the filter's frame and unit.
     void holdFilterGauge();
