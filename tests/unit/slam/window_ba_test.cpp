@@ -20,6 +20,33 @@ namespace scaled::core::slam {
 namespace {
 
 constexpr int kFrames = 300;
+constexpr Scalar kPi = Scalar(3.14159265358979);
+
+// Uniform draws in [lo, hi) from a 64-bit LCG: the scenes are the same on
+// every platform.
+class Uniform {
+public:
+    explicit Uniform(std::uint64_t seed) : rng_(seed) {}
+    Scalar operator()(Scalar lo, Scalar hi) {
+        rng_ = rng_ * 6364136223846793005ULL + 1442695040888963407ULL;
+        return lo + (hi - lo) * Scalar(rng_ >> 11) / Scalar(1ULL << 53);
+    }
+
+private:
+    std::uint64_t rng_;
+};
+
+// Point i seen in frame k at px: kept when inside the 640x480 image, with a
+// deterministic +-0.5 px error.
+void pushObserved(size_t i, int k, const std::optional<Vec2>& px,
+                  std::vector<FeatureObservation>& out) {
+    if (!px || px->x() < 0 || px->y() < 0 || px->x() > 639 || px->y() > 479) {
+        return;
+    }
+    const auto h = static_cast<Scalar>((i * 2654435761U + static_cast<size_t>(k) * 97U) % 1000);
+    const Scalar e = (h / 1000 - Scalar(0.5));
+    out.push_back({i + 1, *px + Vec2(e, -e)});
+}
 
 struct Scene {
     std::vector<Vec3> points;
@@ -32,11 +59,7 @@ struct Scene {
 // to 0.7 along the way (its steps are the true steps times that factor).
 Scene makeScene() {
     Scene s;
-    std::uint64_t rng = 12345;
-    auto uniform = [&rng](Scalar lo, Scalar hi) {
-        rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
-        return lo + (hi - lo) * Scalar(rng >> 11) / Scalar(1ULL << 53);
-    };
+    Uniform uniform(12345);
     for (int i = 0; i < 400; ++i) {
         s.points.emplace_back(uniform(-4, 4), uniform(-1.5, 1.5), uniform(3, 6));
     }
@@ -60,20 +83,14 @@ Scene makeScene() {
     return s;
 }
 
-// The features a frame sees (at most 160), with a deterministic +-0.5 px error.
+// The features a frame sees (at most 160), with pushObserved()'s error.
 void observe(const Scene& s, const PinholeRadialCamera& cam, int k,
              std::vector<FeatureObservation>& out) {
     out.clear();
     for (size_t i = 0; i < s.points.size() && out.size() < 160; ++i) {
         const CameraPose& T = s.truth[static_cast<size_t>(k)];
         const Vec3 p_C = T.R_CtoW.transpose() * (s.points[i] - T.p_CinW);
-        const auto px = cam.project(p_C);
-        if (!px || px->x() < 0 || px->y() < 0 || px->x() > 639 || px->y() > 479) {
-            continue;
-        }
-        const auto h = static_cast<Scalar>((i * 2654435761U + static_cast<size_t>(k) * 97U) % 1000);
-        const Scalar e = (h / 1000 - Scalar(0.5));
-        out.push_back({i + 1, *px + Vec2(e, -e)});
+        pushObserved(i, k, cam.project(p_C), out);
     }
 }
 
@@ -257,7 +274,6 @@ struct RollingShutterScene {
 };
 
 CameraPose rollingTruth(Scalar t) {
-    constexpr Scalar kPi = Scalar(3.14159265358979);
     CameraPose T;
     T.p_CinW = Vec3(Scalar(0.2) * t, Scalar(0.05) * std::sin(2 * kPi * Scalar(0.3) * t), 0);
     T.R_CtoW =
@@ -266,13 +282,8 @@ CameraPose rollingTruth(Scalar t) {
 }
 
 RollingShutterScene makeRollingShutterScene() {
-    constexpr Scalar kPi = Scalar(3.14159265358979);
     RollingShutterScene s;
-    std::uint64_t rng = 777;
-    auto uniform = [&rng](Scalar lo, Scalar hi) {
-        rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
-        return lo + (hi - lo) * Scalar(rng >> 11) / Scalar(1ULL << 53);
-    };
+    Uniform uniform(777);
     for (int i = 0; i < 600; ++i) {
         s.points.emplace_back(uniform(-5, 7), uniform(-1.5, 1.5), uniform(3, 6));
     }
@@ -288,8 +299,8 @@ RollingShutterScene makeRollingShutterScene() {
 }
 
 // The features frame k sees (at most 160), each from the camera at its row's
-// time (three fixed-point passes: the row is where the point lands), with the same
-// +-0.5 px error as observe().
+// time (three fixed-point passes: the row is where the point lands), with
+// pushObserved()'s error.
 void observeRolling(const RollingShutterScene& s, const PinholeRadialCamera& cam, int k,
                     Scalar readout_s, std::vector<FeatureObservation>& out) {
     out.clear();
@@ -305,12 +316,7 @@ void observeRolling(const RollingShutterScene& s, const PinholeRadialCamera& cam
             }
             row = px->y();
         }
-        if (!px || px->x() < 0 || px->y() < 0 || px->x() > 639 || px->y() > 479) {
-            continue;
-        }
-        const auto h = static_cast<Scalar>((i * 2654435761U + static_cast<size_t>(k) * 97U) % 1000);
-        const Scalar e = (h / 1000 - Scalar(0.5));
-        out.push_back({i + 1, *px + Vec2(e, -e)});
+        pushObserved(i, k, px, out);
     }
 }
 
