@@ -171,6 +171,8 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
             ++result.window_ba_optimisations;
             sums.window_ba_points += stats.window_ba.points;
             sums.window_ba_rms_px += static_cast<double>(stats.window_ba.rms_after_px);
+            result.window_ba_rolling_shutter_s =
+                static_cast<double>(stats.window_ba.rolling_shutter_s);
         }
     } else if (r.map_lost) {
         // Lost or diverged: the next frame starts a new map (new scale).
@@ -335,7 +337,8 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
     if (r.window_ba_optimisations > 0) {
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +
              ",\"mean_points\":" + num(r.window_ba_mean_points) +
-             ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px) + "}";
+             ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px) +
+             ",\"rolling_shutter_s\":" + num(r.window_ba_rolling_shutter_s) + "}";
     }
     s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
     s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);

@@ -68,7 +68,8 @@ struct SlamRunResult {
     int window_ba_optimisations = 0;
     double window_ba_mean_points = 0;
     double window_ba_mean_rms_px = 0;
-    double mean_features_measured = 0;  // accepted matches per tracked frame
+    double window_ba_rolling_shutter_s = 0;  // the last optimisation's readout time
+    double mean_features_measured = 0;       // accepted matches per tracked frame
     double mean_features_in_map = 0;
     double ms_per_frame = 0;  // tracker only (image decoding excluded)
     double ms_per_frame_max = 0;

@@ -77,6 +77,10 @@ Status validate(const WindowBaConfig& c) {
         {"max_scale_step", static_cast<double>(c.max_scale_step), L::max_scale_step},
         {"defer_frames", static_cast<double>(c.defer_frames), L::defer_frames},
         {"rolling_shutter_s", static_cast<double>(c.rolling_shutter_s), L::rolling_shutter_s},
+        {"rolling_shutter_sigma_s", static_cast<double>(c.rolling_shutter_sigma_s),
+         L::rolling_shutter_sigma_s},
+        {"rolling_shutter_max_s", static_cast<double>(c.rolling_shutter_max_s),
+         L::rolling_shutter_max_s},
     };
     if (const LimitCheck* bad = firstOutside(checks)) {
         return makeError(ErrorCode::kInvalidArgument, std::string("window_ba.") + bad->name +
@@ -88,6 +92,14 @@ Status validate(const WindowBaConfig& c) {
                          "window_ba.fixed_keyframes = " + std::to_string(c.fixed_keyframes) +
                              ": must leave at least 2 of window_keyframes (" +
                              std::to_string(c.window_keyframes) + ") free");
+    }
+    if (c.rolling_shutter_sigma_s > 0 && c.rolling_shutter_s > c.rolling_shutter_max_s) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "window_ba.rolling_shutter_s = " +
+                             formatLimitValue(static_cast<double>(c.rolling_shutter_s)) +
+                             ": must be at most rolling_shutter_max_s (" +
+                             formatLimitValue(static_cast<double>(c.rolling_shutter_max_s)) +
+                             ") when it is estimated");
     }
     if (c.defer_frames >= c.keyframe_every) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -112,7 +124,11 @@ Result<WindowBa> WindowBa::create(const PinholeRadialCamera& camera, const Windo
 }
 
 WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& config)
-    : camera_(camera), config_(config), capacity_(config.window_keyframes) {
+    : camera_(camera),
+      config_(config),
+      capacity_(config.window_keyframes),
+      readout_s_(config.rolling_shutter_s),
+      estimate_readout_(config.rolling_shutter_sigma_s > 0) {
     const auto cap = static_cast<size_t>(capacity_);
     const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
     const auto max_points = static_cast<size_t>(config.max_points);
@@ -121,12 +137,13 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
     const int max_free = std::max(
         config.window_keyframes - config.fixed_keyframes,
         std::min(config.fixed_keyframes + config.step_keyframes, config.window_keyframes) - 1);
-    const Eigen::Index free_dim = 6 * Eigen::Index{max_free};
+    const Eigen::Index free_dim = 6 * Eigen::Index{max_free} + (estimate_readout_ ? 1 : 0);
     keyframes_.resize(cap);
     saved_keyframes_.resize(cap);
     obs_.resize(cap * per_kf);
     obs_point_.assign(cap * per_kf, -1);
     W_.resize(cap * per_kf);
+    W_t_.resize(max_points);
     points_.resize(max_points);
     views_.resize(max_points * cap);
     saved_points_.resize(max_points);
@@ -229,9 +246,8 @@ void WindowBa::notifyRescaled(Scalar s, const Vec3& centre_W) {
 
 WindowBa::RowMotion WindowBa::rowMotion(const Keyframe& kf, const Vec2& z_px) const {
     RowMotion m;
-    if (config_.rolling_shutter_s > 0) {
-        const Scalar d =
-            config_.rolling_shutter_s * z_px.y() / Scalar(std::max(1, camera_.height() - 1));
+    if (readout_s_ > 0) {
+        const Scalar d = readout_s_ * z_px.y() / Scalar(std::max(1, camera_.height() - 1));
         m.E = rotationFromQuat(quatFromRotationVector(-d * kf.w_C));
         m.shift_C = (unit_ratio_ * d) * kf.v_C;
     }
@@ -279,6 +295,7 @@ WindowBaReport WindowBa::optimise() {
     report.observations = usable_observations_;
     report.rms_after_px = std::sqrt(c / Scalar(std::max(1, usable_observations_)));
     report.optimised = true;
+    report.rolling_shutter_s = readout_s_;
     if (first_optimisation_) {
         first_optimisation_ = false;
         holdFilterGauge();
@@ -448,6 +465,10 @@ Scalar WindowBa::cost() const {
             c += huberCost((*px - z).norm(), config_.huber_px);
         }
     }
+    if (estimate_readout_) {
+        const Scalar e = (readout_s_ - config_.rolling_shutter_s) / config_.rolling_shutter_sigma_s;
+        c += e * e;
+    }
     return c;
 }
 
@@ -460,10 +481,17 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     // p_C in the keyframe's camera; the row's camera sees E (p_C - shift_C).
     const Vec3 p_C = kf.adjusted.R_CtoW.transpose() * (points_[pk].p_W - kf.adjusted.p_CinW);
     Mat23 J_px;
-    const auto px = camera_.project(m.E * (p_C - m.shift_C), &J_px);
+    const Vec3 p_row = m.E * (p_C - m.shift_C);
+    const auto px = camera_.project(p_row, &J_px);
     if (!px) {
         return;
     }
+    // d pixel / d readout time: the row's camera moves on by d = t y / (H - 1)
+    // seconds, p_row by -(w x p_row) - E (unit v) per second.
+    const Vec2 J_t = estimate_readout_
+                         ? Vec2(J_px * (-kf.w_C.cross(p_row) - m.E * (unit_ratio_ * kf.v_C)) *
+                                (z.y() / Scalar(std::max(1, camera_.height() - 1))))
+                         : Vec2::Zero();
     J_px = J_px * m.E;  // d pixel / d p_C
     const Vec2 r = *px - z;
     const Scalar e = r.norm();
@@ -471,6 +499,12 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     const Mat23 J_X = J_px * kf.adjusted.R_CtoW.transpose();
     H_ll_[pk].noalias() += w * J_X.transpose() * J_X;
     b_l_[pk].noalias() -= w * J_X.transpose() * r;
+    const Eigen::Index t_row = denseDim(first_free) - 1;
+    if (estimate_readout_) {
+        H_pp_(t_row, t_row) += w * J_t.squaredNorm();
+        b_p_(t_row) -= w * J_t.dot(r);
+        W_t_[pk].noalias() += w * J_X.transpose() * J_t;
+    }
     if (i < first_free) {
         return;
     }
@@ -481,15 +515,31 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     H_pp_.block<6, 6>(c6, c6).noalias() += w * J_c.transpose() * J_c;
     b_p_.segment<6>(c6).noalias() -= w * J_c.transpose() * r;
     W_[obsIndex(i, j)].noalias() = w * J_c.transpose() * J_X;
+    if (estimate_readout_) {
+        // The lower triangle: the readout's row, the pose's columns.
+        H_pp_.block<1, 6>(t_row, c6).noalias() += w * J_t.transpose() * J_c;
+    }
+}
+
+Eigen::Index WindowBa::denseDim(int first_free) const {
+    return 6 * Eigen::Index{count_ - first_free} + (estimate_readout_ ? 1 : 0);
 }
 
 void WindowBa::accumulate(int first_free) {
-    const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
+    const Eigen::Index n_free = denseDim(first_free);
     H_pp_.topLeftCorner(n_free, n_free).setZero();
     b_p_.head(n_free).setZero();
     for (int k = 0; k < point_count_; ++k) {
         H_ll_[static_cast<size_t>(k)].setZero();
         b_l_[static_cast<size_t>(k)].setZero();
+        W_t_[static_cast<size_t>(k)].setZero();
+    }
+    if (estimate_readout_) {
+        // Its prior: at the given readout time.
+        const Scalar inv_var =
+            1 / (config_.rolling_shutter_sigma_s * config_.rolling_shutter_sigma_s);
+        H_pp_(n_free - 1, n_free - 1) = inv_var;
+        b_p_(n_free - 1) = -inv_var * (readout_s_ - config_.rolling_shutter_s);
     }
     for (int i = 0; i < count_; ++i) {
         for (int j = 0; j < keyframe(i).obs_count; ++j) {
@@ -505,7 +555,8 @@ void WindowBa::accumulate(int first_free) {
 void WindowBa::schurComplement(int first_free, Scalar lambda) {
     // S = H_pp - sum_points W H_ll^-1 W^T, g = b_p - sum W H_ll^-1 b_l, on
     // the free poses' part of the buffers.
-    const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
+    const Eigen::Index n_free = denseDim(first_free);
+    const Eigen::Index t_row = n_free - 1;  // the readout time's, if estimated
     S_.topLeftCorner(n_free, n_free) = H_pp_.topLeftCorner(n_free, n_free);
     g_.head(n_free) = b_p_.head(n_free);
     for (Eigen::Index d = 0; d < n_free; ++d) {
@@ -521,6 +572,18 @@ void WindowBa::schurComplement(int first_free, Scalar lambda) {
         H.diagonal().array() += Scalar(1e-9);
         H_ll_inv_[pk] = H.inverse();
         const auto views = viewsOf(points_[pk]);
+        if (estimate_readout_) {
+            const Vec3 V_t = H_ll_inv_[pk] * W_t_[pk];  // H_ll^-1 symmetric
+            g_(t_row) -= V_t.dot(b_l_[pk]);
+            S_(t_row, t_row) -= V_t.dot(W_t_[pk]);
+            for (const View& b : views) {
+                if (b.kf >= first_free) {
+                    const Eigen::Index cb = 6 * Eigen::Index{b.kf - first_free};
+                    S_.block<1, 6>(t_row, cb).noalias() -=
+                        V_t.transpose() * W_[obsIndex(b.kf, b.j)].transpose();
+                }
+            }
+        }
         for (const View& a : views) {
             if (a.kf < first_free) {
                 continue;
@@ -549,6 +612,11 @@ std::span<const WindowBa::View> WindowBa::viewsOf(const Point& pt) const {
 }
 
 void WindowBa::step(int first_free) {
+    const Scalar dt = estimate_readout_ ? dx_p_(denseDim(first_free) - 1) : Scalar(0);
+    if (estimate_readout_) {
+        // The points' step below is the one for the unclamped time.
+        readout_s_ = std::clamp(readout_s_ + dt, Scalar(0), config_.rolling_shutter_max_s);
+    }
     for (int i = first_free; i < count_; ++i) {
         Keyframe& kf = keyframe(i);
         const Eigen::Index c6 = 6 * Eigen::Index{i - first_free};
@@ -562,7 +630,7 @@ void WindowBa::step(int first_free) {
         if (!pt.usable) {
             continue;
         }
-        Vec3 rhs = b_l_[pk];
+        Vec3 rhs = b_l_[pk] - W_t_[pk] * dt;
         for (const View& a : viewsOf(pt)) {
             if (a.kf >= first_free) {
                 rhs.noalias() -= W_[obsIndex(a.kf, a.j)].transpose() *
@@ -578,7 +646,7 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     schurComplement(first_free, lambda);
     // Cholesky in place on the free part (no allocation); not positive
     // definite: more damping.
-    const Eigen::Index n_free = 6 * Eigen::Index{count_ - first_free};
+    const Eigen::Index n_free = denseDim(first_free);
     Eigen::Ref<MatX> S = S_.topLeftCorner(n_free, n_free);
     const Eigen::LLT<Eigen::Ref<MatX>> llt(S);
     if (llt.info() != Eigen::Success) {
@@ -592,6 +660,7 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
         saved_keyframes_[static_cast<size_t>(i)] = keyframe(i);
     }
     std::copy_n(points_.begin(), point_count_, saved_points_.begin());
+    saved_readout_s_ = readout_s_;
     step(first_free);
     const Scalar c_new = cost();
     if (std::isfinite(c_new) && c_new < c) {
@@ -603,6 +672,7 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
         keyframe(i) = saved_keyframes_[static_cast<size_t>(i)];
     }
     std::copy_n(saved_points_.begin(), point_count_, points_.begin());
+    readout_s_ = saved_readout_s_;
     lambda *= 5;
     return false;
 }

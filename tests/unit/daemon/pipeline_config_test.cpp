@@ -207,9 +207,10 @@ TEST(PipelineConfig, RansacHypothesesStayWithinWhatTheTrackerAccepts) {
 // own check of the same parameter.
 TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
     struct Key {
-        const char* name;  // section.key
+        const char* name = nullptr;  // section.key
         core::ParamLimits limits;
-        bool integer;
+        bool integer = false;
+        const char* with = nullptr;  // another override an in-range value needs
     };
     using S = core::slam::SlamLimits;
     using P = core::PosteriorLimits;
@@ -239,7 +240,11 @@ TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
         {"objects.association_gate", O::association_gate, false},
         {"objects.view_band", O::view_band, false},
         {"objects.max_gap_updates", O::max_gap_updates, true},
-        {"tracker.rolling_shutter_s", core::slam::WindowBaLimits::rolling_shutter_s, false},
+        {"tracker.rolling_shutter_s", core::slam::WindowBaLimits::rolling_shutter_s, false,
+         "tracker.rolling_shutter_max_s=1"},
+        {"tracker.rolling_shutter_sigma_s", core::slam::WindowBaLimits::rolling_shutter_sigma_s,
+         false},
+        {"tracker.rolling_shutter_max_s", core::slam::WindowBaLimits::rolling_shutter_max_s, false},
     };
     const auto text = [](double v, bool integer) {
         std::ostringstream out;
@@ -268,14 +273,23 @@ TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
                 continue;
             }
             PipelineConfig c = defaultPipelineConfig();
-            const auto r =
-                applyPipelineOverrides({std::string(k.name) + "=" + text(good, k.integer)}, c);
+            std::vector<std::string> set{std::string(k.name) + "=" + text(good, k.integer)};
+            if (k.with != nullptr) {
+                set.emplace_back(k.with);
+            }
+            const auto r = applyPipelineOverrides(set, c);
             EXPECT_TRUE(r.ok()) << good << ": " << (r.ok() ? "" : r.error().message);
         }
     }
+    // An estimated readout time's prior beyond the estimate's bound is refused.
+    PipelineConfig c = defaultPipelineConfig();
+    const auto r = applyPipelineOverrides({"tracker.rolling_shutter_s=0.06"}, c);
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("rolling_shutter_max_s (0.05)"), std::string::npos)
+        << r.error().message;
     // Core refuses what the registry refuses: a value past a bound set
     // directly in the configuration.
-    PipelineConfig c = defaultPipelineConfig();
+    c = defaultPipelineConfig();
     c.tracker.slam.chi2_gate = static_cast<core::Scalar>(2e4);
     EXPECT_FALSE(core::slam::validate(c.tracker.slam).ok());
     c = defaultPipelineConfig();

@@ -67,6 +67,13 @@ struct WindowBaConfig {
     // time, moved there by the filter's velocities at the keyframe (the
     // velocity times the unit ratio; neither is adjusted). 0: a global shutter.
     Scalar rolling_shutter_s = 0;
+    // > 0: the readout time is estimated in the window as well, one value
+    // for the camera shared by every observation, with a prior at
+    // rolling_shutter_s of this standard deviation (s, against residuals in
+    // pixels), kept within [0, rolling_shutter_max_s]; each optimisation
+    // starts from the last one's estimate. 0: rolling_shutter_s is given.
+    Scalar rolling_shutter_sigma_s = 0;
+    Scalar rolling_shutter_max_s = Scalar(0.05);
 };
 
 struct WindowBaLimits {
@@ -83,6 +90,8 @@ struct WindowBaLimits {
     static constexpr ParamLimits max_scale_step = closed(0, 10);
     static constexpr ParamLimits defer_frames = closed(0, 999);  // < keyframe_every
     static constexpr ParamLimits rolling_shutter_s = closed(0, 1);
+    static constexpr ParamLimits rolling_shutter_sigma_s = closed(0, 1);
+    static constexpr ParamLimits rolling_shutter_max_s = closed(0, 1);  // >= rolling_shutter_s
 };
 
 Status validate(const WindowBaConfig& config);
@@ -132,6 +141,9 @@ struct WindowBaReport {
     // (Sim(3) over them and the newest fixed one): > 1, the filter's map had
     // shrunk; 1 when nothing was adjusted. Clamped by max_scale_step.
     Scalar scale = 1;
+    // The readout time the window used (estimated with
+    // rolling_shutter_sigma_s > 0), seconds.
+    Scalar rolling_shutter_s = 0;
     // defer_frames > 0: an optimisation is due; nothing was optimised yet.
     bool due = false;
 };
@@ -178,6 +190,8 @@ public:
     // first window is nearly straight: R is that turn, not only drift.)
     [[nodiscard]] Sim3 adjustedFromFilter() const;
     [[nodiscard]] int keyframeCount() const { return count_; }
+    // The readout time in use: rolling_shutter_s, or the window's estimate.
+    [[nodiscard]] Scalar rollingShutter() const { return readout_s_; }
 
 private:
     struct Keyframe {
@@ -232,6 +246,8 @@ private:
     void accumulateView(int i, int j, int first_free);
     void schurComplement(int first_free, Scalar lambda);
     void step(int first_free);
+    // Rows of the dense part: 6 per free keyframe, and the readout time.
+    [[nodiscard]] Eigen::Index denseDim(int first_free) const;
 
     PinholeRadialCamera camera_;
     WindowBaConfig config_;
@@ -242,6 +258,11 @@ private:
     int since_opt_ = 0;  // keyframes since the last optimisation
     bool first_optimisation_ = true;
     Scalar unit_ratio_ = 1;  // adjusted unit per filter unit (scale_feedback off)
+    // The readout time (config_.rolling_shutter_s, or estimated: then the
+    // last entry of the dense normal equations, after the free poses').
+    Scalar readout_s_ = 0;
+    Scalar saved_readout_s_ = 0;
+    bool estimate_readout_ = false;
     std::vector<Keyframe> keyframes_;
     std::vector<FeatureObservation> obs_;  // capacity_ x max_observations_per_keyframe
     std::vector<int> obs_point_;           // point of each observation, -1: none
@@ -250,8 +271,10 @@ private:
     int point_count_ = 0;
     int usable_points_ = 0;
     int usable_observations_ = 0;
-    // Normal equations: the free poses (6 each) dense, the points 3x3 blocks;
-    // per observation of a free keyframe its 6x3 pose-point block.
+    // Normal equations: the free poses (6 each) and the estimated readout
+    // time dense, the points 3x3 blocks; per observation of a free keyframe
+    // its 6x3 pose-point block, per point its readout-point row (summed over
+    // its views).
     MatX H_pp_;
     VecX b_p_;
     MatX S_;
@@ -261,6 +284,7 @@ private:
     std::vector<Vec3> b_l_;
     std::vector<Mat3> H_ll_inv_;
     std::vector<Eigen::Matrix<Scalar, 6, 3>> W_;
+    std::vector<Vec3> W_t_;
     std::vector<Keyframe> saved_keyframes_;
     std::vector<Point> saved_points_;
     std::vector<Vec3> sim_from_;  // scratch for the Sim(3) fits
