@@ -93,6 +93,12 @@ Status validate(const WindowBaConfig& c) {
                              ": must leave at least 2 of window_keyframes (" +
                              std::to_string(c.window_keyframes) + ") free");
     }
+    if (c.rolling_shutter_sigma_s > 0 && c.rolling_shutter_sigma_s < Scalar(1e-4)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "window_ba.rolling_shutter_sigma_s = " +
+                             formatLimitValue(static_cast<double>(c.rolling_shutter_sigma_s)) +
+                             ": must be 0 (given) or at least 0.0001 s (estimated)");
+    }
     if (c.rolling_shutter_sigma_s > 0 && c.rolling_shutter_s > c.rolling_shutter_max_s) {
         return makeError(ErrorCode::kInvalidArgument,
                          "window_ba.rolling_shutter_s = " +
@@ -128,7 +134,7 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
       config_(config),
       capacity_(config.window_keyframes),
       readout_s_(config.rolling_shutter_s),
-      estimate_readout_(config.rolling_shutter_sigma_s > 0) {
+      estimate_readout_(config.rolling_shutter_sigma_s > 0 && config.rolling_shutter_max_s > 0) {
     const auto cap = static_cast<size_t>(capacity_);
     const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
     const auto max_points = static_cast<size_t>(config.max_points);
@@ -160,6 +166,7 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
 }
 
 void WindowBa::reset() {
+    // The estimated readout time is kept: it is the camera's, not the map's.
     head_ = 0;
     count_ = 0;
     frames_ = 0;
@@ -283,7 +290,11 @@ WindowBaReport WindowBa::optimise() {
     report.free_keyframes = count_ - first_free;
     gatherPoints(first_free);
     Scalar c = cost();
-    report.rms_before_px = std::sqrt(c / Scalar(std::max(1, usable_observations_)));
+    const auto rmsPx = [this](Scalar cost_total) {
+        return std::sqrt(std::max(Scalar(0), cost_total - readoutPriorCost()) /
+                         Scalar(std::max(1, usable_observations_)));
+    };
+    report.rms_before_px = rmsPx(c);
     Scalar lambda = Scalar(1e-3);
     for (int it = 0; it < config_.iterations; ++it) {
         const Scalar before = c;
@@ -293,7 +304,7 @@ WindowBaReport WindowBa::optimise() {
     }
     report.points = usable_points_;
     report.observations = usable_observations_;
-    report.rms_after_px = std::sqrt(c / Scalar(std::max(1, usable_observations_)));
+    report.rms_after_px = rmsPx(c);
     report.optimised = true;
     report.rolling_shutter_s = readout_s_;
     if (first_optimisation_) {
@@ -465,11 +476,15 @@ Scalar WindowBa::cost() const {
             c += huberCost((*px - z).norm(), config_.huber_px);
         }
     }
-    if (estimate_readout_) {
-        const Scalar e = (readout_s_ - config_.rolling_shutter_s) / config_.rolling_shutter_sigma_s;
-        c += e * e;
+    return c + readoutPriorCost();
+}
+
+Scalar WindowBa::readoutPriorCost() const {
+    if (!estimate_readout_) {
+        return 0;
     }
-    return c;
+    const Scalar e = (readout_s_ - config_.rolling_shutter_s) / config_.rolling_shutter_sigma_s;
+    return e * e;
 }
 
 void WindowBa::accumulateView(int i, int j, int first_free) {
@@ -612,11 +627,9 @@ std::span<const WindowBa::View> WindowBa::viewsOf(const Point& pt) const {
 }
 
 void WindowBa::step(int first_free) {
+    // iterate() has kept the readout time's step within its bounds.
     const Scalar dt = estimate_readout_ ? dx_p_(denseDim(first_free) - 1) : Scalar(0);
-    if (estimate_readout_) {
-        // The points' step below is the one for the unclamped time.
-        readout_s_ = std::clamp(readout_s_ + dt, Scalar(0), config_.rolling_shutter_max_s);
-    }
+    readout_s_ += dt;
     for (int i = first_free; i < count_; ++i) {
         Keyframe& kf = keyframe(i);
         const Eigen::Index c6 = 6 * Eigen::Index{i - first_free};
@@ -656,6 +669,25 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     auto dx = dx_p_.head(n_free);
     dx = g_.head(n_free);
     llt.solveInPlace(dx);
+    if (estimate_readout_) {
+        // A readout time stepping past its bounds is held at the bound, and
+        // the poses take their step for that: with S = L L^T, L = [L_p 0;
+        // l^T l_t], the poses' part of S dx = g at a fixed dt is
+        // L_p L_p^T dx_p = g_p - L_p l dt.
+        const Eigen::Index t = n_free - 1;
+        const Scalar held =
+            std::clamp(readout_s_ + dx(t), Scalar(0), config_.rolling_shutter_max_s);
+        if (held != readout_s_ + dx(t)) {
+            const Scalar dt = held - readout_s_;
+            auto dx_p = dx.head(t);
+            const auto L_p = S.topLeftCorner(t, t).triangularView<Eigen::Lower>();
+            dx_p = g_.head(t);
+            L_p.solveInPlace(dx_p);
+            dx_p.noalias() -= S.row(t).head(t).transpose() * dt;
+            L_p.transpose().solveInPlace(dx_p);
+            dx(t) = dt;
+        }
+    }
     for (int i = 0; i < count_; ++i) {
         saved_keyframes_[static_cast<size_t>(i)] = keyframe(i);
     }

@@ -67,11 +67,12 @@ struct WindowBaConfig {
     // time, moved there by the filter's velocities at the keyframe (the
     // velocity times the unit ratio; neither is adjusted). 0: a global shutter.
     Scalar rolling_shutter_s = 0;
-    // > 0: the readout time is estimated in the window as well, one value
-    // for the camera shared by every observation, with a prior at
-    // rolling_shutter_s of this standard deviation (s, against residuals in
-    // pixels), kept within [0, rolling_shutter_max_s]; each optimisation
-    // starts from the last one's estimate. 0: rolling_shutter_s is given.
+    // > 0 (at least 1e-4): the readout time is estimated in the window as
+    // well, one value for the camera shared by every observation, with a
+    // prior at rolling_shutter_s of this standard deviation (s, against
+    // residuals in pixels), kept within [0, rolling_shutter_max_s] (0: not
+    // estimated); each optimisation starts from the last one's estimate and
+    // a new map keeps it. 0: rolling_shutter_s is given.
     Scalar rolling_shutter_sigma_s = 0;
     Scalar rolling_shutter_max_s = Scalar(0.05);
 };
@@ -152,7 +153,7 @@ class WindowBa {
 public:
     static Result<WindowBa> create(const PinholeRadialCamera& camera, const WindowBaConfig& config);
 
-    // A new map: forget every keyframe.
+    // A new map: forget every keyframe (an estimated readout time is kept).
     void reset();
 
     // After the filter's frame (update, new features): its camera pose and the
@@ -190,8 +191,6 @@ public:
     // first window is nearly straight: R is that turn, not only drift.)
     [[nodiscard]] Sim3 adjustedFromFilter() const;
     [[nodiscard]] int keyframeCount() const { return count_; }
-    // The readout time in use: rolling_shutter_s, or the window's estimate.
-    [[nodiscard]] Scalar rollingShutter() const { return readout_s_; }
 
 private:
     struct Keyframe {
@@ -242,6 +241,8 @@ private:
     // solve, step); false when the cost did not go down (state restored).
     bool iterate(int first_free, Scalar& lambda, Scalar& c);
     [[nodiscard]] Scalar cost() const;
+    // The estimated readout time's prior term of cost() (0 when given).
+    [[nodiscard]] Scalar readoutPriorCost() const;
     void accumulate(int first_free);
     void accumulateView(int i, int j, int first_free);
     void schurComplement(int first_free, Scalar lambda);
