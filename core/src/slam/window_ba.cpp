@@ -99,11 +99,11 @@ Status validate(const WindowBaConfig& c) {
                              formatLimitValue(static_cast<double>(c.rolling_shutter_sigma_s)) +
                              ": must be 0 (given) or at least 0.0001 s (estimated)");
     }
-    if (c.rolling_shutter_sigma_s > 0 && c.rolling_shutter_s > c.rolling_shutter_max_s) {
+    if (c.rolling_shutter_sigma_s > 0 && std::abs(c.rolling_shutter_s) > c.rolling_shutter_max_s) {
         return makeError(ErrorCode::kInvalidArgument,
                          "window_ba.rolling_shutter_s = " +
                              formatLimitValue(static_cast<double>(c.rolling_shutter_s)) +
-                             ": must be at most rolling_shutter_max_s (" +
+                             ": must be within +-rolling_shutter_max_s (" +
                              formatLimitValue(static_cast<double>(c.rolling_shutter_max_s)) +
                              ") when it is estimated");
     }
@@ -253,7 +253,7 @@ void WindowBa::notifyRescaled(Scalar s, const Vec3& centre_W) {
 
 WindowBa::RowMotion WindowBa::rowMotion(const Keyframe& kf, const Vec2& z_px) const {
     RowMotion m;
-    if (readout_s_ > 0) {
+    if (readout_s_ != 0) {
         const Scalar d = readout_s_ * z_px.y() / Scalar(std::max(1, camera_.height() - 1));
         m.E = rotationFromQuat(quatFromRotationVector(-d * kf.w_C));
         m.shift_C = (unit_ratio_ * d) * kf.v_C;
@@ -670,13 +670,14 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     dx = g_.head(n_free);
     llt.solveInPlace(dx);
     if (estimate_readout_) {
-        // A readout time stepping past its bounds is held at the bound, and
+        // A readout time stepping past +-rolling_shutter_max_s is held at the
+        // bound (negative: the last row is read first), and
         // the poses take their step for that: with S = L L^T, L = [L_p 0;
         // l^T l_t], the poses' part of S dx = g at a fixed dt is
         // L_p L_p^T dx_p = g_p - L_p l dt.
         const Eigen::Index t = n_free - 1;
-        const Scalar held =
-            std::clamp(readout_s_ + dx(t), Scalar(0), config_.rolling_shutter_max_s);
+        const Scalar held = std::clamp(readout_s_ + dx(t), -config_.rolling_shutter_max_s,
+                                       config_.rolling_shutter_max_s);
         if (held != readout_s_ + dx(t)) {
             const Scalar dt = held - readout_s_;
             auto dx_p = dx.head(t);

@@ -415,6 +415,11 @@ TEST(WindowBa, EstimatesTheReadoutTime) {
     const RollingShutterRun global = runRolling(Scalar(0.02), 0, Scalar(0.03));
     EXPECT_EQ(global.optimisations, given.optimisations);
     EXPECT_LT(global.readout_s, Scalar(0.005));
+    // Rows read from the bottom up (-30 ms: the sensor upside down, or the
+    // sequence played backwards): -0.02999 s.
+    const RollingShutterRun upwards = runRolling(0, Scalar(-0.03), Scalar(0.03));
+    EXPECT_EQ(upwards.optimisations, given.optimisations);
+    EXPECT_NEAR(upwards.readout_s, Scalar(-0.03), Scalar(0.002));
     // An 80 ms shutter with the estimate kept within 50 ms: held at the
     // bound, the poses stepping for the bound's time (1.94 px).
     const RollingShutterRun clamped = runRolling(0, Scalar(0.08), Scalar(0.03), Scalar(0.05));
@@ -428,6 +433,8 @@ TEST(WindowBa, EstimatesTheReadoutTime) {
     auto r = validate(bad);
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message.find("rolling_shutter_max_s"), std::string::npos);
+    bad.rolling_shutter_s = Scalar(-0.06);
+    EXPECT_FALSE(validate(bad).ok());
     bad.rolling_shutter_sigma_s = 0;  // given, not estimated: any max
     EXPECT_TRUE(validate(bad).ok());
     bad = WindowBaConfig{};

@@ -63,14 +63,15 @@ struct WindowBaConfig {
     int defer_frames = 0;
     // Rolling shutter (tracker.rolling_shutter_s): seconds from the first
     // row's exposure to the last's, the frame's timestamp being the first
-    // row's. Each observation is seen from the keyframe's camera at its row's
-    // time, moved there by the filter's velocities at the keyframe (the
-    // velocity times the unit ratio; neither is adjusted). 0: a global shutter.
+    // row's; negative when the rows are read from the bottom of the image
+    // up (a sensor mounted upside down, its image turned). Each observation is seen from the
+    // keyframe's camera at its row's time, moved there by the filter's velocities at the keyframe
+    // (the velocity times the unit ratio; neither is adjusted). 0: a global shutter.
     Scalar rolling_shutter_s = 0;
     // > 0 (at least 1e-4): the readout time is estimated in the window as
     // well, one value for the camera shared by every observation, with a
     // prior at rolling_shutter_s of this standard deviation (s, against
-    // residuals in pixels), kept within [0, rolling_shutter_max_s] (0: not
+    // residuals in pixels), kept within +-rolling_shutter_max_s (0: not
     // estimated); each optimisation starts from the last one's estimate and
     // a new map keeps it. 0: rolling_shutter_s is given.
     Scalar rolling_shutter_sigma_s = 0;
@@ -90,9 +91,9 @@ struct WindowBaLimits {
     static constexpr ParamLimits iterations = closed(1, 100);
     static constexpr ParamLimits max_scale_step = closed(0, 10);
     static constexpr ParamLimits defer_frames = closed(0, 999);  // < keyframe_every
-    static constexpr ParamLimits rolling_shutter_s = closed(0, 1);
+    static constexpr ParamLimits rolling_shutter_s = closed(-1, 1);
     static constexpr ParamLimits rolling_shutter_sigma_s = closed(0, 1);
-    static constexpr ParamLimits rolling_shutter_max_s = closed(0, 1);  // >= rolling_shutter_s
+    static constexpr ParamLimits rolling_shutter_max_s = closed(0, 1);  // >= |rolling_shutter_s|
 };
 
 Status validate(const WindowBaConfig& config);
