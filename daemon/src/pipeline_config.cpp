@@ -243,6 +243,8 @@ std::vector<Field> frontEndFields(drivers::vision::TrackerConfig& t) {
              B::rolling_shutter_sigma_s),
         real("tracker", "rolling_shutter_max_s", &t.window_ba.rolling_shutter_max_s,
              B::rolling_shutter_max_s),
+        real("tracker", "focal_sigma_rel", &t.window_ba.focal_sigma_rel, B::focal_sigma_rel),
+        real("tracker", "focal_max_rel", &t.window_ba.focal_max_rel, B::focal_max_rel),
     };
 }
 

@@ -173,6 +173,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
             sums.window_ba_rms_px += static_cast<double>(stats.window_ba.rms_after_px);
             result.window_ba_rolling_shutter_s =
                 static_cast<double>(stats.window_ba.rolling_shutter_s);
+            result.window_ba_focal_scale = static_cast<double>(stats.window_ba.focal_scale);
         }
     } else if (r.map_lost) {
         // Lost or diverged: the next frame starts a new map (new scale).
@@ -338,7 +339,8 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
         s += ",\"window_ba\":{\"optimisations\":" + std::to_string(r.window_ba_optimisations) +
              ",\"mean_points\":" + num(r.window_ba_mean_points) +
              ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px) +
-             ",\"rolling_shutter_s\":" + num(r.window_ba_rolling_shutter_s) + "}";
+             ",\"rolling_shutter_s\":" + num(r.window_ba_rolling_shutter_s) +
+             ",\"focal_scale\":" + num(r.window_ba_focal_scale) + "}";
     }
     s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
     s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);

@@ -81,6 +81,8 @@ Status validate(const WindowBaConfig& c) {
          L::rolling_shutter_sigma_s},
         {"rolling_shutter_max_s", static_cast<double>(c.rolling_shutter_max_s),
          L::rolling_shutter_max_s},
+        {"focal_sigma_rel", static_cast<double>(c.focal_sigma_rel), L::focal_sigma_rel},
+        {"focal_max_rel", static_cast<double>(c.focal_max_rel), L::focal_max_rel},
     };
     if (const LimitCheck* bad = firstOutside(checks)) {
         return makeError(ErrorCode::kInvalidArgument, std::string("window_ba.") + bad->name +
@@ -98,6 +100,12 @@ Status validate(const WindowBaConfig& c) {
                          "window_ba.rolling_shutter_sigma_s = " +
                              formatLimitValue(static_cast<double>(c.rolling_shutter_sigma_s)) +
                              ": must be 0 (given) or at least 0.0001 s (estimated)");
+    }
+    if (c.focal_sigma_rel > 0 && c.focal_sigma_rel < Scalar(1e-4)) {
+        return makeError(ErrorCode::kInvalidArgument,
+                         "window_ba.focal_sigma_rel = " +
+                             formatLimitValue(static_cast<double>(c.focal_sigma_rel)) +
+                             ": must be 0 (given) or at least 0.0001 (estimated)");
     }
     if (c.rolling_shutter_sigma_s > 0 && std::abs(c.rolling_shutter_s) > c.rolling_shutter_max_s) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -130,11 +138,13 @@ Result<WindowBa> WindowBa::create(const PinholeRadialCamera& camera, const Windo
 }
 
 WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& config)
-    : camera_(camera),
+    : camera_given_(camera),
+      camera_(camera),
       config_(config),
       capacity_(config.window_keyframes),
       readout_s_(config.rolling_shutter_s),
-      estimate_readout_(config.rolling_shutter_sigma_s > 0 && config.rolling_shutter_max_s > 0) {
+      estimate_readout_(config.rolling_shutter_sigma_s > 0 && config.rolling_shutter_max_s > 0),
+      estimate_focal_(config.focal_sigma_rel > 0 && config.focal_max_rel > 0) {
     const auto cap = static_cast<size_t>(capacity_);
     const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
     const auto max_points = static_cast<size_t>(config.max_points);
@@ -143,13 +153,13 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
     const int max_free = std::max(
         config.window_keyframes - config.fixed_keyframes,
         std::min(config.fixed_keyframes + config.step_keyframes, config.window_keyframes) - 1);
-    const Eigen::Index free_dim = 6 * Eigen::Index{max_free} + (estimate_readout_ ? 1 : 0);
+    const Eigen::Index free_dim = 6 * Eigen::Index{max_free} + globalCount();
     keyframes_.resize(cap);
     saved_keyframes_.resize(cap);
     obs_.resize(cap * per_kf);
     obs_point_.assign(cap * per_kf, -1);
     W_.resize(cap * per_kf);
-    W_t_.resize(max_points);
+    W_g_.resize(max_points);
     points_.resize(max_points);
     views_.resize(max_points * cap);
     saved_points_.resize(max_points);
@@ -166,7 +176,8 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
 }
 
 void WindowBa::reset() {
-    // The estimated readout time is kept: it is the camera's, not the map's.
+    // The estimated readout time and focal length are kept: they are the
+    // camera's, not the map's.
     head_ = 0;
     count_ = 0;
     frames_ = 0;
@@ -291,7 +302,7 @@ WindowBaReport WindowBa::optimise() {
     gatherPoints(first_free);
     Scalar c = cost();
     const auto rmsPx = [this](Scalar cost_total) {
-        return std::sqrt(std::max(Scalar(0), cost_total - readoutPriorCost()) /
+        return std::sqrt(std::max(Scalar(0), cost_total - priorCost()) /
                          Scalar(std::max(1, usable_observations_)));
     };
     report.rms_before_px = rmsPx(c);
@@ -307,6 +318,7 @@ WindowBaReport WindowBa::optimise() {
     report.rms_after_px = rmsPx(c);
     report.optimised = true;
     report.rolling_shutter_s = readout_s_;
+    report.focal_scale = focal_scale_;
     if (first_optimisation_) {
         first_optimisation_ = false;
         holdFilterGauge();
@@ -476,15 +488,30 @@ Scalar WindowBa::cost() const {
             c += huberCost((*px - z).norm(), config_.huber_px);
         }
     }
-    return c + readoutPriorCost();
+    return c + priorCost();
 }
 
-Scalar WindowBa::readoutPriorCost() const {
-    if (!estimate_readout_) {
-        return 0;
+Scalar WindowBa::priorCost() const {
+    Scalar c = 0;
+    if (estimate_readout_) {
+        const Scalar e = (readout_s_ - config_.rolling_shutter_s) / config_.rolling_shutter_sigma_s;
+        c += e * e;
     }
-    const Scalar e = (readout_s_ - config_.rolling_shutter_s) / config_.rolling_shutter_sigma_s;
-    return e * e;
+    if (estimate_focal_) {
+        const Scalar e = (focal_scale_ - 1) / config_.focal_sigma_rel;
+        c += e * e;
+    }
+    return c;
+}
+
+void WindowBa::setFocalScale(Scalar s) {
+    focal_scale_ = s;
+    CameraIntrinsics k = camera_given_.intrinsics();
+    k.fx *= s;
+    k.fy *= s;
+    if (auto c = PinholeRadialCamera::create(k)) {  // focal_max_rel keeps s > 0
+        camera_ = *c;
+    }
 }
 
 void WindowBa::accumulateView(int i, int j, int first_free) {
@@ -503,10 +530,16 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     }
     // d pixel / d readout time: the row's camera moves on by d = t y / (H - 1)
     // seconds, p_row by -(w x p_row) - E (unit v) per second.
-    const Vec2 J_t = estimate_readout_
-                         ? Vec2(J_px * (-kf.w_C.cross(p_row) - m.E * (unit_ratio_ * kf.v_C)) *
-                                (z.y() / Scalar(std::max(1, camera_.height() - 1))))
-                         : Vec2::Zero();
+    // d pixel / d focal factor s (fx = s fx0): (pixel - centre) / s.
+    Eigen::Matrix<Scalar, 2, 2> J_g = Eigen::Matrix<Scalar, 2, 2>::Zero();  // (focal, readout)
+    if (estimate_focal_) {
+        const CameraIntrinsics& ki = camera_.intrinsics();
+        J_g.col(0) = (*px - Vec2(ki.cx, ki.cy)) / focal_scale_;
+    }
+    if (estimate_readout_) {
+        J_g.col(1) = J_px * (-kf.w_C.cross(p_row) - m.E * (unit_ratio_ * kf.v_C)) *
+                     (z.y() / Scalar(std::max(1, camera_.height() - 1)));
+    }
     J_px = J_px * m.E;  // d pixel / d p_C
     const Vec2 r = *px - z;
     const Scalar e = r.norm();
@@ -514,11 +547,20 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     const Mat23 J_X = J_px * kf.adjusted.R_CtoW.transpose();
     H_ll_[pk].noalias() += w * J_X.transpose() * J_X;
     b_l_[pk].noalias() -= w * J_X.transpose() * r;
-    const Eigen::Index t_row = denseDim(first_free) - 1;
-    if (estimate_readout_) {
-        H_pp_(t_row, t_row) += w * J_t.squaredNorm();
-        b_p_(t_row) -= w * J_t.dot(r);
-        W_t_[pk].noalias() += w * J_X.transpose() * J_t;
+    const Eigen::Index g0 = 6 * Eigen::Index{count_ - first_free};
+    const Eigen::Index rows[2] = {g0, g0 + (estimate_focal_ ? 1 : 0)};
+    const bool active[2] = {estimate_focal_, estimate_readout_};
+    for (int a = 0; a < 2; ++a) {
+        if (!active[a]) {
+            continue;
+        }
+        for (int b = 0; b <= a; ++b) {  // the lower triangle
+            if (active[b]) {
+                H_pp_(rows[a], rows[b]) += w * J_g.col(a).dot(J_g.col(b));
+            }
+        }
+        b_p_(rows[a]) -= w * J_g.col(a).dot(r);
+        W_g_[pk].col(a).noalias() += w * J_X.transpose() * J_g.col(a);
     }
     if (i < first_free) {
         return;
@@ -530,14 +572,16 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     H_pp_.block<6, 6>(c6, c6).noalias() += w * J_c.transpose() * J_c;
     b_p_.segment<6>(c6).noalias() -= w * J_c.transpose() * r;
     W_[obsIndex(i, j)].noalias() = w * J_c.transpose() * J_X;
-    if (estimate_readout_) {
-        // The lower triangle: the readout's row, the pose's columns.
-        H_pp_.block<1, 6>(t_row, c6).noalias() += w * J_t.transpose() * J_c;
+    for (int a = 0; a < 2; ++a) {
+        if (active[a]) {
+            // The lower triangle: the global's row, the pose's columns.
+            H_pp_.block<1, 6>(rows[a], c6).noalias() += w * J_g.col(a).transpose() * J_c;
+        }
     }
 }
 
 Eigen::Index WindowBa::denseDim(int first_free) const {
-    return 6 * Eigen::Index{count_ - first_free} + (estimate_readout_ ? 1 : 0);
+    return 6 * Eigen::Index{count_ - first_free} + globalCount();
 }
 
 void WindowBa::accumulate(int first_free) {
@@ -547,7 +591,14 @@ void WindowBa::accumulate(int first_free) {
     for (int k = 0; k < point_count_; ++k) {
         H_ll_[static_cast<size_t>(k)].setZero();
         b_l_[static_cast<size_t>(k)].setZero();
-        W_t_[static_cast<size_t>(k)].setZero();
+        W_g_[static_cast<size_t>(k)].setZero();
+    }
+    if (estimate_focal_) {
+        // Its prior: at the camera's given focal length.
+        const Eigen::Index f = 6 * Eigen::Index{count_ - first_free};
+        const Scalar inv_var = 1 / (config_.focal_sigma_rel * config_.focal_sigma_rel);
+        H_pp_(f, f) = inv_var;
+        b_p_(f) = -inv_var * (focal_scale_ - 1);
     }
     if (estimate_readout_) {
         // Its prior: at the given readout time.
@@ -571,7 +622,9 @@ void WindowBa::schurComplement(int first_free, Scalar lambda) {
     // S = H_pp - sum_points W H_ll^-1 W^T, g = b_p - sum W H_ll^-1 b_l, on
     // the free poses' part of the buffers.
     const Eigen::Index n_free = denseDim(first_free);
-    const Eigen::Index t_row = n_free - 1;  // the readout time's, if estimated
+    const Eigen::Index g0 = 6 * Eigen::Index{count_ - first_free};
+    const Eigen::Index rows[2] = {g0, g0 + (estimate_focal_ ? 1 : 0)};  // (focal, readout)
+    const bool active[2] = {estimate_focal_, estimate_readout_};
     S_.topLeftCorner(n_free, n_free) = H_pp_.topLeftCorner(n_free, n_free);
     g_.head(n_free) = b_p_.head(n_free);
     for (Eigen::Index d = 0; d < n_free; ++d) {
@@ -587,15 +640,22 @@ void WindowBa::schurComplement(int first_free, Scalar lambda) {
         H.diagonal().array() += Scalar(1e-9);
         H_ll_inv_[pk] = H.inverse();
         const auto views = viewsOf(points_[pk]);
-        if (estimate_readout_) {
-            const Vec3 V_t = H_ll_inv_[pk] * W_t_[pk];  // H_ll^-1 symmetric
-            g_(t_row) -= V_t.dot(b_l_[pk]);
-            S_(t_row, t_row) -= V_t.dot(W_t_[pk]);
+        for (int a = 0; a < 2; ++a) {
+            if (!active[a]) {
+                continue;
+            }
+            const Vec3 V_g = H_ll_inv_[pk] * W_g_[pk].col(a);  // H_ll^-1 symmetric
+            g_(rows[a]) -= V_g.dot(b_l_[pk]);
+            for (int b = 0; b <= a; ++b) {
+                if (active[b]) {
+                    S_(rows[a], rows[b]) -= V_g.dot(W_g_[pk].col(b));
+                }
+            }
             for (const View& b : views) {
                 if (b.kf >= first_free) {
                     const Eigen::Index cb = 6 * Eigen::Index{b.kf - first_free};
-                    S_.block<1, 6>(t_row, cb).noalias() -=
-                        V_t.transpose() * W_[obsIndex(b.kf, b.j)].transpose();
+                    S_.block<1, 6>(rows[a], cb).noalias() -=
+                        V_g.transpose() * W_[obsIndex(b.kf, b.j)].transpose();
                 }
             }
         }
@@ -628,8 +688,14 @@ std::span<const WindowBa::View> WindowBa::viewsOf(const Point& pt) const {
 
 void WindowBa::step(int first_free) {
     // iterate() has kept the readout time's step within its bounds.
-    const Scalar dt = estimate_readout_ ? dx_p_(denseDim(first_free) - 1) : Scalar(0);
-    readout_s_ += dt;
+    const Eigen::Index g0 = 6 * Eigen::Index{count_ - first_free};
+    const Vec2 dg(estimate_focal_ ? dx_p_(g0) : Scalar(0),
+                  estimate_readout_ ? dx_p_(denseDim(first_free) - 1) : Scalar(0));
+    readout_s_ += dg(1);
+    if (estimate_focal_) {
+        const Scalar hi = 1 + config_.focal_max_rel;
+        setFocalScale(std::clamp(focal_scale_ + dg(0), 1 / hi, hi));
+    }
     for (int i = first_free; i < count_; ++i) {
         Keyframe& kf = keyframe(i);
         const Eigen::Index c6 = 6 * Eigen::Index{i - first_free};
@@ -643,7 +709,7 @@ void WindowBa::step(int first_free) {
         if (!pt.usable) {
             continue;
         }
-        Vec3 rhs = b_l_[pk] - W_t_[pk] * dt;
+        Vec3 rhs = b_l_[pk] - W_g_[pk] * dg;
         for (const View& a : viewsOf(pt)) {
             if (a.kf >= first_free) {
                 rhs.noalias() -= W_[obsIndex(a.kf, a.j)].transpose() *
@@ -694,6 +760,7 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     }
     std::copy_n(points_.begin(), point_count_, saved_points_.begin());
     saved_readout_s_ = readout_s_;
+    saved_focal_scale_ = focal_scale_;
     step(first_free);
     const Scalar c_new = cost();
     if (std::isfinite(c_new) && c_new < c) {
@@ -706,6 +773,9 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     }
     std::copy_n(saved_points_.begin(), point_count_, points_.begin());
     readout_s_ = saved_readout_s_;
+    if (estimate_focal_) {
+        setFocalScale(saved_focal_scale_);
+    }
     lambda *= 5;
     return false;
 }

@@ -245,6 +245,8 @@ TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
         {"tracker.rolling_shutter_sigma_s", core::slam::WindowBaLimits::rolling_shutter_sigma_s,
          false},
         {"tracker.rolling_shutter_max_s", core::slam::WindowBaLimits::rolling_shutter_max_s, false},
+        {"tracker.focal_sigma_rel", core::slam::WindowBaLimits::focal_sigma_rel, false},
+        {"tracker.focal_max_rel", core::slam::WindowBaLimits::focal_max_rel, false},
     };
     const auto text = [](double v, bool integer) {
         std::ostringstream out;

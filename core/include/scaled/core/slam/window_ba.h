@@ -76,6 +76,14 @@ struct WindowBaConfig {
     // a new map keeps it. 0: rolling_shutter_s is given.
     Scalar rolling_shutter_sigma_s = 0;
     Scalar rolling_shutter_max_s = Scalar(0.05);
+    // > 0 (at least 1e-4): the focal length (fx and fy by one factor) is
+    // estimated in the window as well, with a prior at the camera's given
+    // one of this relative standard deviation, the factor kept within
+    // [1 / (1 + focal_max_rel), 1 + focal_max_rel]; each optimisation
+    // starts from the last one's estimate and a new map keeps it. 0: the
+    // camera's focal length is given.
+    Scalar focal_sigma_rel = 0;
+    Scalar focal_max_rel = Scalar(0.3);
 };
 
 struct WindowBaLimits {
@@ -94,6 +102,8 @@ struct WindowBaLimits {
     static constexpr ParamLimits rolling_shutter_s = closed(-1, 1);
     static constexpr ParamLimits rolling_shutter_sigma_s = closed(0, 1);
     static constexpr ParamLimits rolling_shutter_max_s = closed(0, 1);  // >= |rolling_shutter_s|
+    static constexpr ParamLimits focal_sigma_rel = closed(0, 1);
+    static constexpr ParamLimits focal_max_rel = closed(0, 1);
 };
 
 Status validate(const WindowBaConfig& config);
@@ -146,6 +156,9 @@ struct WindowBaReport {
     // The readout time the window used (estimated with
     // rolling_shutter_sigma_s > 0), seconds.
     Scalar rolling_shutter_s = 0;
+    // The focal length the window used over the camera's given one (1 unless
+    // estimated with focal_sigma_rel > 0).
+    Scalar focal_scale = 1;
     // defer_frames > 0: an optimisation is due; nothing was optimised yet.
     bool due = false;
 };
@@ -242,16 +255,24 @@ private:
     // solve, step); false when the cost did not go down (state restored).
     bool iterate(int first_free, Scalar& lambda, Scalar& c);
     [[nodiscard]] Scalar cost() const;
-    // The estimated readout time's prior term of cost() (0 when given).
-    [[nodiscard]] Scalar readoutPriorCost() const;
+    // The estimated readout time's and focal length's prior terms of cost()
+    // (0 when given).
+    [[nodiscard]] Scalar priorCost() const;
+    // The camera with the focal length times focal_scale_.
+    void setFocalScale(Scalar s);
     void accumulate(int first_free);
     void accumulateView(int i, int j, int first_free);
     void schurComplement(int first_free, Scalar lambda);
     void step(int first_free);
-    // Rows of the dense part: 6 per free keyframe, and the readout time.
+    // Rows of the dense part: 6 per free keyframe, then the focal length's
+    // and the readout time's when estimated (the readout time's last).
     [[nodiscard]] Eigen::Index denseDim(int first_free) const;
+    [[nodiscard]] int globalCount() const {
+        return (estimate_focal_ ? 1 : 0) + (estimate_readout_ ? 1 : 0);
+    }
 
-    PinholeRadialCamera camera_;
+    PinholeRadialCamera camera_given_;
+    PinholeRadialCamera camera_;  // camera_given_ with the focal length times focal_scale_
     WindowBaConfig config_;
     int capacity_ = 0;   // keyframes kept (the window)
     int head_ = 0;       // ring index of the oldest keyframe
@@ -265,6 +286,9 @@ private:
     Scalar readout_s_ = 0;
     Scalar saved_readout_s_ = 0;
     bool estimate_readout_ = false;
+    Scalar focal_scale_ = 1;
+    Scalar saved_focal_scale_ = 1;
+    bool estimate_focal_ = false;
     std::vector<Keyframe> keyframes_;
     std::vector<FeatureObservation> obs_;  // capacity_ x max_observations_per_keyframe
     std::vector<int> obs_point_;           // point of each observation, -1: none
@@ -273,10 +297,10 @@ private:
     int point_count_ = 0;
     int usable_points_ = 0;
     int usable_observations_ = 0;
-    // Normal equations: the free poses (6 each) and the estimated readout
-    // time dense, the points 3x3 blocks; per observation of a free keyframe
-    // its 6x3 pose-point block, per point its readout-point row (summed over
-    // its views).
+    // Normal equations: the free poses (6 each) and the estimated focal
+    // length and readout time dense, the points 3x3 blocks; per observation
+    // of a free keyframe its 6x3 pose-point block, per point its
+    // global-point rows (summed over its views).
     MatX H_pp_;
     VecX b_p_;
     MatX S_;
@@ -286,7 +310,7 @@ private:
     std::vector<Vec3> b_l_;
     std::vector<Mat3> H_ll_inv_;
     std::vector<Eigen::Matrix<Scalar, 6, 3>> W_;
-    std::vector<Vec3> W_t_;
+    std::vector<Eigen::Matrix<Scalar, 3, 2>> W_g_;  // per point: (focal, readout) columns
     std::vector<Keyframe> saved_keyframes_;
     std::vector<Point> saved_points_;
     std::vector<Vec3> sim_from_;  // scratch for the Sim(3) fits
