@@ -245,6 +245,8 @@ std::vector<Field> frontEndFields(drivers::vision::TrackerConfig& t) {
              B::rolling_shutter_max_s),
         real("tracker", "focal_sigma_rel", &t.window_ba.focal_sigma_rel, B::focal_sigma_rel),
         real("tracker", "focal_max_rel", &t.window_ba.focal_max_rel, B::focal_max_rel),
+        real("tracker", "k1_sigma", &t.window_ba.k1_sigma, B::k1_sigma),
+        real("tracker", "k1_max_change", &t.window_ba.k1_max_change, B::k1_max_change),
     };
 }
 

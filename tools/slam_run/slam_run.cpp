@@ -174,6 +174,7 @@ void countFrame(const daemon::FrameStepResult& r, const drivers::source::Frame& 
             result.window_ba_rolling_shutter_s =
                 static_cast<double>(stats.window_ba.rolling_shutter_s);
             result.window_ba_focal_scale = static_cast<double>(stats.window_ba.focal_scale);
+            result.window_ba_k1 = static_cast<double>(stats.window_ba.k1);
         }
     } else if (r.map_lost) {
         // Lost or diverged: the next frame starts a new map (new scale).
@@ -340,7 +341,8 @@ std::string toJson(const SlamRunResult& r, const std::string& dataset) {
              ",\"mean_points\":" + num(r.window_ba_mean_points) +
              ",\"mean_rms_after_px\":" + num(r.window_ba_mean_rms_px) +
              ",\"rolling_shutter_s\":" + num(r.window_ba_rolling_shutter_s) +
-             ",\"focal_scale\":" + num(r.window_ba_focal_scale) + "}";
+             ",\"focal_scale\":" + num(r.window_ba_focal_scale) + ",\"k1\":" + num(r.window_ba_k1) +
+             "}";
     }
     s += ",\"mean_features_measured\":" + num(r.mean_features_measured);
     s += ",\"mean_features_in_map\":" + num(r.mean_features_in_map);

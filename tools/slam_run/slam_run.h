@@ -70,6 +70,7 @@ struct SlamRunResult {
     double window_ba_mean_rms_px = 0;
     double window_ba_rolling_shutter_s = 0;  // the last optimisation's readout time
     double window_ba_focal_scale = 1;        // its focal length over the camera's
+    double window_ba_k1 = 0;                 // its radial distortion
     double mean_features_measured = 0;       // accepted matches per tracked frame
     double mean_features_in_map = 0;
     double ms_per_frame = 0;  // tracker only (image decoding excluded)

@@ -83,6 +83,8 @@ Status validate(const WindowBaConfig& c) {
          L::rolling_shutter_max_s},
         {"focal_sigma_rel", static_cast<double>(c.focal_sigma_rel), L::focal_sigma_rel},
         {"focal_max_rel", static_cast<double>(c.focal_max_rel), L::focal_max_rel},
+        {"k1_sigma", static_cast<double>(c.k1_sigma), L::k1_sigma},
+        {"k1_max_change", static_cast<double>(c.k1_max_change), L::k1_max_change},
     };
     if (const LimitCheck* bad = firstOutside(checks)) {
         return makeError(ErrorCode::kInvalidArgument, std::string("window_ba.") + bad->name +
@@ -106,6 +108,12 @@ Status validate(const WindowBaConfig& c) {
                          "window_ba.focal_sigma_rel = " +
                              formatLimitValue(static_cast<double>(c.focal_sigma_rel)) +
                              ": must be 0 (given) or at least 0.0001 (estimated)");
+    }
+    if (c.k1_sigma > 0 && c.k1_sigma < Scalar(1e-4)) {
+        return makeError(
+            ErrorCode::kInvalidArgument,
+            "window_ba.k1_sigma = " + formatLimitValue(static_cast<double>(c.k1_sigma)) +
+                ": must be 0 (given) or at least 0.0001 (estimated)");
     }
     if (c.rolling_shutter_sigma_s > 0 && std::abs(c.rolling_shutter_s) > c.rolling_shutter_max_s) {
         return makeError(ErrorCode::kInvalidArgument,
@@ -144,7 +152,9 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
       capacity_(config.window_keyframes),
       readout_s_(config.rolling_shutter_s),
       estimate_readout_(config.rolling_shutter_sigma_s > 0 && config.rolling_shutter_max_s > 0),
-      estimate_focal_(config.focal_sigma_rel > 0 && config.focal_max_rel > 0) {
+      k1_(camera.intrinsics().k1),
+      estimate_focal_(config.focal_sigma_rel > 0 && config.focal_max_rel > 0),
+      estimate_k1_(config.k1_sigma > 0 && config.k1_max_change > 0) {
     const auto cap = static_cast<size_t>(capacity_);
     const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
     const auto max_points = static_cast<size_t>(config.max_points);
@@ -176,8 +186,8 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
 }
 
 void WindowBa::reset() {
-    // The estimated readout time and focal length are kept: they are the
-    // camera's, not the map's.
+    // The estimated readout time, focal length and distortion are kept: they
+    // are the camera's, not the map's.
     head_ = 0;
     count_ = 0;
     frames_ = 0;
@@ -319,6 +329,7 @@ WindowBaReport WindowBa::optimise() {
     report.optimised = true;
     report.rolling_shutter_s = readout_s_;
     report.focal_scale = focal_scale_;
+    report.k1 = k1_;
     if (first_optimisation_) {
         first_optimisation_ = false;
         holdFilterGauge();
@@ -501,16 +512,37 @@ Scalar WindowBa::priorCost() const {
         const Scalar e = (focal_scale_ - 1) / config_.focal_sigma_rel;
         c += e * e;
     }
+    if (estimate_k1_) {
+        const Scalar e = (k1_ - camera_given_.intrinsics().k1) / config_.k1_sigma;
+        c += e * e;
+    }
     return c;
 }
 
-void WindowBa::setFocalScale(Scalar s) {
-    focal_scale_ = s;
+bool WindowBa::setCameraEstimate(Scalar focal_scale, Scalar k1) {
     CameraIntrinsics k = camera_given_.intrinsics();
-    k.fx *= s;
-    k.fy *= s;
-    if (auto c = PinholeRadialCamera::create(k)) {  // focal_max_rel keeps s > 0
-        camera_ = *c;
+    k.fx *= focal_scale;
+    k.fy *= focal_scale;
+    k.k1 = k1;
+    auto c = PinholeRadialCamera::create(k);  // focal_max_rel keeps the factor > 0
+    if (!c) {
+        return false;
+    }
+    camera_ = *c;
+    focal_scale_ = focal_scale;
+    k1_ = k1;
+    return true;
+}
+
+void WindowBa::globalRows(int first_free, Eigen::Index (&rows)[kGlobals],
+                          bool (&active)[kGlobals]) const {
+    active[0] = estimate_focal_;
+    active[1] = estimate_k1_;
+    active[2] = estimate_readout_;
+    Eigen::Index r = 6 * Eigen::Index{count_ - first_free};
+    for (int a = 0; a < kGlobals; ++a) {
+        rows[a] = r;
+        r += active[a] ? 1 : 0;
     }
 }
 
@@ -530,14 +562,19 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     }
     // d pixel / d readout time: the row's camera moves on by d = t y / (H - 1)
     // seconds, p_row by -(w x p_row) - E (unit v) per second.
-    // d pixel / d focal factor s (fx = s fx0): (pixel - centre) / s.
-    Eigen::Matrix<Scalar, 2, 2> J_g = Eigen::Matrix<Scalar, 2, 2>::Zero();  // (focal, readout)
+    // d pixel / d focal factor s (fx = s fx0): (pixel - centre) / s;
+    // d pixel / d k1: f x_u r_u^2 (x_d = x_u (1 + k1 r_u^2 + k2 r_u^4)).
+    Eigen::Matrix<Scalar, 2, kGlobals> J_g = Eigen::Matrix<Scalar, 2, kGlobals>::Zero();
+    const CameraIntrinsics& ki = camera_.intrinsics();
     if (estimate_focal_) {
-        const CameraIntrinsics& ki = camera_.intrinsics();
         J_g.col(0) = (*px - Vec2(ki.cx, ki.cy)) / focal_scale_;
     }
+    if (estimate_k1_) {
+        const Vec2 x_u = p_row.head<2>() / p_row.z();
+        J_g.col(1) = Vec2(ki.fx * x_u.x(), ki.fy * x_u.y()) * x_u.squaredNorm();
+    }
     if (estimate_readout_) {
-        J_g.col(1) = J_px * (-kf.w_C.cross(p_row) - m.E * (unit_ratio_ * kf.v_C)) *
+        J_g.col(2) = J_px * (-kf.w_C.cross(p_row) - m.E * (unit_ratio_ * kf.v_C)) *
                      (z.y() / Scalar(std::max(1, camera_.height() - 1)));
     }
     J_px = J_px * m.E;  // d pixel / d p_C
@@ -547,10 +584,10 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     const Mat23 J_X = J_px * kf.adjusted.R_CtoW.transpose();
     H_ll_[pk].noalias() += w * J_X.transpose() * J_X;
     b_l_[pk].noalias() -= w * J_X.transpose() * r;
-    const Eigen::Index g0 = 6 * Eigen::Index{count_ - first_free};
-    const Eigen::Index rows[2] = {g0, g0 + (estimate_focal_ ? 1 : 0)};
-    const bool active[2] = {estimate_focal_, estimate_readout_};
-    for (int a = 0; a < 2; ++a) {
+    Eigen::Index rows[kGlobals];
+    bool active[kGlobals];
+    globalRows(first_free, rows, active);
+    for (int a = 0; a < kGlobals; ++a) {
         if (!active[a]) {
             continue;
         }
@@ -572,7 +609,7 @@ void WindowBa::accumulateView(int i, int j, int first_free) {
     H_pp_.block<6, 6>(c6, c6).noalias() += w * J_c.transpose() * J_c;
     b_p_.segment<6>(c6).noalias() -= w * J_c.transpose() * r;
     W_[obsIndex(i, j)].noalias() = w * J_c.transpose() * J_X;
-    for (int a = 0; a < 2; ++a) {
+    for (int a = 0; a < kGlobals; ++a) {
         if (active[a]) {
             // The lower triangle: the global's row, the pose's columns.
             H_pp_.block<1, 6>(rows[a], c6).noalias() += w * J_g.col(a).transpose() * J_c;
@@ -593,12 +630,20 @@ void WindowBa::accumulate(int first_free) {
         b_l_[static_cast<size_t>(k)].setZero();
         W_g_[static_cast<size_t>(k)].setZero();
     }
+    Eigen::Index rows[kGlobals];
+    bool active[kGlobals];
+    globalRows(first_free, rows, active);
     if (estimate_focal_) {
         // Its prior: at the camera's given focal length.
-        const Eigen::Index f = 6 * Eigen::Index{count_ - first_free};
         const Scalar inv_var = 1 / (config_.focal_sigma_rel * config_.focal_sigma_rel);
-        H_pp_(f, f) = inv_var;
-        b_p_(f) = -inv_var * (focal_scale_ - 1);
+        H_pp_(rows[0], rows[0]) = inv_var;
+        b_p_(rows[0]) = -inv_var * (focal_scale_ - 1);
+    }
+    if (estimate_k1_) {
+        // Its prior: at the camera's given k1.
+        const Scalar inv_var = 1 / (config_.k1_sigma * config_.k1_sigma);
+        H_pp_(rows[1], rows[1]) = inv_var;
+        b_p_(rows[1]) = -inv_var * (k1_ - camera_given_.intrinsics().k1);
     }
     if (estimate_readout_) {
         // Its prior: at the given readout time.
@@ -622,9 +667,9 @@ void WindowBa::schurComplement(int first_free, Scalar lambda) {
     // S = H_pp - sum_points W H_ll^-1 W^T, g = b_p - sum W H_ll^-1 b_l, on
     // the free poses' part of the buffers.
     const Eigen::Index n_free = denseDim(first_free);
-    const Eigen::Index g0 = 6 * Eigen::Index{count_ - first_free};
-    const Eigen::Index rows[2] = {g0, g0 + (estimate_focal_ ? 1 : 0)};  // (focal, readout)
-    const bool active[2] = {estimate_focal_, estimate_readout_};
+    Eigen::Index rows[kGlobals];
+    bool active[kGlobals];
+    globalRows(first_free, rows, active);
     S_.topLeftCorner(n_free, n_free) = H_pp_.topLeftCorner(n_free, n_free);
     g_.head(n_free) = b_p_.head(n_free);
     for (Eigen::Index d = 0; d < n_free; ++d) {
@@ -640,7 +685,7 @@ void WindowBa::schurComplement(int first_free, Scalar lambda) {
         H.diagonal().array() += Scalar(1e-9);
         H_ll_inv_[pk] = H.inverse();
         const auto views = viewsOf(points_[pk]);
-        for (int a = 0; a < 2; ++a) {
+        for (int a = 0; a < kGlobals; ++a) {
             if (!active[a]) {
                 continue;
             }
@@ -688,13 +733,20 @@ std::span<const WindowBa::View> WindowBa::viewsOf(const Point& pt) const {
 
 void WindowBa::step(int first_free) {
     // iterate() has kept the readout time's step within its bounds.
-    const Eigen::Index g0 = 6 * Eigen::Index{count_ - first_free};
-    const Vec2 dg(estimate_focal_ ? dx_p_(g0) : Scalar(0),
-                  estimate_readout_ ? dx_p_(denseDim(first_free) - 1) : Scalar(0));
-    readout_s_ += dg(1);
-    if (estimate_focal_) {
+    Eigen::Index rows[kGlobals];
+    bool active[kGlobals];
+    globalRows(first_free, rows, active);
+    Eigen::Matrix<Scalar, kGlobals, 1> dg = Eigen::Matrix<Scalar, kGlobals, 1>::Zero();
+    for (int a = 0; a < kGlobals; ++a) {
+        dg(a) = active[a] ? dx_p_(rows[a]) : Scalar(0);
+    }
+    readout_s_ += dg(2);
+    if (estimate_focal_ || estimate_k1_) {
         const Scalar hi = 1 + config_.focal_max_rel;
-        setFocalScale(std::clamp(focal_scale_ + dg(0), 1 / hi, hi));
+        const Scalar k1_given = camera_given_.intrinsics().k1;
+        (void)setCameraEstimate(std::clamp(focal_scale_ + dg(0), 1 / hi, hi),
+                                std::clamp(k1_ + dg(1), k1_given - config_.k1_max_change,
+                                           k1_given + config_.k1_max_change));
     }
     for (int i = first_free; i < count_; ++i) {
         Keyframe& kf = keyframe(i);
@@ -761,6 +813,7 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     std::copy_n(points_.begin(), point_count_, saved_points_.begin());
     saved_readout_s_ = readout_s_;
     saved_focal_scale_ = focal_scale_;
+    saved_k1_ = k1_;
     step(first_free);
     const Scalar c_new = cost();
     if (std::isfinite(c_new) && c_new < c) {
@@ -773,8 +826,8 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     }
     std::copy_n(saved_points_.begin(), point_count_, points_.begin());
     readout_s_ = saved_readout_s_;
-    if (estimate_focal_) {
-        setFocalScale(saved_focal_scale_);
+    if (estimate_focal_ || estimate_k1_) {
+        (void)setCameraEstimate(saved_focal_scale_, saved_k1_);
     }
     lambda *= 5;
     return false;

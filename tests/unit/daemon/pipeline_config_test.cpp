@@ -247,6 +247,8 @@ TEST(PipelineConfig, CoreKeysTakeTheirRangesFromCore) {
         {"tracker.rolling_shutter_max_s", core::slam::WindowBaLimits::rolling_shutter_max_s, false},
         {"tracker.focal_sigma_rel", core::slam::WindowBaLimits::focal_sigma_rel, false},
         {"tracker.focal_max_rel", core::slam::WindowBaLimits::focal_max_rel, false},
+        {"tracker.k1_sigma", core::slam::WindowBaLimits::k1_sigma, false},
+        {"tracker.k1_max_change", core::slam::WindowBaLimits::k1_max_change, false},
     };
     const auto text = [](double v, bool integer) {
         std::ostringstream out;

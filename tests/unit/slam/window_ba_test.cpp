@@ -328,24 +328,30 @@ struct RollingShutterRun {
     std::int64_t allocations = 0;  // by addFrame() once it has optimised
     Scalar readout_s = 0;          // the last optimisation's
     Scalar focal_scale = 1;        // the last optimisation's
+    Scalar k1 = 0;                 // the last optimisation's
 };
 
 // The window given model_readout_s (estimating it from there with
 // sigma_s > 0) on images whose rows are read in true_readout_s.
 // With focal_factor != 1 the window is given a camera whose focal length is
 // that factor times the images' (estimating it from there with
-// focal_sigma_rel > 0).
+// focal_sigma_rel > 0). The images' radial distortion is true_k1; the
+// window is given none (estimating it with k1_sigma > 0), or true_k1 with
+// give_k1.
 RollingShutterRun runRolling(Scalar model_readout_s, Scalar true_readout_s = Scalar(0.03),
                              Scalar sigma_s = 0, Scalar max_s = Scalar(0.05),
-                             Scalar focal_factor = 1, Scalar focal_sigma_rel = 0) {
+                             Scalar focal_factor = 1, Scalar focal_sigma_rel = 0,
+                             Scalar true_k1 = 0, Scalar k1_sigma = 0, bool give_k1 = false) {
     const RollingShutterScene s = makeRollingShutterScene();
-    const auto cam = test::makeCamera();
+    const auto cam = test::makeCamera(true_k1);
     WindowBaConfig config;
     config.rolling_shutter_s = model_readout_s;
     config.rolling_shutter_sigma_s = sigma_s;
     config.rolling_shutter_max_s = max_s;
     config.focal_sigma_rel = focal_sigma_rel;
+    config.k1_sigma = k1_sigma;
     CameraIntrinsics model_k = cam.intrinsics();
+    model_k.k1 = give_k1 ? true_k1 : 0;
     model_k.fx *= focal_factor;
     model_k.fy *= focal_factor;
     auto ba = WindowBa::create(PinholeRadialCamera::create(model_k).value(), config);
@@ -369,6 +375,7 @@ RollingShutterRun runRolling(Scalar model_readout_s, Scalar true_readout_s = Sca
             out.rms_after_px = r.rms_after_px;
             out.readout_s = r.rolling_shutter_s;
             out.focal_scale = r.focal_scale;
+            out.k1 = r.k1;
         }
         if (out.optimisations > 0 && k % config.keyframe_every == 0) {
             const CameraPose served = ba->adjustedPose(s.truth[ks]);
@@ -454,10 +461,11 @@ TEST(WindowBa, EstimatesTheReadoutTime) {
     EXPECT_NE(r.error().message.find("window_ba.rolling_shutter_sigma_s"), std::string::npos);
 }
 
-TEST(WindowBa, EstimatesTheFocalLength) {
+TEST(WindowBa, EstimatesTheFocalLengthAndDistortion) {
     // Given a focal length 10% long (the 7-Scenes camera.txt is about 11%
     // long for its colour images) on a global shutter, the window's factor
-    // comes to 1 / 1.1 and the trajectory to what the right camera gives.
+    // comes to 1 / 1.1 (0.90909) and the trajectory to what the right camera
+    // gives (0.403 px against 0.988 px with the long focal length, 2.0 mm).
     const RollingShutterRun right = runRolling(0, 0);
     const RollingShutterRun wrong = runRolling(0, 0, 0, Scalar(0.05), Scalar(1.1));
     const RollingShutterRun estimated = runRolling(0, 0, 0, Scalar(0.05), Scalar(1.1), Scalar(0.2));
@@ -469,18 +477,38 @@ TEST(WindowBa, EstimatesTheFocalLength) {
     EXPECT_LT(estimated.rms_after_px, Scalar(1.1) * right.rms_after_px);
     EXPECT_LT(estimated.max_position_error, Scalar(2) * right.max_position_error + Scalar(0.005));
     EXPECT_EQ(estimated.allocations, 0) << "addFrame allocated once running";
-    // With a 30 ms rolling shutter, both estimated together.
+    // With a 30 ms rolling shutter, both estimated together (0.90977, 29.98 ms).
     const RollingShutterRun both =
         runRolling(0, Scalar(0.03), Scalar(0.03), Scalar(0.05), Scalar(1.1), Scalar(0.2));
     EXPECT_NEAR(both.focal_scale, 1 / Scalar(1.1), Scalar(0.005));
     EXPECT_NEAR(both.readout_s, Scalar(0.03), Scalar(0.002));
     EXPECT_EQ(both.allocations, 0) << "addFrame allocated once running";
 
+    // A barrel distortion (k1 = -0.1) not given: estimated with the focal
+    // length (0.90959, k1 -0.0999; 0.403 px as given both, 1.003 px given
+    // neither).
+    const RollingShutterRun distorted_right =
+        runRolling(0, 0, 0, Scalar(0.05), 1, 0, Scalar(-0.1), 0, true);
+    const RollingShutterRun distorted_given_none =
+        runRolling(0, 0, 0, Scalar(0.05), Scalar(1.1), 0, Scalar(-0.1));
+    const RollingShutterRun distorted =
+        runRolling(0, 0, 0, Scalar(0.05), Scalar(1.1), Scalar(0.2), Scalar(-0.1), Scalar(0.2));
+    EXPECT_NEAR(distorted.focal_scale, 1 / Scalar(1.1), Scalar(0.005));
+    EXPECT_NEAR(distorted.k1, Scalar(-0.1), Scalar(0.01));
+    EXPECT_GT(distorted_given_none.rms_after_px, Scalar(1.5) * distorted_right.rms_after_px);
+    EXPECT_LT(distorted.rms_after_px, Scalar(1.1) * distorted_right.rms_after_px);
+    EXPECT_EQ(distorted.allocations, 0) << "addFrame allocated once running";
+
     WindowBaConfig bad;
     bad.focal_sigma_rel = Scalar(1e-5);
     const auto r = validate(bad);
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message.find("window_ba.focal_sigma_rel"), std::string::npos);
+    bad = WindowBaConfig{};
+    bad.k1_sigma = Scalar(1e-5);
+    const auto r1 = validate(bad);
+    ASSERT_FALSE(r1.ok());
+    EXPECT_NE(r1.error().message.find("window_ba.k1_sigma"), std::string::npos);
 }
 
 TEST(WindowBa, AResetStartsOver) {

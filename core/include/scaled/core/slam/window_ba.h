@@ -84,6 +84,11 @@ struct WindowBaConfig {
     // camera's focal length is given.
     Scalar focal_sigma_rel = 0;
     Scalar focal_max_rel = Scalar(0.3);
+    // > 0 (at least 1e-4): the radial distortion's k1 is estimated in the
+    // window too, with a prior at the camera's given k1 of this standard
+    // deviation, kept within +-k1_max_change of it. 0: given.
+    Scalar k1_sigma = 0;
+    Scalar k1_max_change = Scalar(0.3);
 };
 
 struct WindowBaLimits {
@@ -104,6 +109,8 @@ struct WindowBaLimits {
     static constexpr ParamLimits rolling_shutter_max_s = closed(0, 1);  // >= |rolling_shutter_s|
     static constexpr ParamLimits focal_sigma_rel = closed(0, 1);
     static constexpr ParamLimits focal_max_rel = closed(0, 1);
+    static constexpr ParamLimits k1_sigma = closed(0, 1);
+    static constexpr ParamLimits k1_max_change = closed(0, 1);
 };
 
 Status validate(const WindowBaConfig& config);
@@ -159,6 +166,7 @@ struct WindowBaReport {
     // The focal length the window used over the camera's given one (1 unless
     // estimated with focal_sigma_rel > 0).
     Scalar focal_scale = 1;
+    Scalar k1 = 0;  // the radial distortion the window used
     // defer_frames > 0: an optimisation is due; nothing was optimised yet.
     bool due = false;
 };
@@ -258,8 +266,13 @@ private:
     // The estimated readout time's and focal length's prior terms of cost()
     // (0 when given).
     [[nodiscard]] Scalar priorCost() const;
-    // The camera with the focal length times focal_scale_.
-    void setFocalScale(Scalar s);
+    // The camera with the focal length times focal_scale and this k1; false
+    // (nothing changed) when the camera cannot be made.
+    bool setCameraEstimate(Scalar focal_scale, Scalar k1);
+    // The camera's estimated parameters (focal factor, k1, readout time: the
+    // readout time's last) in the dense part: their rows, and which are.
+    static constexpr int kGlobals = 3;
+    void globalRows(int first_free, Eigen::Index (&rows)[kGlobals], bool (&active)[kGlobals]) const;
     void accumulate(int first_free);
     void accumulateView(int i, int j, int first_free);
     void schurComplement(int first_free, Scalar lambda);
@@ -268,7 +281,7 @@ private:
     // and the readout time's when estimated (the readout time's last).
     [[nodiscard]] Eigen::Index denseDim(int first_free) const;
     [[nodiscard]] int globalCount() const {
-        return (estimate_focal_ ? 1 : 0) + (estimate_readout_ ? 1 : 0);
+        return (estimate_focal_ ? 1 : 0) + (estimate_k1_ ? 1 : 0) + (estimate_readout_ ? 1 : 0);
     }
 
     PinholeRadialCamera camera_given_;
@@ -288,7 +301,10 @@ private:
     bool estimate_readout_ = false;
     Scalar focal_scale_ = 1;
     Scalar saved_focal_scale_ = 1;
+    Scalar k1_ = 0;
+    Scalar saved_k1_ = 0;
     bool estimate_focal_ = false;
+    bool estimate_k1_ = false;
     std::vector<Keyframe> keyframes_;
     std::vector<FeatureObservation> obs_;  // capacity_ x max_observations_per_keyframe
     std::vector<int> obs_point_;           // point of each observation, -1: none
@@ -310,7 +326,7 @@ private:
     std::vector<Vec3> b_l_;
     std::vector<Mat3> H_ll_inv_;
     std::vector<Eigen::Matrix<Scalar, 6, 3>> W_;
-    std::vector<Eigen::Matrix<Scalar, 3, 2>> W_g_;  // per point: (focal, readout) columns
+    std::vector<Eigen::Matrix<Scalar, 3, kGlobals>> W_g_;  // per point: (focal, k1, readout)
     std::vector<Keyframe> saved_keyframes_;
     std::vector<Point> saved_points_;
     std::vector<Vec3> sim_from_;  // scratch for the Sim(3) fits
