@@ -731,8 +731,10 @@ std::span<const WindowBa::View> WindowBa::viewsOf(const Point& pt) const {
     return {views_.data() + k * static_cast<size_t>(capacity_), static_cast<size_t>(pt.views)};
 }
 
-void WindowBa::step(int first_free) {
-    // iterate() has kept the readout time's step within its bounds.
+bool WindowBa::step(int first_free) {
+    // iterate() has kept the readout time's step within its bounds; the
+    // focal factor's and k1's are clamped here, and the points take the
+    // clamped steps (the poses keep theirs: the cost decides).
     Eigen::Index rows[kGlobals];
     bool active[kGlobals];
     globalRows(first_free, rows, active);
@@ -744,9 +746,14 @@ void WindowBa::step(int first_free) {
     if (estimate_focal_ || estimate_k1_) {
         const Scalar hi = 1 + config_.focal_max_rel;
         const Scalar k1_given = camera_given_.intrinsics().k1;
-        (void)setCameraEstimate(std::clamp(focal_scale_ + dg(0), 1 / hi, hi),
-                                std::clamp(k1_ + dg(1), k1_given - config_.k1_max_change,
-                                           k1_given + config_.k1_max_change));
+        const Scalar s = std::clamp(focal_scale_ + dg(0), 1 / hi, hi);
+        const Scalar k1 = std::clamp(k1_ + dg(1), k1_given - config_.k1_max_change,
+                                     k1_given + config_.k1_max_change);
+        dg(0) = s - focal_scale_;
+        dg(1) = k1 - k1_;
+        if (!std::isfinite(s) || !std::isfinite(k1) || !setCameraEstimate(s, k1)) {
+            return false;  // no camera for that step: iterate() restores the state
+        }
     }
     for (int i = first_free; i < count_; ++i) {
         Keyframe& kf = keyframe(i);
@@ -761,7 +768,12 @@ void WindowBa::step(int first_free) {
         if (!pt.usable) {
             continue;
         }
-        Vec3 rhs = b_l_[pk] - W_g_[pk] * dg;
+        Vec3 rhs = b_l_[pk];
+        for (int a = 0; a < kGlobals; ++a) {
+            if (active[a]) {
+                rhs -= W_g_[pk].col(a) * dg(a);
+            }
+        }
         for (const View& a : viewsOf(pt)) {
             if (a.kf >= first_free) {
                 rhs.noalias() -= W_[obsIndex(a.kf, a.j)].transpose() *
@@ -770,6 +782,7 @@ void WindowBa::step(int first_free) {
         }
         pt.p_W += H_ll_inv_[pk] * rhs;
     }
+    return true;
 }
 
 bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
@@ -814,9 +827,9 @@ bool WindowBa::iterate(int first_free, Scalar& lambda, Scalar& c) {
     saved_readout_s_ = readout_s_;
     saved_focal_scale_ = focal_scale_;
     saved_k1_ = k1_;
-    step(first_free);
-    const Scalar c_new = cost();
-    if (std::isfinite(c_new) && c_new < c) {
+    const bool stepped = step(first_free);
+    const Scalar c_new = stepped ? cost() : c;
+    if (stepped && std::isfinite(c_new) && c_new < c) {
         c = c_new;
         lambda = std::max(Scalar(1e-7), lambda / 3);
         return true;

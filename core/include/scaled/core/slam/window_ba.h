@@ -263,8 +263,8 @@ private:
     // solve, step); false when the cost did not go down (state restored).
     bool iterate(int first_free, Scalar& lambda, Scalar& c);
     [[nodiscard]] Scalar cost() const;
-    // The estimated readout time's and focal length's prior terms of cost()
-    // (0 when given).
+    // The prior terms of cost() of the estimated camera parameters (focal
+    // factor, k1, readout time; 0 when all are given).
     [[nodiscard]] Scalar priorCost() const;
     // The camera with the focal length times focal_scale and this k1; false
     // (nothing changed) when the camera cannot be made.
@@ -276,16 +276,17 @@ private:
     void accumulate(int first_free);
     void accumulateView(int i, int j, int first_free);
     void schurComplement(int first_free, Scalar lambda);
-    void step(int first_free);
-    // Rows of the dense part: 6 per free keyframe, then the focal length's
-    // and the readout time's when estimated (the readout time's last).
+    // false: no camera could be made for the step (nothing is to be kept).
+    bool step(int first_free);
+    // Rows of the dense part: 6 per free keyframe, then the focal factor's,
+    // k1's and the readout time's when estimated (the readout time's last).
     [[nodiscard]] Eigen::Index denseDim(int first_free) const;
     [[nodiscard]] int globalCount() const {
         return (estimate_focal_ ? 1 : 0) + (estimate_k1_ ? 1 : 0) + (estimate_readout_ ? 1 : 0);
     }
 
     PinholeRadialCamera camera_given_;
-    PinholeRadialCamera camera_;  // camera_given_ with the focal length times focal_scale_
+    PinholeRadialCamera camera_;  // camera_given_ with fx, fy times focal_scale_ and k1_
     WindowBaConfig config_;
     int capacity_ = 0;   // keyframes kept (the window)
     int head_ = 0;       // ring index of the oldest keyframe
