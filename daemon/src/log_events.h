@@ -104,6 +104,15 @@ public:
         }
     }
 
+    void onWindowBa(const WindowBa& w) override {
+        WindowEvent e;
+        e.frame_id = w.frame_id;
+        e.t_ns = w.t_ns;
+        e.epoch = w.epoch;
+        e.report = w.report;
+        log_.windowEvent(e);
+    }
+
     // At most log.pose_rate_hz lines per second of frame time; none when 0.
     void onPose(const Pose& p) override {
         if (p.pose == nullptr || !(log_.poseRateHz() > 0) ||

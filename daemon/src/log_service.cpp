@@ -200,6 +200,35 @@ void formatEvent(const ObjectEvent& event, std::string& out) {
     out += '}';
 }
 
+void formatEvent(const WindowEvent& event, std::string& out) {
+    begin(out, "WINDOW", event.mono_ns);
+    frameFields(out, event.frame_id, event.t_ns, event.epoch);
+    if (event.report != nullptr) {
+        const core::slam::WindowBaReport& r = *event.report;
+        key(out, "keyframes");
+        appendJsonInt(out, r.keyframes);
+        key(out, "free_keyframes");
+        appendJsonInt(out, r.free_keyframes);
+        key(out, "points");
+        appendJsonInt(out, r.points);
+        key(out, "observations");
+        appendJsonInt(out, r.observations);
+        key(out, "rms_before_px");
+        appendJsonNumber(out, static_cast<double>(r.rms_before_px), kLogDigits);
+        key(out, "rms_px");
+        appendJsonNumber(out, static_cast<double>(r.rms_after_px), kLogDigits);
+        key(out, "scale");
+        appendJsonNumber(out, static_cast<double>(r.scale), kLogDigits);
+        key(out, "rolling_shutter_s");
+        appendJsonNumber(out, static_cast<double>(r.rolling_shutter_s), kLogDigits);
+        key(out, "focal_scale");
+        appendJsonNumber(out, static_cast<double>(r.focal_scale), kLogDigits);
+        key(out, "k1");
+        appendJsonNumber(out, static_cast<double>(r.k1), kLogDigits);
+    }
+    out += '}';
+}
+
 void formatEvent(const PoseEvent& event, std::string& out) {
     // As the socket's POSE: 0.1 mm at 1 km; the scale with the log's digits.
     constexpr int kPoseDigits = 7;
@@ -474,6 +503,10 @@ bool LogService::scaleEvent(const ScaleEvent& event) {
     return append(lineBuffer());
 }
 bool LogService::objectEvent(const ObjectEvent& event) {
+    formatEvent(event, lineBuffer());
+    return append(lineBuffer());
+}
+bool LogService::windowEvent(const WindowEvent& event) {
     formatEvent(event, lineBuffer());
     return append(lineBuffer());
 }

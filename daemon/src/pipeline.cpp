@@ -153,7 +153,7 @@ void collectObjects(const core::ScaleEstimator& estimator, const core::ScaleSumm
 }
 
 Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& hub,
-                   PipelineEvents* events, const core::PinholeRadialCamera& /*camera*/)
+                   PipelineEvents* events, const core::PinholeRadialCamera& camera)
     : config_(config),
       hub_(hub),
       events_(events),
@@ -172,6 +172,14 @@ Pipeline::Pipeline(const DaemonConfig& config, PipelineParts parts, ReportHub& h
         status_.camera_mode = live_->mode();
     }
     report_.fault.reserve(256);
+    const core::slam::WindowBaConfig& ba = config.pipeline.tracker.window_ba;
+    WindowBaStatus& w = status_.window_ba;
+    w.present = ba.enabled;
+    w.rolling_shutter_estimated = core::slam::estimatesReadout(ba);
+    w.focal_estimated = core::slam::estimatesFocal(ba);
+    w.k1_estimated = core::slam::estimatesK1(ba);
+    w.rolling_shutter_s = static_cast<double>(ba.rolling_shutter_s);
+    w.k1 = static_cast<double>(camera.intrinsics().k1);
     if (imu_ != nullptr) {
         status_.imu = imu_->status();
         imu_label_ = status_.imu.device;
@@ -566,12 +574,7 @@ void Pipeline::trackFrame(TrackingState& state, QueuedFrame& item) {
                      stats.relocalised ? "relocalised" : "tracking", false);
     }
     const std::uint64_t epoch = recordTracked(r, frame.id, state.tracked);
-    if (stats.start_redone && events_ != nullptr) {
-        // The start check began the map again in the same frame and unit
-        // (tracker.start_check_s): the pose jumps once, the epoch goes on.
-        events_->onState(DaemonState::kTracking, DaemonState::kTracking, epoch, frame.id,
-                         "start begun again");
-    }
+    trackerEvents(stats, frame, epoch);
     ++fps_window_frames_;
     if (r.ok) {
         publishPose(state, frame, epoch);
@@ -691,7 +694,50 @@ std::uint64_t Pipeline::recordTracked(const FrameStepResult& r, std::int64_t fra
     timing.tracking.add(r.track_ms);
     status_.tracking_ms_mean = timing.tracking.mean_ms;
     status_.epoch = epoch;
+    if (stats.window_ba.optimised) {
+        recordWindowBa(stats.window_ba, frame_id, epoch);
+    }
     return epoch;
+}
+
+// What the tracker did on this frame beyond tracking it: a window
+// optimisation taken (WINDOW), the map's start begun again.
+void Pipeline::trackerEvents(const drivers::vision::TrackStats& stats,
+                             const drivers::source::Frame& frame, std::uint64_t epoch) {
+    if (events_ == nullptr) {
+        return;
+    }
+    if (stats.window_ba.optimised) {
+        PipelineEvents::WindowBa e;
+        e.frame_id = frame.id;
+        e.t_ns = frame.t_ns;
+        e.epoch = epoch;
+        e.report = &stats.window_ba;
+        events_->onWindowBa(e);
+    }
+    if (stats.start_redone) {
+        // The start check began the map again in the same frame and unit
+        // (tracker.start_check_s): the pose jumps once, the epoch goes on.
+        events_->onState(DaemonState::kTracking, DaemonState::kTracking, epoch, frame.id,
+                         "start begun again");
+    }
+}
+
+// STATUS.window_ba: the optimisation this frame took (report_mutex_ held).
+void Pipeline::recordWindowBa(const core::slam::WindowBaReport& ba, std::int64_t frame_id,
+                              std::uint64_t epoch) {
+    WindowBaStatus& w = status_.window_ba;
+    ++w.optimisations;
+    w.frame_id = frame_id;
+    w.epoch = epoch;
+    w.keyframes = ba.keyframes;
+    w.points = ba.points;
+    w.observations = ba.observations;
+    w.rms_px = static_cast<double>(ba.rms_after_px);
+    w.scale = static_cast<double>(ba.scale);
+    w.rolling_shutter_s = static_cast<double>(ba.rolling_shutter_s);
+    w.focal_scale = static_cast<double>(ba.focal_scale);
+    w.k1 = static_cast<double>(ba.k1);
 }
 
 // POSE: fixed-size arithmetic and a copy into the hub, no allocation.

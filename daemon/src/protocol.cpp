@@ -392,6 +392,52 @@ void appendStatusCounters(std::string& out, const PipelineStatus& s) {
     appendJsonInt(out, s.epoch);
 }
 
+// STATUS.window_ba (proto_minor 5): the camera the window used and its
+// latest optimisation ("last": null before the first).
+void appendStatusWindowBa(std::string& out, const WindowBaStatus& w) {
+    out += R"(,"window_ba":{"optimisations":)";
+    appendJsonInt(out, w.optimisations);
+    key(out, "estimated");
+    out += '[';
+    bool first = true;
+    for (const auto& [name, on] :
+         {std::pair{"rolling_shutter_s", w.rolling_shutter_estimated},
+          std::pair{"focal_scale", w.focal_estimated}, std::pair{"k1", w.k1_estimated}}) {
+        if (on) {
+            out += first ? "" : ",";
+            appendJsonString(out, name);
+            first = false;
+        }
+    }
+    out += ']';
+    key(out, "rolling_shutter_s");
+    appendJsonNumber(out, w.rolling_shutter_s);
+    key(out, "focal_scale");
+    appendJsonNumber(out, w.focal_scale);
+    key(out, "k1");
+    appendJsonNumber(out, w.k1);
+    key(out, "last");
+    if (w.optimisations == 0) {
+        out += "null}";
+        return;
+    }
+    out += R"({"frame_id":)";
+    appendJsonInt(out, w.frame_id);
+    key(out, "epoch");
+    appendJsonInt(out, w.epoch);
+    key(out, "keyframes");
+    appendJsonInt(out, w.keyframes);
+    key(out, "points");
+    appendJsonInt(out, w.points);
+    key(out, "observations");
+    appendJsonInt(out, w.observations);
+    key(out, "rms_px");
+    appendJsonNumber(out, w.rms_px);
+    key(out, "scale");
+    appendJsonNumber(out, w.scale);
+    out += "}}";
+}
+
 // STATUS: the socket's clients and the field log.
 void appendStatusService(std::string& out, const LogStatus& log, const ClientCounts& clients) {
     out += R"(,"clients":{"connected":)";
@@ -448,6 +494,9 @@ void appendStatus(std::string& out, const PipelineStatus& s, const LogStatus& lo
         out += '}';
     }
     appendTiming(out, s.timing);
+    if (s.window_ba.present) {
+        appendStatusWindowBa(out, s.window_ba);
+    }
     appendStatusService(out, log, clients);
     out += "}}\n";
 }

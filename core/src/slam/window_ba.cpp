@@ -151,10 +151,10 @@ WindowBa::WindowBa(const PinholeRadialCamera& camera, const WindowBaConfig& conf
       config_(config),
       capacity_(config.window_keyframes),
       readout_s_(config.rolling_shutter_s),
-      estimate_readout_(config.rolling_shutter_sigma_s > 0 && config.rolling_shutter_max_s > 0),
+      estimate_readout_(estimatesReadout(config)),
       k1_(camera.intrinsics().k1),
-      estimate_focal_(config.focal_sigma_rel > 0 && config.focal_max_rel > 0),
-      estimate_k1_(config.k1_sigma > 0 && config.k1_max_change > 0) {
+      estimate_focal_(estimatesFocal(config)),
+      estimate_k1_(estimatesK1(config)) {
     const auto cap = static_cast<size_t>(capacity_);
     const auto per_kf = static_cast<size_t>(config.max_observations_per_keyframe);
     const auto max_points = static_cast<size_t>(config.max_points);

@@ -115,6 +115,7 @@ public:
                      double /*latency_ms*/) override {}
     void onScale(const Scale& /*scale*/) override {}
     void onPose(const Pose& /*pose*/) override {}
+    void onWindowBa(const WindowBa& /*window*/) override {}
     void onState(DaemonState /*from*/, DaemonState to, std::uint64_t /*epoch*/,
                  std::int64_t /*frame_id*/, const char* reason) override {
         const std::lock_guard lock(mutex_);

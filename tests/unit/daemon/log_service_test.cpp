@@ -465,6 +465,47 @@ TEST(LogService, ScaleUpdatesLogTheObjectsTheyViewed) {
     EXPECT_EQ(lines[3]["frame_id"], 460);
 }
 
+// A WINDOW line per window optimisation, through LogEvents: the frame that
+// took it, the window's size, its RMS before and after, its scale and the
+// camera it used (9 significant digits).
+TEST(LogService, WindowLinesHaveTheOptimisationAndItsCamera) {
+    TempDir dir("log");
+    ReportHub hub(16);
+    auto log = make(configIn(dir.path()), hub);
+    ASSERT_TRUE(log);
+    LogEvents events(*log);
+    core::slam::WindowBaReport r;
+    r.optimised = true;
+    r.keyframes = 67;
+    r.free_keyframes = 34;
+    r.points = 412;
+    r.observations = 5120;
+    r.rms_before_px = core::Scalar(1.5);
+    r.rms_after_px = core::Scalar(0.75);
+    r.scale = core::Scalar(1.0625);
+    r.rolling_shutter_s = core::Scalar(0.0234375);
+    r.focal_scale = core::Scalar(0.9375);
+    r.k1 = core::Scalar(-0.125);
+    PipelineEvents::WindowBa e;
+    e.frame_id = 517;
+    e.t_ns = 17'233'333'333;
+    e.epoch = 2;
+    e.report = &r;
+    events.onWindowBa(e);
+    ASSERT_TRUE(log->flush());
+
+    const auto contents = readAll(dir.path());
+    ASSERT_EQ(contents.lines.size(), 1U);
+    json j = parse(contents.lines[0].text);
+    ASSERT_TRUE(j["mono_ns"].is_number_integer());
+    j.erase("mono_ns");
+    EXPECT_EQ(j, json::parse(R"({"class":"WINDOW","frame_id":517,"t_ns":17233333333,"epoch":2,
+        "keyframes":67,"free_keyframes":34,"points":412,"observations":5120,
+        "rms_before_px":1.5,"rms_px":0.75,"scale":1.0625,"rolling_shutter_s":0.0234375,
+        "focal_scale":0.9375,"k1":-0.125})"))
+        << contents.lines[0].text;
+}
+
 PoseReport poseAt(std::uint64_t epoch, std::int64_t frame_id, std::int64_t t_ns) {
     PoseReport p;
     p.epoch = epoch;

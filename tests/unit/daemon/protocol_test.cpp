@@ -57,7 +57,7 @@ TEST(Protocol, Version) {
     appendVersion(out, "0.1.0");
     EXPECT_EQ(out,
               "{\"class\":\"VERSION\",\"release\":\"0.1.0\",\"proto_major\":1,"
-              "\"proto_minor\":4}\n");
+              "\"proto_minor\":5}\n");
 }
 
 // Three objects, one of each state: what OBJECTS and the field log's OBJECT
@@ -293,6 +293,56 @@ TEST(Protocol, StatusTiming) {
         }
     }
     EXPECT_EQ(t.size(), 11U);
+}
+
+// STATUS.window_ba (proto_minor 5): only with tracker.window_ba on; what the
+// window estimates by name, the camera it used, and its latest optimisation
+// ("last": null before the first).
+TEST(Protocol, StatusWindowBa) {
+    PipelineStatus s;
+    std::string out;
+    appendStatus(out, s, LogStatus{}, ClientCounts{});
+    EXPECT_FALSE(parseLine(out).contains("window_ba")) << out;
+
+    s.window_ba.present = true;
+    s.window_ba.k1 = -0.25;
+    out.clear();
+    appendStatus(out, s, LogStatus{}, ClientCounts{});
+    EXPECT_EQ(parseLine(out)["window_ba"], json::parse(R"({"optimisations":0,"estimated":[],
+        "rolling_shutter_s":0,"focal_scale":1,"k1":-0.25,"last":null})"))
+        << out;
+
+    WindowBaStatus& w = s.window_ba;
+    w.rolling_shutter_estimated = true;
+    w.k1_estimated = true;
+    w.optimisations = 14;
+    w.frame_id = 517;
+    w.epoch = 2;
+    w.keyframes = 67;
+    w.points = 412;
+    w.observations = 5120;
+    w.rms_px = 0.75;
+    w.scale = 1.0125;
+    w.rolling_shutter_s = 0.0227;
+    w.focal_scale = 1;
+    w.k1 = -0.125;
+    out.clear();
+    appendStatus(out, s, LogStatus{}, ClientCounts{});
+    const json j = parseLine(out);
+    EXPECT_EQ(j["window_ba"], json::parse(R"({"optimisations":14,
+        "estimated":["rolling_shutter_s","k1"],"rolling_shutter_s":0.0227,"focal_scale":1,
+        "k1":-0.125,"last":{"frame_id":517,"epoch":2,"keyframes":67,"points":412,
+        "observations":5120,"rms_px":0.75,"scale":1.0125}})"))
+        << out;
+    // Additive: the members before and after it are where they were.
+    EXPECT_TRUE(j["timing"].is_object());
+    EXPECT_TRUE(j["clients"].is_object());
+    EXPECT_TRUE(j["log"].is_object());
+    w.focal_estimated = true;
+    out.clear();
+    appendStatus(out, s, LogStatus{}, ClientCounts{});
+    EXPECT_EQ(parseLine(out)["window_ba"]["estimated"],
+              json::parse(R"(["rolling_shutter_s","focal_scale","k1"])"));
 }
 
 // The mean follows the recent samples: exact over the first 100, then an
@@ -889,6 +939,20 @@ TEST(ProtocolSamples, Write) {
     st.gyro.source = "iio:device0 [lsm6dsl]";
     st.gyro.frames = 5120;
     st.gyro.bias_C_radps = {0.0031, -0.0102, 0.0007};
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
+    // The window adjustment before its first optimisation, then after one.
+    st.window_ba.present = true;
+    st.window_ba.rolling_shutter_estimated = true;
+    appendStatus(out, st, LogStatus{}, ClientCounts{});
+    st.window_ba.optimisations = 3;
+    st.window_ba.frame_id = 208;
+    st.window_ba.epoch = 1;
+    st.window_ba.keyframes = 58;
+    st.window_ba.points = 301;
+    st.window_ba.observations = 4012;
+    st.window_ba.rms_px = 0.61;
+    st.window_ba.scale = 1.004;
+    st.window_ba.rolling_shutter_s = 0.0226;
     appendStatus(out, st, LogStatus{}, ClientCounts{});
     appendPosterior(out, PosteriorSnapshot{});
     PosteriorSnapshot p;

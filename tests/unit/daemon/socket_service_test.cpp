@@ -184,7 +184,7 @@ TEST_F(SocketServiceTest, SendsVersionOnConnect) {
     TestClient c(config_.path);
     const json v = c.readJson();
     EXPECT_EQ(v, json::parse(R"({"class":"VERSION","release":"0.1.0","proto_major":1,
-        "proto_minor":4})"));
+        "proto_minor":5})"));
     EXPECT_EQ(svc->stats().accepted, 1U);
     EXPECT_EQ(svc->stats().connected, 1);
 }

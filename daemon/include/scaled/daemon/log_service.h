@@ -146,6 +146,18 @@ struct ObjectEvent {
     std::int64_t mono_ns = 0;
 };
 
+// WINDOW {frame_id, t_ns, epoch, keyframes, free_keyframes, points,
+// observations, rms_before_px, rms_px, scale, rolling_shutter_s, focal_scale,
+// k1}: a window optimisation (tracker.window_ba), on the frame that took its
+// result, with the camera it used (docs/field-log.md).
+struct WindowEvent {
+    std::int64_t frame_id = -1;
+    std::int64_t t_ns = 0;
+    std::uint64_t epoch = 0;
+    const core::slam::WindowBaReport* report = nullptr;  // required
+    std::int64_t mono_ns = 0;
+};
+
 // POSE {frame_id, t_ns, epoch, state, scale|null, scale_sigma|null,
 // position|null, velocity|null, position_cov|null, orientation,
 // attitude_cov, position_map, velocity_map, position_map_cov}: the members
@@ -185,6 +197,7 @@ void formatEvent(const FrameEvent& event, std::string& out);
 void formatEvent(const DetectionEvent& event, std::string& out);
 void formatEvent(const ScaleEvent& event, std::string& out);
 void formatEvent(const ObjectEvent& event, std::string& out);
+void formatEvent(const WindowEvent& event, std::string& out);
 void formatEvent(const PoseEvent& event, std::string& out);
 void formatEvent(const StateEvent& event, std::string& out);
 void formatEvent(const ErrorEvent& event, std::string& out);
@@ -241,6 +254,7 @@ public:
     bool detectionEvent(const DetectionEvent& event);
     bool scaleEvent(const ScaleEvent& event);
     bool objectEvent(const ObjectEvent& event);
+    bool windowEvent(const WindowEvent& event);
     bool poseEvent(const PoseEvent& event);
     bool stateEvent(const StateEvent& event);
     bool errorEvent(const ErrorEvent& event);

@@ -96,6 +96,13 @@ public:
     };
     // The pose of a tracked frame (the one published to the hub) with its
     // metric part at the scale the daemon serves at that moment.
+    // A window optimisation whose result a tracked frame took.
+    struct WindowBa {
+        std::int64_t frame_id = 0;
+        std::int64_t t_ns = 0;
+        std::uint64_t epoch = 0;
+        const core::slam::WindowBaReport* report = nullptr;
+    };
     struct Pose {
         const PoseReport* pose = nullptr;
         MetricPose metric;  // metricPose(*pose, the latest scale report)
@@ -110,6 +117,9 @@ public:
     virtual void onDetection(const drivers::detector::DetectionResult& result, std::uint64_t epoch,
                              double latency_ms) = 0;
     virtual void onScale(const Scale& scale) = 0;
+    // Every window optimisation (tracker.window_ba), on the tracking thread.
+    // Must not block or allocate.
+    virtual void onWindowBa(const WindowBa& window) = 0;
     virtual void onState(DaemonState from, DaemonState to, std::uint64_t epoch,
                          std::int64_t frame_id, const char* reason) = 0;
     virtual void onError(const char* where, const std::string& message) = 0;
@@ -211,6 +221,10 @@ private:
     void recordGravity(const drivers::imu::MapGravity& g);
     std::uint64_t recordTracked(const FrameStepResult& r, std::int64_t frame_id,
                                 std::uint64_t tracked);
+    void recordWindowBa(const core::slam::WindowBaReport& ba, std::int64_t frame_id,
+                        std::uint64_t epoch);
+    void trackerEvents(const drivers::vision::TrackStats& stats,
+                       const drivers::source::Frame& frame, std::uint64_t epoch);
     void publishPose(const TrackingState& state, const drivers::source::Frame& frame,
                      std::uint64_t epoch);
     void handToDetector(TrackingState& state, const drivers::source::Frame& frame,

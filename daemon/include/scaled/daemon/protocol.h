@@ -21,8 +21,9 @@
 namespace scaled::daemon {
 
 inline constexpr int kProtoMajor = 1;
-// 1: STATUS.camera; 2: STATUS.timing; 3: OBJECTS; 4: POSE (pose, watch "pose")
-inline constexpr int kProtoMinor = 4;
+// 1: STATUS.camera; 2: STATUS.timing; 3: OBJECTS; 4: POSE (pose, watch "pose");
+// 5: STATUS.window_ba
+inline constexpr int kProtoMinor = 5;
 
 // The most bytes of a client's text (its "cmd") an ERROR echoes; a longer
 // one is cut at a UTF-8 character boundary and marked "truncated":true.

@@ -134,6 +134,31 @@ struct GyroStatus {
     std::array<double, 3> bias_C_radps{};  // the on-line bias estimate, camera frame
 };
 
+// The window bundle adjustment (protocol: STATUS.window_ba, proto_minor 5;
+// the field log's WINDOW lines): its latest optimisation and the camera it
+// used. The readout time, focal factor and k1 are the camera's (a new map
+// keeps them), so they are reported across epochs.
+struct WindowBaStatus {
+    bool present = false;  // tracker.window_ba is on (STATUS has a window_ba object)
+    // What the window estimates (its *_sigma keys > 0); the rest is given.
+    bool rolling_shutter_estimated = false;
+    bool focal_estimated = false;
+    bool k1_estimated = false;
+    std::uint64_t optimisations = 0;  // so far, every epoch
+    // The latest optimisation (valid once optimisations > 0).
+    std::int64_t frame_id = -1;  // the frame that took its result
+    std::uint64_t epoch = 0;
+    int keyframes = 0;
+    int points = 0;
+    int observations = 0;
+    double rms_px = 0;  // reprojection RMS after it
+    double scale = 1;   // its scale correction of the filter's map
+    // The camera the window used: given until the first optimisation.
+    double rolling_shutter_s = 0;
+    double focal_scale = 1;  // over the camera file's focal length
+    double k1 = 0;
+};
+
 // Pipeline health (protocol class STATUS).
 struct PipelineStatus {
     std::string source;  // "sim", "replay:/path/to/dir", ...
@@ -171,6 +196,7 @@ struct PipelineStatus {
     std::string camera_device;          // "/dev/video0 (vivid)"
     std::string camera_mode;            // "YUYV 640x480 @ 30"; empty while lost
     PipelineTiming timing;              // protocol: STATUS.timing (proto_minor 2)
+    WindowBaStatus window_ba;           // protocol: STATUS.window_ba (proto_minor 5)
 };
 
 // Field-log health, published by the log service.

@@ -115,6 +115,18 @@ struct WindowBaLimits {
 
 Status validate(const WindowBaConfig& config);
 
+// What the window estimates of the camera (the rest is given): a prior's
+// width and a bound, both > 0.
+[[nodiscard]] inline bool estimatesReadout(const WindowBaConfig& c) {
+    return c.rolling_shutter_sigma_s > 0 && c.rolling_shutter_max_s > 0;
+}
+[[nodiscard]] inline bool estimatesFocal(const WindowBaConfig& c) {
+    return c.focal_sigma_rel > 0 && c.focal_max_rel > 0;
+}
+[[nodiscard]] inline bool estimatesK1(const WindowBaConfig& c) {
+    return c.k1_sigma > 0 && c.k1_max_change > 0;
+}
+
 // A similarity of the world: p_to = scale R p_from + t.
 struct Sim3 {
     Scalar scale = 1;
