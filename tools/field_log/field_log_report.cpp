@@ -48,6 +48,9 @@ const char* const kObjectsHeader =
     "anchor_rel_sigma,run";
 const char* const kPosesHeader =
     "t_s,frame,epoch,x_m,y_m,z_m,sigma_x_m,sigma_y_m,sigma_z_m,scale,state,x_map,y_map,z_map,run";
+const char* const kWindowsHeader =
+    "frame,t_s,epoch,keyframes,free_keyframes,points,observations,rms_before_px,rms_px,scale,"
+    "rolling_shutter_s,focal_scale,k1,run";
 const char* const kMainTrajectory = "trajectory_metric.tum";
 
 std::optional<double> number(const json& j, const char* key) {
@@ -223,6 +226,8 @@ public:
             object(j, where);
         } else if (cls == "POSE") {
             pose(j, where);
+        } else if (cls == "WINDOW") {
+            window(j, where);
         }
     }
 
@@ -404,6 +409,27 @@ private:
             std::to_string(run_));
     }
 
+    // WINDOW: one row of windows.csv (a window optimisation and the camera it
+    // used). A line without frame_id or epoch is skipped and named.
+    void window(const json& j, const std::string& where) {
+        const auto frame_id = integer(j, "frame_id");
+        const auto ep = integer(j, "epoch");
+        if (!frame_id || !ep) {
+            ++a_.bad_fields;
+            problem(where + ": WINDOW without frame_id or epoch (skipped)");
+            return;
+        }
+        epoch(ep);
+        a_.window_rows.push_back(
+            std::to_string(*frame_id) + "," + tSeconds(integer(j, "t_ns")) + "," +
+            std::to_string(*ep) + "," + intField(integer(j, "keyframes")) + "," +
+            intField(integer(j, "free_keyframes")) + "," + intField(integer(j, "points")) + "," +
+            intField(integer(j, "observations")) + "," + field(number(j, "rms_before_px"), 9) +
+            "," + field(number(j, "rms_px"), 9) + "," + field(number(j, "scale"), 9) + "," +
+            field(number(j, "rolling_shutter_s"), 9) + "," + field(number(j, "focal_scale"), 9) +
+            "," + field(number(j, "k1"), 9) + "," + std::to_string(run_));
+    }
+
     // POSE: one row of poses.csv and, with a metric position, a pose of its
     // (run, epoch)'s trajectory. A line without the members every POSE has
     // (frame_id, epoch, t_ns, orientation, position_map) or with a member
@@ -570,6 +596,7 @@ std::string toJson(const FieldLogAnalysis& a) {
     s += ",\"observations_logged\":" + std::to_string(a.observation_rows.size());
     s += ",\"objects_logged\":" + std::to_string(a.object_rows.size());
     s += ",\"poses_logged\":" + std::to_string(a.pose_rows.size());
+    s += ",\"windows_logged\":" + std::to_string(a.window_rows.size());
     s += ",\"metric_poses_logged\":" + std::to_string(a.metric_poses);
     s += ",\"trajectories\":[";
     for (std::size_t i = 0; i < a.trajectories.size(); ++i) {
@@ -628,6 +655,8 @@ std::string toText(const FieldLogAnalysis& a) {
          (a.pose_rows.empty() ? std::string()
                               : std::to_string(a.pose_rows.size()) + " pose lines (" +
                                     std::to_string(a.metric_poses) + " metric), ") +
+         (a.window_rows.empty() ? std::string()
+                                : std::to_string(a.window_rows.size()) + " window lines, ") +
          std::to_string(a.errors) + " errors, " + jsonNumber(a.time_span_s, 6) + " s\n";
     if (a.last_scale && a.last_scale->scale) {
         const auto& l = *a.last_scale;
@@ -685,6 +714,9 @@ Status writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_di
         return ok;
     }
     if (auto ok = write("poses.csv", kPosesHeader, a.pose_rows); !ok) {
+        return ok;
+    }
+    if (auto ok = write("windows.csv", kWindowsHeader, a.window_rows); !ok) {
         return ok;
     }
     for (const auto& t : a.trajectories) {

@@ -3,8 +3,8 @@
 // field-log's work: a field log read back (drivers/field_log.h) turned into
 // scale-eval's CSV shapes (frames.csv, updates.csv, observations.csv, the
 // ground-truth columns left empty), objects.csv (the object model's OBJECT
-// lines), poses.csv and the metric trajectories in TUM format (POSE lines)
-// and a summary (docs/field-log.md).
+// lines), poses.csv and the metric trajectories in TUM format (POSE lines),
+// windows.csv (WINDOW lines) and a summary (docs/field-log.md).
 
 #include <cstddef>
 #include <cstdint>
@@ -64,6 +64,7 @@ struct FieldLogAnalysis {
     std::vector<std::string> object_rows;  // OBJECT lines (estimator.model = "object")
     std::vector<std::string> pose_rows;    // POSE lines (poses.csv)
     std::size_t metric_poses = 0;          // POSE lines with a metric position
+    std::vector<std::string> window_rows;  // WINDOW lines (windows.csv)
 
     // The metric poses of one map: a (run, epoch) with at least one POSE line
     // with a position, in the epoch's gravity-aligned frame G (metres,
@@ -93,8 +94,8 @@ std::string toJson(const FieldLogAnalysis& a);
 // A few lines for a terminal.
 std::string toText(const FieldLogAnalysis& a);
 
-// frames.csv, updates.csv, observations.csv, objects.csv, poses.csv, the
-// trajectories' TUM files (and trajectory_metric.tum) and summary.json into
+// frames.csv, updates.csv, observations.csv, objects.csv, poses.csv,
+// windows.csv, the trajectories' TUM files (and trajectory_metric.tum) and summary.json into
 // `out_dir` (created if needed). Errors name the file.
 core::Status writeFieldLogOutputs(const FieldLogAnalysis& a, const std::string& out_dir);
 

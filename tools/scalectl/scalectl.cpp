@@ -501,6 +501,45 @@ std::string formatScale(const ScaleReply& s) {
     return out;
 }
 
+// STATUS.window_ba (proto_minor 5; absent when the window is off or from an
+// older daemon: nothing printed): the camera the window used, "(estimated)"
+// after what it estimates, then its latest optimisation.
+void formatWindowBa(const json& doc, std::ostream& o) {
+    const json* w = at(doc, {"window_ba"});
+    if (w == nullptr || !w->is_object()) {
+        return;
+    }
+    const json* estimated = at(*w, {"estimated"});
+    const auto mark = [&](const char* name) {
+        if (estimated == nullptr || !estimated->is_array()) {
+            return "";
+        }
+        for (const json& e : *estimated) {
+            if (e.is_string() && e.get<std::string>() == name) {
+                return " (estimated)";
+            }
+        }
+        return "";
+    };
+    // Numbers with fixed decimals (the daemon writes 1.0 as the integer 1).
+    const auto number = [](const json& obj, const char* k, int decimals, double factor = 1) {
+        const json* v = at(obj, {k});
+        return v != nullptr && v->is_number() ? fixed(v->get<double>() * factor, decimals)
+                                              : std::string("-");
+    };
+    o << "window         optimisations " << show(*w, {"optimisations"}) << "  readout "
+      << number(*w, "rolling_shutter_s", 1, 1e3) << " ms" << mark("rolling_shutter_s")
+      << "  focal x" << number(*w, "focal_scale", 4) << mark("focal_scale") << "  k1 "
+      << number(*w, "k1", 4) << mark("k1") << '\n';
+    const json* last = at(*w, {"last"});
+    if (last != nullptr && last->is_object()) {
+        o << "               last: frame " << show(*last, {"frame_id"}) << "  epoch "
+          << show(*last, {"epoch"}) << "  keyframes " << show(*last, {"keyframes"}) << "  points "
+          << show(*last, {"points"}) << "  rms " << number(*last, "rms_px", 3) << " px  scale "
+          << number(*last, "scale", 4) << '\n';
+    }
+}
+
 core::Result<std::string> formatStatus(std::string_view line) {
     auto parsed = expectClass(line, "STATUS");
     if (!parsed) {
@@ -526,6 +565,7 @@ core::Result<std::string> formatStatus(std::string_view line) {
       << show(j, {"detector", "latency_ms", "max"}) << " ms\n";
     o << "scale          updates " << show(j, {"scale_updates"}) << "  epoch " << show(j, {"epoch"})
       << '\n';
+    formatWindowBa(j, o);
     formatTiming(j, o);
     // max: socket.max_clients; reserved: further connections kept for queries
     // (a daemon before issue 22 has neither reserved nor the counters after it).

@@ -150,6 +150,41 @@ TEST(FieldLogReport, PosesBecomeACsvAndMetricTrajectoriesPerEpoch) {
     EXPECT_NE(toText(a).find("5 pose lines (4 metric)"), std::string::npos) << toText(a);
 }
 
+// WINDOW lines become windows.csv, one row per window optimisation with the
+// camera it used; a line without its frame or epoch is skipped and named.
+TEST(FieldLogReport, WindowLinesBecomeACsv) {
+    test::TempDir dir("field_log_report");
+    const fs::path log = dir.path() / "scaled-20240101T000000Z-000001.jsonl";
+    {
+        std::ofstream out(log);
+        out << R"({"class":"START","mono_ns":1,"release":"0.1.0","source":"sim","config":""})"
+            << "\n"
+            << R"({"class":"WINDOW","mono_ns":2,"frame_id":136,"t_ns":4533333333,"epoch":1,)"
+            << R"("keyframes":46,"free_keyframes":13,"points":310,"observations":3900,)"
+            << R"("rms_before_px":1.25,"rms_px":0.5,"scale":1.015625,"rolling_shutter_s":0.0227,)"
+            << R"("focal_scale":1,"k1":0})"
+            << "\n"
+            << R"({"class":"WINDOW","mono_ns":3,"t_ns":5,"keyframes":46})"
+            << "\n";
+    }
+    auto contents = drivers::fieldlog::readFieldLog(log);
+    ASSERT_TRUE(contents) << contents.error().message;
+    const FieldLogAnalysis a = analyseFieldLog(*contents, log.string());
+    EXPECT_EQ(a.classes.at("WINDOW"), 2U);
+    EXPECT_EQ(a.bad_fields, 1U);
+    ASSERT_EQ(a.problems.size(), 1U);
+    EXPECT_EQ(a.problems[0], log.string() + ":3: WINDOW without frame_id or epoch (skipped)");
+    const fs::path out = dir.path() / "out";
+    ASSERT_TRUE(writeFieldLogOutputs(a, out.string()));
+    EXPECT_EQ(linesOf(slurp(out / "windows.csv")),
+              (std::vector<std::string>{
+                  "frame,t_s,epoch,keyframes,free_keyframes,points,observations,rms_before_px,"
+                  "rms_px,scale,rolling_shutter_s,focal_scale,k1,run",
+                  "136,4.533333333,1,46,13,310,3900,1.25,0.5,1.015625,0.0227,1,0,1"}));
+    EXPECT_EQ(json::parse(slurp(out / "summary.json"))["windows_logged"], 1);
+    EXPECT_NE(toText(a).find("1 window lines"), std::string::npos) << toText(a);
+}
+
 // Trajectories of several runs carry the run in their names (epochs restart
 // with every run); a log without metric poses writes no TUM file.
 TEST(FieldLogReport, SeveralRunsNameTheRunAndNoScaleMeansNoTrajectory) {

@@ -254,6 +254,39 @@ TEST(ScalectlFormat, StatusStageTimes) {
     EXPECT_EQ(old->find("timing"), std::string::npos) << *old;
 }
 
+// STATUS.window_ba (proto_minor 5): the camera the window used, what it
+// estimates marked, then its latest optimisation; nothing without it.
+TEST(ScalectlFormat, StatusWindowBa) {
+    const std::string line =
+        R"({"class":"STATUS","source":"sim","window_ba":{"optimisations":14,)"
+        R"("estimated":["rolling_shutter_s"],"rolling_shutter_s":0.0227,"focal_scale":1,)"
+        R"("k1":-0.125,"last":{"frame_id":517,"epoch":2,"keyframes":67,"points":412,)"
+        R"("observations":5120,"rms_px":0.75,"scale":1.0125}}})";
+    auto text = ctl::formatStatus(line);
+    ASSERT_TRUE(text.ok()) << text.error().message;
+    EXPECT_NE(text->find("window         optimisations 14  readout 22.7 ms (estimated)  focal "
+                         "x1.0000  k1 -0.1250\n"),
+              std::string::npos)
+        << *text;
+    EXPECT_NE(text->find("               last: frame 517  epoch 2  keyframes 67  points 412  rms "
+                         "0.750 px  scale 1.0125\n"),
+              std::string::npos)
+        << *text;
+
+    auto before = ctl::formatStatus(
+        R"({"class":"STATUS","source":"sim","window_ba":{"optimisations":0,"estimated":[],)"
+        R"("rolling_shutter_s":0,"focal_scale":1,"k1":0,"last":null}})");
+    ASSERT_TRUE(before.ok());
+    EXPECT_NE(before->find("optimisations 0  readout 0.0 ms  focal x1.0000  k1 0.0000\n"),
+              std::string::npos)
+        << *before;
+    EXPECT_EQ(before->find("last:"), std::string::npos) << *before;
+
+    auto old = ctl::formatStatus(kStatus);
+    ASSERT_TRUE(old.ok());
+    EXPECT_EQ(old->find("window "), std::string::npos) << *old;
+}
+
 // OBJECTS (proto_minor 3): a header line, then one aligned row per object;
 // nulls (tentative anchors, no local estimate, no height) print as `-`.
 TEST(ScalectlFormat, ObjectsTable) {
