@@ -119,6 +119,22 @@ for bad in ['{"class":"SCALE"}', '{"class":"WATCH","enable":1}', '{"class":"NOPE
     if not validate(json.loads(bad)):
         failed += 1
         print(f"accepted a bad line: {bad}")
+# STATUS.window_ba (proto_minor 5) broken in turn, from the first STATUS line
+# that has one.
+with_window = [json.loads(l) for _, l in lines if '"window_ba"' in l and '"STATUS"' in l]
+if not with_window:
+    failed += 1
+    print("no STATUS line with window_ba")
+else:
+    for name, breaks in [("an unknown estimated name", lambda w: w.update(estimated=["f"])),
+                         ("an extra member in last", lambda w: w["last"].update(x=1)),
+                         ("no last", lambda w: w.pop("last")),
+                         ("a string readout", lambda w: w.update(rolling_shutter_s="25 ms"))]:
+        bad = json.loads(json.dumps(with_window[0]))
+        breaks(bad["window_ba"])
+        if not validate(bad):
+            failed += 1
+            print(f"accepted STATUS.window_ba with {name}")
 missing = {"VERSION", "SCALE", "STATUS", "POSTERIOR", "OBJECTS", "POSE", "WATCH", "ACK",
            "ERROR", "request"} - classes
 if missing:

@@ -72,5 +72,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     checkRows(a.observation_rows, "observations.csv rows are one record");
     checkRows(a.object_rows, "objects.csv rows are one record");
     checkRows(a.pose_rows, "poses.csv rows are one record");
+    checkRows(a.window_rows, "windows.csv rows are one record");
     return 0;
 }

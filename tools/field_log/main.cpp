@@ -1,6 +1,6 @@
 // field-log: a field log (the daemon's JSON lines, docs/field-log.md) into
-// scale-eval's CSV files, poses.csv and the metric trajectories (TUM), a
-// summary and the figures.
+// scale-eval's CSV files, objects.csv, poses.csv, windows.csv and the metric
+// trajectories (TUM), a summary and the figures.
 //
 //   field-log LOG_DIR_OR_FILE [--out DIR] [--json] [--no-plots] [--title TEXT]
 //

@@ -1,6 +1,7 @@
 // field-log's POSE export: poses.csv, the metric trajectories (TUM, one file
 // per epoch and trajectory_metric.tum) and the summary, from a small
 // hand-written log; malformed POSE lines are skipped and named by file and line.
+// Its WINDOW export: windows.csv.
 
 #include "field_log_report.h"
 

@@ -94,15 +94,15 @@ public:
         // frame_id received a view in this update.
         std::span<const ObjectReport> objects;
     };
-    // The pose of a tracked frame (the one published to the hub) with its
-    // metric part at the scale the daemon serves at that moment.
-    // A window optimisation whose result a tracked frame took.
+    // A window optimisation and the frame that took its result.
     struct WindowBa {
-        std::int64_t frame_id = 0;
+        std::int64_t frame_id = -1;
         std::int64_t t_ns = 0;
         std::uint64_t epoch = 0;
         const core::slam::WindowBaReport* report = nullptr;
     };
+    // The pose of a tracked frame (the one published to the hub) with its
+    // metric part at the scale the daemon serves at that moment.
     struct Pose {
         const PoseReport* pose = nullptr;
         MetricPose metric;  // metricPose(*pose, the latest scale report)

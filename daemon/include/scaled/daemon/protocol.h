@@ -46,7 +46,7 @@ struct ClientCounts {
     std::uint64_t evicted = 0;
 };
 
-// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":4}
+// {"class":"VERSION","release":"0.1.0","proto_major":1,"proto_minor":5}
 void appendVersion(std::string& out, std::string_view release);
 // SCALE; age_s is measured against `now_mono_ns` (CLOCK_MONOTONIC).
 void appendScale(std::string& out, const ScaleReport& report, std::int64_t now_mono_ns);
