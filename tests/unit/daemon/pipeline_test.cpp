@@ -5,6 +5,7 @@
 // with a bounded timeout, never a sleep.
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -514,6 +515,34 @@ TEST(Pipeline, StatusReportsTheWindowOptimisations) {
     EXPECT_LT(std::abs(w.rolling_shutter_s), 0.005) << "after " << windows.size();
     EXPECT_EQ(w.focal_scale, 1.0);
     EXPECT_EQ(w.k1, static_cast<double>(drivers::sim::simIntrinsics(simConfig(10.0)).k1));
+}
+
+// Optimised on the keyframe itself (defer_frames 0) or taken one frame later
+// (1, the daemon's default): each optimisation is reported once, on the
+// frame that takes its result, the deferred one a frame after the other.
+TEST(Pipeline, EachWindowOptimisationIsReportedOnceDeferredOrNot) {
+    std::array<std::vector<std::int64_t>, 2> frames;
+    for (const int defer : {0, 1}) {
+        DaemonConfig c = config(AtEnd::kExit);
+        c.pipeline.tracker.window_ba.defer_frames = defer;
+        ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
+        Recorder events;
+        auto p = Pipeline::create(c, parts(8.0, true), hub, &events);
+        ASSERT_TRUE(p.ok()) << p.error().message;
+        ASSERT_TRUE((*p)->start().ok());
+        ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
+        (*p)->stop();
+        ASSERT_EQ(hub.status().epoch, 1U);
+        for (const auto& call : events.windows()) {
+            frames.at(static_cast<std::size_t>(defer)).push_back(call.frame_id);
+        }
+        EXPECT_EQ(hub.status().window_ba.optimisations, events.windows().size()) << defer;
+    }
+    ASSERT_GE(frames[0].size(), 2U);
+    ASSERT_EQ(frames[1].size(), frames[0].size());
+    for (std::size_t k = 0; k < frames[0].size(); ++k) {
+        EXPECT_EQ(frames[1][k], frames[0][k] + 1) << k;
+    }
 }
 
 // tracker.window_ba off: STATUS has no window_ba object and no WINDOW event.
