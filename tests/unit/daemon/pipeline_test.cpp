@@ -470,6 +470,17 @@ TEST(Pipeline, StatusReportsStageTimes) {
     EXPECT_DOUBLE_EQ(st.tracking_ms_mean, t.tracking.mean_ms);
 }
 
+// A lossless sim of duration_s run to its end with `events`, without a
+// failure; `hub` then holds the final status.
+void runToEnd(const DaemonConfig& c, double duration_s, ReportHub& hub, Recorder& events) {
+    auto p = Pipeline::create(c, parts(duration_s, true), hub, &events);
+    ASSERT_TRUE(p.ok()) << p.error().message;
+    ASSERT_TRUE((*p)->start().ok());
+    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
+    (*p)->stop();
+    ASSERT_FALSE((*p)->failure().has_value());
+}
+
 // STATUS.window_ba and the WINDOW events: one event per window optimisation,
 // the status holding the latest and the camera it used. The daemon's default
 // estimates the readout time; the sim renders a global shutter, so the
@@ -478,12 +489,7 @@ TEST(Pipeline, StatusReportsTheWindowOptimisations) {
     DaemonConfig c = config(AtEnd::kExit);
     ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
     Recorder events;
-    auto p = Pipeline::create(c, parts(10.0, true), hub, &events);  // 300 frames
-    ASSERT_TRUE(p.ok()) << p.error().message;
-    ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
-    (*p)->stop();
-    ASSERT_FALSE((*p)->failure().has_value());
+    ASSERT_NO_FATAL_FAILURE(runToEnd(c, 10.0, hub, events));  // 300 frames
 
     const PipelineStatus st = hub.status();
     ASSERT_EQ(st.epoch, 1U);
@@ -527,11 +533,7 @@ TEST(Pipeline, EachWindowOptimisationIsReportedOnceDeferredOrNot) {
         c.pipeline.tracker.window_ba.defer_frames = defer;
         ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
         Recorder events;
-        auto p = Pipeline::create(c, parts(8.0, true), hub, &events);
-        ASSERT_TRUE(p.ok()) << p.error().message;
-        ASSERT_TRUE((*p)->start().ok());
-        ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
-        (*p)->stop();
+        ASSERT_NO_FATAL_FAILURE(runToEnd(c, 8.0, hub, events));
         ASSERT_EQ(hub.status().epoch, 1U);
         for (const auto& call : events.windows()) {
             frames.at(static_cast<std::size_t>(defer)).push_back(call.frame_id);
@@ -551,11 +553,7 @@ TEST(Pipeline, WithoutTheWindowStatusHasNoWindow) {
     c.pipeline.tracker.window_ba.enabled = false;
     ReportHub hub(static_cast<std::size_t>(c.pipeline.estimator.posterior.grid.bins));
     Recorder events;
-    auto p = Pipeline::create(c, parts(6.0, true), hub, &events);
-    ASSERT_TRUE(p.ok()) << p.error().message;
-    ASSERT_TRUE((*p)->start().ok());
-    ASSERT_TRUE(waitFinished(hub, **p, std::chrono::seconds(300)));
-    (*p)->stop();
+    ASSERT_NO_FATAL_FAILURE(runToEnd(c, 6.0, hub, events));
     const PipelineStatus st = hub.status();
     EXPECT_FALSE(st.window_ba.present);
     EXPECT_EQ(st.window_ba.optimisations, 0U);
